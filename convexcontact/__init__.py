@@ -1,0 +1,33 @@
+"""convexcontact: frictional contact of linear elastic bodies as exact convex programs.
+
+Build a :class:`Scene`, call :func:`solve`, read the :class:`ContactResult`::
+
+    import convexcontact as cc
+    result = cc.solve(cc.library.hertz_punch(), solver="clarabel")
+    print(result.max_pressure, result.certificate.worst)
+    result.save("out")
+"""
+
+from .conic import ConicProgram, ConicSolution
+from .drivers.solve import Model, prepare, solve
+from .results.result import ContactResult
+from .scene import library
+from .scene.model import (
+    Body,
+    Contact,
+    Dirichlet,
+    Material,
+    MeshFile,
+    Obstacle,
+    Rectangle,
+    Scene,
+    SceneError,
+    Signorini,
+    Traction,
+)
+
+__all__ = [
+    "Body", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Dirichlet", "Material", "MeshFile",
+    "Model", "Obstacle", "Rectangle", "Scene", "SceneError", "Signorini", "Traction", "library", "prepare", "solve",
+]
+__version__ = "0.1.0"

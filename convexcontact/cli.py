@@ -1,0 +1,84 @@
+"""Command line: ``convexcontact demo`` and ``convexcontact run SCENE.toml``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from . import solvers
+from .drivers.solve import solve
+from .scene.library import hertz_punch
+from .scene.model import SceneError
+
+
+def table(result) -> str:
+    """A short human-readable summary of a result."""
+    s = result.summary()
+    rows = [
+        ("scene", s["scene"]),
+        ("free DOFs", s["ndof"]),
+        ("contact nodes", s["n_contact_nodes"]),
+        ("solver", f'{s["solver"]} ({s["solver_status"]}, {s["iterations"]} iterations)'),
+        ("status", s["status"]),
+    ]
+    if result.solved:
+        rows += [
+            ("closed nodes", s["n_closed"]),
+            ("contact half-width", f'{s["contact_half_width"]:.6g}'),
+            ("max pressure", f'{s["max_pressure"]:.6g}'),
+            ("normal force", f'{s["normal_force"]:.6g}'),
+            ("elastic energy", f'{s["elastic_energy"]:.6g}'),
+            ("certificate (worst)", f'{s["certificate"]["worst"]:.2e}'),
+        ]
+    else:
+        rows.append(("message", s["message"]))
+    rows.append(("times [s]", ", ".join(f"{k} {v:.3f}" for k, v in s["timings"].items())))
+    width = max(len(name) for name, _ in rows)
+    return "\n".join(f"{name:<{width}}  {value}" for name, value in rows)
+
+
+def report(result, out: Path | None, json_file: Path | None) -> int:
+    print(table(result))
+    if out is not None:
+        paths = result.save(out)
+        print("wrote", ", ".join(str(p) for p in paths))
+    if json_file is not None:
+        json_file.write_text(json.dumps(result.summary(), indent=1))
+    return 0 if result.solved else 1
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="convexcontact", description="Exact contact solves as convex programs.")
+    commands = parser.add_subparsers(dest="command", required=True)
+    for name, help_text in (("demo", "solve the built-in Hertz punch scene"), ("run", "solve a scene from a TOML file")):
+        command = commands.add_parser(name, help=help_text)
+        if name == "run":
+            command.add_argument("scene", type=Path, help="scene file (see docs/scenes.md)")
+        else:
+            command.add_argument("--nx", type=int, default=80, help="elements across the block (default 80)")
+        command.add_argument("--solver", default="clarabel", help="clarabel | osqp | cvxpy[:NAME]")
+        command.add_argument("--tol", type=float, default=None, help="solver tolerance (default: the adapter's)")
+        command.add_argument("--out", type=Path, default=Path("out") if name == "demo" else None,
+                             help="folder for summary.json, solution.vtu, PNG plots")
+        command.add_argument("--json", type=Path, default=None, help="also write the JSON summary here")
+    args = parser.parse_args(argv)
+    try:
+        solvers.check_name(args.solver)
+        if args.command == "demo":
+            scene = hertz_punch(nx=args.nx)
+        else:
+            from .scene.toml import load_scene
+
+            scene = load_scene(args.scene)
+        options = {} if args.tol is None else {"tol": args.tol}
+        result = solve(scene, args.solver, **options)
+    except (SceneError, ValueError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    return report(result, args.out, args.json)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,115 @@
+"""The one interface between formulations and solvers: Clarabel's standard form.
+
+    minimize   ½ xᵀPx + qᵀx
+    subject to Ax + s = b,   s ∈ K = K₁ × K₂ × …
+
+with cones (in this order of rows) from :data:`CONES`. Dual variables z ∈ K*
+satisfy Px + q + Aᵀz = 0 at optimality.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+
+@dataclass(frozen=True)
+class Cone:
+    """One block of rows of the constraint: ``kind`` is zero, nonnegative or soc."""
+
+    kind: str
+    dim: int
+
+    def __post_init__(self):
+        if self.kind not in CONES:
+            raise ValueError(f"cone kind must be one of {CONES}, got {self.kind!r}")
+        if self.dim < 1 or (self.kind == "soc" and self.dim < 2):
+            raise ValueError(f"{self.kind} cone of dimension {self.dim}")
+
+
+CONES = ("zero", "nonnegative", "soc")
+
+
+def zero(dim: int) -> Cone:
+    return Cone("zero", dim)
+
+
+def nonnegative(dim: int) -> Cone:
+    return Cone("nonnegative", dim)
+
+
+def soc(dim: int) -> Cone:
+    """(t, x) with t ≥ ‖x‖₂; dimension 1 + len(x)."""
+    return Cone("soc", dim)
+
+
+@dataclass(frozen=True)
+class ConicProgram:
+    """Data of a convex conic program in Clarabel's standard form.
+
+    ``P`` is stored as the full symmetric matrix (CSC); adapters take the upper
+    triangle where the solver wants it.
+    """
+
+    P: sp.csc_matrix
+    q: np.ndarray
+    A: sp.csc_matrix
+    b: np.ndarray
+    cones: tuple[Cone, ...]
+
+    def __post_init__(self):
+        n, m = self.q.size, self.b.size
+        if self.P.shape != (n, n) or self.A.shape != (m, n):
+            raise ValueError(f"shapes P {self.P.shape}, A {self.A.shape} do not fit q ({n}) and b ({m})")
+        if sum(c.dim for c in self.cones) != m:
+            raise ValueError("cone dimensions do not add up to the rows of A")
+
+    @property
+    def n_variables(self) -> int:
+        return self.q.size
+
+    @property
+    def n_constraints(self) -> int:
+        return self.b.size
+
+    @property
+    def is_linear(self) -> bool:
+        """True when every cone is polyhedral (zero or nonnegative)."""
+        return all(c.kind != "soc" for c in self.cones)
+
+    def blocks(self):
+        """Yield (cone, row slice) for every cone block."""
+        start = 0
+        for cone in self.cones:
+            yield cone, slice(start, start + cone.dim)
+            start += cone.dim
+
+
+@dataclass
+class ConicSolution:
+    """What a solver returns, before anything is known of mechanics.
+
+    ``status`` is ours (solved, infeasible, unbounded, inaccurate, failed);
+    ``solver_status`` is the solver's own word, untouched.
+    """
+
+    x: np.ndarray
+    z: np.ndarray
+    s: np.ndarray
+    status: str
+    solver_status: str
+    iterations: int
+    solve_time: float
+    solver: str
+    info: dict = field(default_factory=dict)
+
+    @property
+    def solved(self) -> bool:
+        return self.status in ("solved", "inaccurate")
+
+
+Recovery = Callable[[ConicSolution], dict]
+"""Maps a solver's (x, z, s) back to mechanical fields; returned by every formulation."""

@@ -1,0 +1,172 @@
+"""Stiffness, loads and Dirichlet elimination in scaled units (scikit-fem)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import skfem as fe
+from skfem.helpers import ddot, dot, eye, sym_grad, trace
+from skfem.models.elasticity import lame_parameters
+
+from ..scene.model import Material, Scene, SceneError
+from .contact import ContactTrace, contact_trace
+from .mesh import build_mesh, check_boundary, vector_basis
+from .scaling import Scaling
+
+
+@dataclass
+class FEModel:
+    """Everything the formulations need, in scaled units (see :class:`Scaling`).
+
+    ``K`` and ``f`` act on the free DOFs ``free``; ``prescribed`` is the full DOF
+    vector holding the Dirichlet values (zero on free DOFs).
+    """
+
+    scene: Scene
+    scaling: Scaling
+    mesh: fe.Mesh  # in scaled coordinates
+    basis: fe.Basis
+    lame: tuple[np.ndarray, np.ndarray]  # per element (λ, μ) of the 2-D law, scaled
+    K_full: sp.csr_matrix
+    f_full: np.ndarray
+    free: np.ndarray
+    prescribed: np.ndarray
+    contact: ContactTrace
+
+    @property
+    def K(self) -> sp.csr_matrix:
+        return self.K_full[self.free][:, self.free]
+
+    @property
+    def f(self) -> np.ndarray:
+        """Load on the free DOFs, with the Dirichlet data moved to the right-hand side."""
+        return (self.f_full - self.K_full @ self.prescribed)[self.free]
+
+    @property
+    def n_free(self) -> int:
+        return self.free.size
+
+    def full(self, u_free: np.ndarray) -> np.ndarray:
+        """Full DOF vector from the free DOFs and the Dirichlet data."""
+        u = self.prescribed.copy()
+        u[self.free] = u_free
+        return u
+
+
+def stress(lam, mu):
+    """Stress of the 2-D linear elastic law with (possibly per-element) Lamé parameters."""
+
+    def sigma(strain):
+        return 2.0 * mu * strain + lam * eye(trace(strain), 2)
+
+    return sigma
+
+
+@fe.BilinearForm
+def _elasticity(u, v, w):
+    return ddot(stress(w["lam"], w["mu"])(sym_grad(u)), sym_grad(v))
+
+
+def lame_per_element(scene: Scene, mesh: fe.Mesh, stress_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """Scaled Lamé parameters of the 2-D law (plane strain or plane stress) per element."""
+    nelems = mesh.t.shape[1]
+    E = np.full(nelems, np.nan)
+    nu = np.full(nelems, np.nan)
+    if isinstance(scene.materials, Material):
+        E[:], nu[:] = scene.materials.E, scene.materials.nu
+    else:
+        subdomains = mesh.subdomains or {}
+        for name, material in scene.materials.items():
+            if name not in subdomains:
+                raise SceneError(f"materials.{name}", "no such subdomain", f"the mesh has {sorted(subdomains)}")
+            E[subdomains[name]], nu[subdomains[name]] = material.E, material.nu
+        if np.isnan(E).any():
+            raise SceneError("materials", f"{np.isnan(E).sum()} elements have no material", "cover every subdomain")
+    lam, mu = lame_parameters(E / stress_scale, nu)
+    if scene.body.plane == "stress":
+        lam = 2.0 * lam * mu / (lam + 2.0 * mu)
+    return lam, mu
+
+
+def stiffness(basis: fe.Basis, lame: tuple[np.ndarray, np.ndarray]) -> sp.csr_matrix:
+    """Stiffness matrix of the whole basis with element-wise Lamé parameters."""
+    nqp = basis.X.shape[-1]
+    lam, mu = (np.repeat(p[:, None], nqp, axis=1) for p in lame)
+    return fe.asm(_elasticity, basis, lam=lam, mu=mu).tocsr()
+
+
+def load_vector(scene: Scene, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling) -> np.ndarray:
+    """Tractions and body force, scaled by the pressure scale."""
+    f = np.zeros(basis.N)
+    for traction in scene.tractions:
+        facets = check_boundary(mesh, traction.boundary, f"traction[{traction.boundary}].boundary")
+        facet_basis = fe.FacetBasis(mesh, basis.elem, facets=facets)
+        if traction.pressure is not None:
+            p = traction.pressure / scaling.pressure
+            f += fe.asm(fe.LinearForm(lambda v, w: -p * dot(w.n, v)), facet_basis)
+        else:
+            t = np.array(traction.vector) / scaling.pressure
+            f += fe.asm(fe.LinearForm(lambda v, w: t[0] * v[0] + t[1] * v[1]), facet_basis)
+    if any(scene.body_force):
+        b = np.array(scene.body_force) * scaling.length / scaling.pressure
+        f += fe.asm(fe.LinearForm(lambda v, w: b[0] * v[0] + b[1] * v[1]), basis)
+    return f
+
+
+def dirichlet(scene: Scene, mesh: fe.Mesh, basis: fe.Basis, displacement_scale: float):
+    """Free DOF indices and the full vector of prescribed values (scaled)."""
+    values = np.full(basis.N, np.nan)
+    for condition in scene.dirichlet:
+        check_boundary(mesh, condition.boundary, f"dirichlet[{condition.boundary}].boundary")
+        dofs = basis.get_dofs(condition.boundary)
+        for component, value in (("u^1", condition.ux), ("u^2", condition.uy)):
+            if value is None:
+                continue
+            index = dofs.all(component)
+            scaled = value / displacement_scale
+            clash = ~np.isnan(values[index]) & ~np.isclose(values[index], scaled)
+            if clash.any():
+                raise SceneError(
+                    f"dirichlet[{condition.boundary}]",
+                    "prescribes a value that another Dirichlet boundary sets differently at a shared node",
+                    "make the values agree at corners",
+                )
+            values[index] = scaled
+    fixed = ~np.isnan(values)
+    return np.flatnonzero(~fixed), np.where(fixed, values, 0.0)
+
+
+def characteristic_pressure(scene: Scene, length: float, stress: float) -> float:
+    """A pressure that sets the displacement scale: the largest applied load or imposed strain."""
+    candidates = [abs(t.pressure) if t.pressure is not None else float(np.hypot(*t.vector)) for t in scene.tractions]
+    candidates.append(float(np.hypot(*scene.body_force)) * length)
+    obstacle = scene.contact.obstacle
+    if obstacle.force is not None:
+        candidates.append(obstacle.force / length)
+    imposed = [abs(d.ux or 0.0) for d in scene.dirichlet] + [abs(d.uy or 0.0) for d in scene.dirichlet]
+    imposed += [abs(obstacle.depth or 0.0), abs(obstacle.gap)]
+    candidates.append(stress * max(imposed) / length)
+    return max(candidates)
+
+
+def assemble(scene: Scene) -> FEModel:
+    """Assemble the scene's finite element model in scaled units."""
+    user_mesh = build_mesh(scene.body)
+    extent = user_mesh.p.max(axis=1) - user_mesh.p.min(axis=1)
+    length = float(extent.max())
+    E_max = max(m.E for m in ([scene.materials] if isinstance(scene.materials, Material) else scene.materials.values()))
+    pressure = characteristic_pressure(scene, length, E_max)
+    # zero load and zero gap: any displacement scale will do, the answer is u = 0
+    displacement = length * pressure / E_max if pressure > 0 else length
+    scaling = Scaling(length=length, stress=E_max, displacement=displacement)
+
+    mesh = user_mesh.scaled(1.0 / length)
+    basis = vector_basis(mesh, scene.body.element)
+    lame = lame_per_element(scene, mesh, scaling.stress)
+    K_full = stiffness(basis, lame)
+    f_full = load_vector(scene, mesh, basis, scaling)
+    free, prescribed = dirichlet(scene, mesh, basis, scaling.displacement)
+    contact = contact_trace(scene.contact, mesh, basis, scaling, free, prescribed)
+    return FEModel(scene, scaling, mesh, basis, lame, K_full, f_full, free, prescribed, contact)

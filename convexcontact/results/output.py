@@ -1,0 +1,55 @@
+"""Writing a result: summary.json, solution.vtu (meshio) and PNG plots."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from skfem.io.meshio import to_meshio
+
+from .fields_out import element_stress, vertex_contact, vertex_displacement
+
+FORMATS = ("json", "vtk", "png")
+
+
+def write_json(result, path: Path):
+    path.write_text(json.dumps(result.summary(), indent=1))
+
+
+def write_vtk(result, path: Path):
+    """Mesh in user units with displacement, contact pressure (point data) and stresses (cell data)."""
+    fem = result.fem
+    point_data = {
+        "displacement": vertex_displacement(result),
+        "contact_pressure": vertex_contact(result, result.contact.pressure),
+    }
+    if result.contact.friction is not None:
+        point_data["friction_traction"] = vertex_contact(result, result.contact.friction)
+    cell_data = {name: [values] for name, values in element_stress(result).items()}
+    mesh = to_meshio(fem.mesh.scaled(fem.scaling.length), point_data=point_data, cell_data=cell_data)
+    mesh.points = np.column_stack([mesh.points, np.zeros(len(mesh.points))])  # VTU wants 3-D points
+    mesh.write(str(path))
+
+
+def save(result, directory, formats=FORMATS) -> list[Path]:
+    """Write the chosen outputs of ``result`` into ``directory`` and return the paths."""
+    unknown = set(formats) - set(FORMATS)
+    if unknown:
+        raise ValueError(f"formats: unknown {sorted(unknown)}; choose from {FORMATS}")
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    if "json" in formats:
+        paths.append(directory / "summary.json")
+        write_json(result, paths[-1])
+    if result.solved and "vtk" in formats:
+        paths.append(directory / "solution.vtu")
+        write_vtk(result, paths[-1])
+    if result.solved and "png" in formats:
+        from . import plots
+
+        paths += [directory / "deformed.png", directory / "contact.png"]
+        plots.deformed_mesh(result, paths[-2])
+        plots.contact_tractions(result, paths[-1])
+    return paths

@@ -1,0 +1,84 @@
+"""Plots of a result: deformed mesh, and tractions along Γ_C (against Hertz where it applies)."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.collections import PolyCollection  # noqa: E402
+
+from ..analytic import hertz_plane_strain, hertz_pressure  # noqa: E402
+from ..scene.model import Material  # noqa: E402
+from .fields_out import element_stress, vertex_displacement  # noqa: E402
+
+
+def deformed_mesh(result, path, magnification: float | None = None):
+    """Deformed mesh coloured by von Mises stress; contact nodes marked by status."""
+    fem = result.fem
+    points = fem.mesh.p.T * fem.scaling.length
+    u = vertex_displacement(result)
+    size = np.ptp(points, axis=0).max()
+    if magnification is None:
+        largest = np.abs(u).max()
+        magnification = 0.05 * size / largest if largest > 0 else 1.0
+    moved = points + magnification * u
+    corners = fem.mesh.t[: 4 if fem.mesh.t.shape[0] >= 4 else 3]
+    fig, ax = plt.subplots(figsize=(8, 5))
+    polys = PolyCollection(moved[corners.T], array=element_stress(result)["von_mises"], cmap="viridis",
+                           edgecolors="k", linewidths=0.1)
+    ax.add_collection(polys)
+    fig.colorbar(polys, ax=ax, label="von Mises stress")
+    contact = result.contact
+    tip = contact.coords + magnification * result.displacement[fem.contact.dofs]
+    for status, color in (("open", "tab:gray"), ("closed", "tab:red"), ("stick", "tab:blue"), ("slip", "tab:orange")):
+        mask = contact.status == status
+        if mask.any():
+            ax.plot(*tip[mask].T, ".", color=color, ms=3, label=status)
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.legend(loc="lower right", fontsize=8)
+    ax.set_title(f"{result.scene.name}: deformed mesh (displacement ×{magnification:.3g})")
+    fig.savefig(path, dpi=150, bbox_inches="tight")
+    plt.close(fig)
+
+
+def hertz_reference(result):
+    """(a, p0) of plane-strain Hertz for a punch scene with one material, else None."""
+    scene = result.scene
+    obstacle = scene.contact.obstacle
+    if obstacle.shape not in ("parabolic", "cylinder") or not isinstance(scene.materials, Material):
+        return None
+    E, nu = scene.materials.E, scene.materials.nu
+    if scene.body.plane == "stress":  # plane stress: E* = E
+        nu = 0.0
+    return hertz_plane_strain(result.normal_force, obstacle.radius, E, nu)
+
+
+def contact_tractions(result, path):
+    """Contact pressure (and friction traction) along Γ_C, with the Hertz curve for punches."""
+    contact = result.contact
+    order = np.argsort(contact.coordinate)
+    s = contact.coordinate[order]
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.plot(s, contact.pressure[order], "o-", ms=3, label="λ_N (pressure)")
+    if contact.friction is not None:
+        ax.plot(s, contact.friction[order], "s-", ms=3, label="λ_T (friction traction)")
+    reference = hertz_reference(result)
+    if reference is not None:
+        a, p0 = reference
+        center = result.scene.contact.obstacle.center
+        x = np.linspace(center - 1.5 * a, center + 1.5 * a, 400)
+        ax.plot(x, hertz_pressure(x - center, a, p0), "k--", label=f"Hertz (a = {a:.4g}, p₀ = {p0:.4g})")
+        closed = s[contact.status[order] != "open"]
+        if closed.size:
+            span = max(closed.max() - closed.min(), 3 * a)
+            ax.set_xlim(closed.mean() - span, closed.mean() + span)
+    ax.set_xlabel("coordinate along Γ_C")
+    ax.set_ylabel("traction")
+    ax.axhline(0, color="0.7", lw=0.5)
+    ax.legend()
+    ax.set_title(f"{result.scene.name}: contact tractions")
+    fig.savefig(path, dpi=150, bbox_inches="tight")
+    plt.close(fig)

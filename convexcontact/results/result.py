@@ -1,0 +1,160 @@
+"""The result of a contact solve, in the user's units."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..fem.assembly import FEModel
+from ..formulations.fields import ContactFields
+from .certificate import Certificate, normal_gap
+
+CLOSED_PRESSURE = 1e-6
+"""A node is closed when its pressure exceeds this fraction of the largest pressure."""
+
+
+@dataclass
+class ContactNodes:
+    """Fields at the contact nodes (user units). ``status`` is open/closed (/stick/slip)."""
+
+    coords: np.ndarray
+    coordinate: np.ndarray
+    normals: np.ndarray
+    gap: np.ndarray  # initial gap to the obstacle at its final position
+    normal_displacement: np.ndarray
+    pressure: np.ndarray
+    status: np.ndarray
+    friction: np.ndarray | None = None
+    slip: np.ndarray | None = None
+
+
+@dataclass
+class ContactResult:
+    """Displacement, contact tractions, certificate and timings of one solve."""
+
+    fem: FEModel
+    solver: str
+    status: str
+    solver_status: str
+    iterations: int
+    timings: dict[str, float]
+    certificate: Certificate | None
+    contact_weights: object  # C of the formulation (scaled), nodal force = C λ
+    displacement: np.ndarray | None  # full DOF vector, user units
+    contact: ContactNodes | None
+    obstacle_advance: float | None = None
+    message: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def solved(self) -> bool:
+        return self.contact is not None
+
+    @property
+    def scene(self):
+        return self.fem.scene
+
+    @property
+    def ndof(self) -> int:
+        return self.fem.n_free
+
+    @property
+    def closed(self) -> np.ndarray:
+        return self.contact.status != "open"
+
+    @property
+    def contact_force(self) -> np.ndarray:
+        """Resultant force of the obstacle on the body (per unit thickness), user units."""
+        return -(self._nodal_contact_forces[:, None] * self.contact.normals).sum(axis=0)
+
+    @property
+    def normal_force(self) -> float:
+        """Compressive resultant along the mean outward normal of Γ_C (≥ 0)."""
+        mean = self.fem.contact.weights @ self.fem.contact.normals
+        return float(-self.contact_force @ (mean / np.linalg.norm(mean)))
+
+    @property
+    def _nodal_contact_forces(self) -> np.ndarray:
+        return self.contact_weights @ self.contact.pressure * self.fem.scaling.length
+
+    @property
+    def max_pressure(self) -> float:
+        return float(self.contact.pressure.max())
+
+    @property
+    def contact_half_width(self) -> float:
+        """Half the extent of the closed zone along Γ_C (0 when nothing touches)."""
+        s = self.contact.coordinate[self.closed]
+        return float((s.max() - s.min()) / 2) if s.size else 0.0
+
+    @property
+    def elastic_energy(self) -> float:
+        """½ uᵀKu per unit thickness, user units."""
+        scaled = self.displacement / self.fem.scaling.displacement
+        return float(0.5 * scaled @ (self.fem.K_full @ scaled) * self.fem.scaling.energy)
+
+    def summary(self) -> dict:
+        """JSON-ready summary (see docs/certificate.md for the certificate)."""
+        out = {
+            "scene": self.scene.name,
+            "ndof": self.ndof,
+            "n_contact_nodes": self.fem.contact.m,
+            "solver": self.solver,
+            "status": self.status,
+            "solver_status": self.solver_status,
+            "iterations": self.iterations,
+            "timings": self.timings,
+            "message": self.message,
+        }
+        if not self.solved:
+            return out
+        c = self.contact
+        out.update(
+            contact_half_width=self.contact_half_width,
+            max_pressure=self.max_pressure,
+            normal_force=self.normal_force,
+            contact_force=self.contact_force.tolist(),
+            elastic_energy=self.elastic_energy,
+            certificate=self.certificate.as_dict(),
+            n_closed=int(self.closed.sum()),
+            contact_nodes={
+                "x": c.coords[:, 0].tolist(),
+                "y": c.coords[:, 1].tolist(),
+                "s": c.coordinate.tolist(),
+                "gap": c.gap.tolist(),
+                "u_N": c.normal_displacement.tolist(),
+                "lambda_N": c.pressure.tolist(),
+                "status": c.status.tolist(),
+            },
+        )
+        if self.obstacle_advance is not None:
+            out["obstacle_advance"] = self.obstacle_advance
+        if c.friction is not None:
+            out["contact_nodes"].update(lambda_T=c.friction.tolist(), u_T=c.slip.tolist())
+        return out
+
+    def save(self, directory, formats=("json", "vtk", "png")) -> list:
+        """Write summary.json, solution.vtu and plots into ``directory``; return the paths."""
+        from .output import save
+
+        return save(self, directory, formats)
+
+
+def contact_nodes(fem: FEModel, fields: ContactFields) -> ContactNodes:
+    """Contact-node fields in user units; open where the pressure is negligible."""
+    contact, scaling = fem.contact, fem.scaling
+    pressure = fields.pressure * scaling.pressure
+    largest = pressure.max(initial=0.0)
+    closed = (pressure > CLOSED_PRESSURE * largest) if largest > 0 else np.zeros(contact.m, bool)
+    u_N = contact.N @ fields.u + contact.normal_offset
+    gap = u_N - normal_gap(contact, fields)
+    return ContactNodes(
+        coords=contact.coords * scaling.length,
+        coordinate=contact.coordinate * scaling.length,
+        normals=contact.normals,
+        gap=gap * scaling.displacement,
+        normal_displacement=u_N * scaling.displacement,
+        pressure=pressure,
+        status=np.where(closed, "closed", "open"),
+    )

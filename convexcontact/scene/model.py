@@ -1,0 +1,304 @@
+"""What a user describes: body, materials, boundaries, obstacle and contact law.
+
+Plain dataclasses. Each checks its own fields where the value enters and raises
+:class:`SceneError` naming the field and the fix; nothing is silently changed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Union
+
+import numpy as np
+
+ELEMENTS = ("P1", "P2", "Q1", "Q2")
+PLANES = ("strain", "stress")
+
+
+class SceneError(ValueError):
+    """A scene field is missing, malformed or physically meaningless."""
+
+    def __init__(self, field_name: str, problem: str, fix: str = ""):
+        self.field = field_name
+        message = f"{field_name}: {problem}"
+        super().__init__(message + (f" — {fix}" if fix else ""))
+
+
+def finite(value, field_name: str) -> float:
+    """Return ``value`` as a float, refusing NaN, infinity and non-numbers."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise SceneError(field_name, f"expected a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise SceneError(field_name, f"got {value!r}", "give a finite number")
+    return number
+
+
+def finite_vector(value, field_name: str, length: int = 2) -> tuple[float, ...]:
+    """Return ``value`` as a tuple of ``length`` finite floats."""
+    if np.ndim(value) != 1 or len(value) != length:
+        raise SceneError(field_name, f"expected {length} numbers, got {value!r}")
+    return tuple(finite(v, f"{field_name}[{i}]") for i, v in enumerate(value))
+
+
+@dataclass(frozen=True)
+class Material:
+    """Isotropic linear elastic material."""
+
+    E: float
+    nu: float
+
+    def __post_init__(self):
+        E = finite(self.E, "material.E")
+        nu = finite(self.nu, "material.nu")
+        if E <= 0:
+            raise SceneError("material.E", f"Young's modulus must be positive, got {E}")
+        if not -1 < nu < 0.5:
+            raise SceneError(
+                "material.nu",
+                f"Poisson's ratio must lie in (-1, 0.5), got {nu}",
+                "for near-incompressible bodies use e.g. 0.4999 with P2 or Q2",
+            )
+        object.__setattr__(self, "E", E)
+        object.__setattr__(self, "nu", nu)
+
+
+@dataclass(frozen=True)
+class Rectangle:
+    """Built-in rectangle [x0, x0+width] × [y0, y0+height].
+
+    Boundaries are named ``left``, ``right``, ``bottom``, ``top``. ``grading``
+    (≥ 1) is the ratio of the largest to the smallest element size: in x the
+    elements are finest at ``refine_x``; in y they are finest at the side named
+    ``refine_y`` ("top" or "bottom").
+    """
+
+    width: float = 1.0
+    height: float = 1.0
+    nx: int = 16
+    ny: int = 16
+    origin: tuple[float, float] = (0.0, 0.0)
+    grading: tuple[float, float] = (1.0, 1.0)
+    refine_x: float | None = None
+    refine_y: str = "top"
+
+    def __post_init__(self):
+        for name in ("width", "height"):
+            if finite(getattr(self, name), f"body.{name}") <= 0:
+                raise SceneError(f"body.{name}", "must be positive")
+        for name in ("nx", "ny"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or value < 1:
+                raise SceneError(f"body.{name}", f"expected a positive integer, got {value!r}")
+        object.__setattr__(self, "origin", finite_vector(self.origin, "body.origin"))
+        grading = finite_vector(self.grading, "body.grading")
+        if min(grading) < 1:
+            raise SceneError("body.grading", f"ratios must be ≥ 1, got {grading}")
+        object.__setattr__(self, "grading", grading)
+        if self.refine_x is not None:
+            finite(self.refine_x, "body.refine_x")
+        if self.refine_y not in ("top", "bottom"):
+            raise SceneError("body.refine_y", f"expected 'top' or 'bottom', got {self.refine_y!r}")
+
+
+@dataclass(frozen=True)
+class MeshFile:
+    """A mesh file read with meshio; gmsh physical groups name boundaries and subdomains."""
+
+    path: Path
+
+    def __post_init__(self):
+        path = Path(self.path)
+        if not path.is_file():
+            raise SceneError("body.mesh", f"no mesh file at {path}", "check the path")
+        object.__setattr__(self, "path", path)
+
+
+@dataclass(frozen=True)
+class Body:
+    """Geometry, element and 2-D hypothesis of the elastic body."""
+
+    geometry: Union[Rectangle, MeshFile]
+    element: str = "P1"
+    plane: str = "strain"
+
+    def __post_init__(self):
+        if self.element not in ELEMENTS:
+            raise SceneError("body.element", f"unknown element {self.element!r}", f"use one of {ELEMENTS}")
+        if self.plane not in PLANES:
+            raise SceneError("body.plane", f"unknown hypothesis {self.plane!r}", f"use one of {PLANES}")
+
+
+@dataclass(frozen=True)
+class Dirichlet:
+    """Prescribed displacement components on a named boundary (None = free)."""
+
+    boundary: str
+    ux: float | None = None
+    uy: float | None = None
+
+    def __post_init__(self):
+        if self.ux is None and self.uy is None:
+            raise SceneError(f"dirichlet[{self.boundary}]", "no component prescribed", "give ux and/or uy")
+        for name in ("ux", "uy"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, finite(value, f"dirichlet[{self.boundary}].{name}"))
+
+
+@dataclass(frozen=True)
+class Traction:
+    """Surface load on a named boundary: a pressure (pushing inward) or a vector."""
+
+    boundary: str
+    pressure: float | None = None
+    vector: tuple[float, float] | None = None
+
+    def __post_init__(self):
+        where = f"traction[{self.boundary}]"
+        if (self.pressure is None) == (self.vector is None):
+            raise SceneError(where, "give exactly one of pressure or vector")
+        if self.pressure is not None:
+            object.__setattr__(self, "pressure", finite(self.pressure, f"{where}.pressure"))
+        else:
+            object.__setattr__(self, "vector", finite_vector(self.vector, f"{where}.vector"))
+
+
+GapFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """Rigid obstacle, described by the initial gap g along the outward normal of Γ_C.
+
+    ``shape``:
+      - ``"flat"``: g = ``gap`` everywhere;
+      - ``"parabolic"``: g = s²/(2R) − d, s the coordinate along Γ_C from ``center``;
+      - ``"cylinder"``: g = R − sqrt(R² − s²) − d (exact circle);
+      - ``"expression"``: g = ``expression``(x, y), a formula string or a callable.
+
+    Exactly one of ``depth`` (indentation d, displacement control) and ``force``
+    (resultant P per unit thickness pressing the obstacle on the body, force
+    control: d becomes an unknown) may be given for the shaped obstacles; a flat
+    obstacle or an expression uses ``depth`` = 0 unless told otherwise.
+    """
+
+    shape: str = "flat"
+    gap: float = 0.0
+    radius: float | None = None
+    center: float = 0.0
+    depth: float | None = None
+    force: float | None = None
+    expression: Union[str, GapFunction, None] = None
+
+    SHAPES = ("flat", "parabolic", "cylinder", "expression")
+
+    def __post_init__(self):
+        if self.shape not in self.SHAPES:
+            raise SceneError("obstacle.shape", f"unknown shape {self.shape!r}", f"use one of {self.SHAPES}")
+        finite(self.gap, "obstacle.gap")
+        finite(self.center, "obstacle.center")
+        if self.shape in ("parabolic", "cylinder"):
+            if self.radius is None or finite(self.radius, "obstacle.radius") <= 0:
+                raise SceneError("obstacle.radius", "a punch needs a positive radius")
+        if self.shape == "expression":
+            if self.expression is None:
+                raise SceneError("obstacle.expression", "missing", "give a formula in x and y, e.g. 'x**2/2 - 0.01'")
+            if isinstance(self.expression, str):
+                from .expressions import compile_expression
+
+                compile_expression(self.expression, "obstacle.expression")
+        if self.depth is not None and self.force is not None:
+            raise SceneError("obstacle", "both depth and force given", "give depth (displacement control) or force")
+        if self.depth is not None:
+            finite(self.depth, "obstacle.depth")
+        if self.force is not None and finite(self.force, "obstacle.force") < 0:
+            raise SceneError("obstacle.force", "must be ≥ 0 (it presses the obstacle on the body)")
+
+    @property
+    def force_controlled(self) -> bool:
+        return self.force is not None
+
+    def shape_gap(self, x: np.ndarray, y: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Initial gap in user units before indentation (``depth`` not subtracted).
+
+        ``x, y`` are the node coordinates, ``s`` their coordinate along Γ_C.
+        """
+        if self.shape == "flat":
+            return np.full(x.shape, self.gap)
+        if self.shape == "expression":
+            if callable(self.expression):
+                values = np.broadcast_to(np.asarray(self.expression(x, y), dtype=float), x.shape)
+                if not np.isfinite(values).all():
+                    raise SceneError("obstacle.expression", "the gap function returned NaN or infinity")
+                return np.array(values)
+            from .expressions import compile_expression
+
+            return compile_expression(self.expression, "obstacle.expression")(x=x, y=y)
+        r = s - self.center
+        if self.shape == "parabolic":
+            return r**2 / (2.0 * self.radius)
+        outside = np.abs(r) >= self.radius
+        if outside.any():
+            raise SceneError(
+                "obstacle.radius",
+                f"the cylinder (radius {self.radius}) does not cover the contact boundary",
+                "use a larger radius, the parabolic shape, or a shorter contact boundary",
+            )
+        return self.radius - np.sqrt(self.radius**2 - r**2)
+
+
+@dataclass(frozen=True)
+class Signorini:
+    """Frictionless unilateral contact.
+
+    ``non_penetration``: ``"nodal"`` (u_N ≤ g at every contact node, lumped) or
+    ``"weak"`` (Hild's continuous P1 multipliers: M(u_N − g) ≤ 0).
+    """
+
+    non_penetration: str = "nodal"
+
+    def __post_init__(self):
+        if self.non_penetration not in ("nodal", "weak"):
+            raise SceneError("contact.non_penetration", f"got {self.non_penetration!r}", "use 'nodal' or 'weak'")
+
+
+ContactLaw = Signorini
+
+
+@dataclass(frozen=True)
+class Contact:
+    """The contact boundary Γ_C, the obstacle facing it and the contact law."""
+
+    boundary: str
+    obstacle: Obstacle = field(default_factory=Obstacle)
+    law: ContactLaw = field(default_factory=Signorini)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A complete contact problem of 2-D linear elastostatics."""
+
+    body: Body
+    materials: Union[Material, dict[str, Material]]
+    dirichlet: tuple[Dirichlet, ...]
+    contact: Contact
+    tractions: tuple[Traction, ...] = ()
+    body_force: tuple[float, float] = (0.0, 0.0)
+    name: str = "scene"
+
+    def __post_init__(self):
+        object.__setattr__(self, "dirichlet", tuple(self.dirichlet))
+        object.__setattr__(self, "tractions", tuple(self.tractions))
+        object.__setattr__(self, "body_force", finite_vector(self.body_force, "body_force"))
+        if not self.dirichlet:
+            raise SceneError(
+                "dirichlet",
+                "no Dirichlet boundary: the body can move rigidly",
+                "fix at least one boundary, e.g. [[dirichlet]] boundary = 'bottom', ux = 0, uy = 0",
+            )
+        if isinstance(self.materials, dict) and not self.materials:
+            raise SceneError("materials", "empty", "give [material] E and nu")

@@ -1,0 +1,33 @@
+"""Solver adapters: thin functions from a ConicProgram to a ConicSolution.
+
+A solver never knows mechanics. Names: ``clarabel``, ``osqp``, ``cvxpy`` or
+``cvxpy:NAME`` (any solver cvxpy reaches, e.g. ``cvxpy:SCS``).
+"""
+
+from __future__ import annotations
+
+from ..conic import ConicProgram, ConicSolution
+from . import clarabel_direct, cvxpy_model, osqp_direct
+from .osqp_direct import ConeNotSupported
+
+SOLVERS = ("clarabel", "osqp", "cvxpy")
+
+
+def check_name(name: str) -> str:
+    """Return ``name`` if it names a solver path, else raise naming the choices."""
+    if name.split(":", 1)[0] not in SOLVERS:
+        raise ValueError(f"solver: unknown {name!r}; use one of {SOLVERS} or 'cvxpy:NAME'")
+    return name
+
+
+def solve(program: ConicProgram, solver: str = "clarabel", **options) -> ConicSolution:
+    """Solve ``program`` with the named solver; ``options`` go to that adapter."""
+    base, _, sub = check_name(solver).partition(":")
+    if base == "clarabel":
+        return clarabel_direct.solve(program, **options)
+    if base == "osqp":
+        return osqp_direct.solve(program, **options)
+    return cvxpy_model.solve(program, solver=sub or None, **options)
+
+
+__all__ = ["SOLVERS", "ConeNotSupported", "check_name", "solve", "cvxpy_model"]
