@@ -9,8 +9,8 @@ satisfy Px + q + Aᵀz = 0 at optimality.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp

@@ -58,14 +58,14 @@ class Model:
 
     def result(self, solution: ConicSolution, timings: dict) -> ContactResult:
         fem, C = self.fem, self.contact_weights
-        common = dict(
-            fem=fem,
-            solver=solution.solver,
-            solver_status=solution.solver_status,
-            iterations=solution.iterations,
-            timings=timings,
-            contact_weights=C,
-        )
+        common = {
+            "fem": fem,
+            "solver": solution.solver,
+            "solver_status": solution.solver_status,
+            "iterations": solution.iterations,
+            "timings": timings,
+            "contact_weights": C,
+        }
         if not solution.solved:
             return ContactResult(
                 status=solution.status,

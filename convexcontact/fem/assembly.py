@@ -105,10 +105,10 @@ def load_vector(scene: Scene, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling) 
         facet_basis = fe.FacetBasis(mesh, basis.elem, facets=facets)
         if traction.pressure is not None:
             p = traction.pressure / scaling.pressure
-            f += fe.asm(fe.LinearForm(lambda v, w: -p * dot(w.n, v)), facet_basis)
+            f += fe.asm(fe.LinearForm(lambda v, w, p=p: -p * dot(w.n, v)), facet_basis)
         else:
             t = np.array(traction.vector) / scaling.pressure
-            f += fe.asm(fe.LinearForm(lambda v, w: t[0] * v[0] + t[1] * v[1]), facet_basis)
+            f += fe.asm(fe.LinearForm(lambda v, w, t=t: t[0] * v[0] + t[1] * v[1]), facet_basis)
     if any(scene.body_force):
         b = np.array(scene.body_force) * scaling.length / scaling.pressure
         f += fe.asm(fe.LinearForm(lambda v, w: b[0] * v[0] + b[1] * v[1]), basis)

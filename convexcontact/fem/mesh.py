@@ -30,7 +30,7 @@ def graded(start: float, length: float, cells: int, ratio: float, focus: float |
     if focus is None or ratio == 1:
         return np.linspace(start, start + length, cells + 1)
     left = float(np.clip(focus - start, 0.0, length))
-    n_left = int(round(cells * left / length))
+    n_left = round(cells * left / length)
     n_right = cells - n_left
     x_left = start + left - _outward(left, n_left, ratio)[::-1] if n_left else np.array([start + left])
     x_right = start + left + _outward(length - left, n_right, ratio)[1:] if n_right else np.array([])
@@ -42,7 +42,7 @@ def rectangle(geometry: Rectangle, quads: bool) -> fe.Mesh:
     x0, y0 = geometry.origin
     gx, gy = geometry.grading
     focus_y = y0 + geometry.height if geometry.refine_y == "top" else y0
-    x = graded(x0, geometry.width, geometry.nx, gx, geometry.refine_x if gx > 1 else None)
+    x = graded(x0, geometry.width, geometry.nx, gx, geometry.refine_x)
     y = graded(y0, geometry.height, geometry.ny, gy, focus_y if gy > 1 else None)
     mesh_type = fe.MeshQuad1 if quads else fe.MeshTri1
     return mesh_type.init_tensor(x, y).with_defaults()

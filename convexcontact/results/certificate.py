@@ -12,8 +12,8 @@ mesh and in any units:
 - ``friction_bound``    max (|λ_T| − s)_+ / p_ref     (friction only)
 - ``slip_direction``    max |λ_T + s u_T/|u_T|| / p_ref over slipping nodes (friction only)
 
-u_ref, p_ref and f_ref are the largest displacement, pressure and nodal force
-of the problem (data or solution).
+u_ref, p_ref and f_ref are the largest displacement (or obstacle advance), pressure
+and nodal force of the problem (data or solution).
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ def certify(
         contact_force = contact_force + contact.T.T @ (C @ lam_T)
     elastic_force = K @ fields.u
 
-    u_ref = max(np.abs(fields.u).max(initial=0.0), np.abs(contact.gap).max(initial=0.0), TINY)
+    u_ref = max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_advance), TINY)
     p_ref = max(np.abs(lam_N).max(initial=0.0), TINY)
     f_ref = max(np.abs(f).max(initial=0.0), np.abs(elastic_force).max(initial=0.0), TINY)
     residuals = {

@@ -5,13 +5,13 @@ from __future__ import annotations
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.collections import PolyCollection  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import PolyCollection
 
-from ..analytic import hertz_plane_strain, hertz_pressure  # noqa: E402
-from ..scene.model import Material  # noqa: E402
-from .fields_out import element_stress, vertex_displacement  # noqa: E402
+from ..analytic import hertz_plane_strain, hertz_pressure
+from ..scene.model import Material
+from .fields_out import element_stress, vertex_displacement
 
 
 def deformed_mesh(result, path, magnification: float | None = None):

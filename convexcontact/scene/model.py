@@ -7,9 +7,9 @@ Plain dataclasses. Each checks its own fields where the value enters and raises
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Union
 
 import numpy as np
 
@@ -27,7 +27,9 @@ class SceneError(ValueError):
 
 
 def finite(value, field_name: str) -> float:
-    """Return ``value`` as a float, refusing NaN, infinity and non-numbers."""
+    """Return ``value`` as a float, refusing NaN, infinity and non-numbers (strings, booleans)."""
+    if isinstance(value, (str, bool, np.bool_)):
+        raise SceneError(field_name, f"expected a number, got {value!r}")
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -46,19 +48,20 @@ def finite_vector(value, field_name: str, length: int = 2) -> tuple[float, ...]:
 
 @dataclass(frozen=True)
 class Material:
-    """Isotropic linear elastic material."""
+    """Isotropic linear elastic material; ``name`` (a subdomain) only labels errors."""
 
     E: float
     nu: float
+    name: str = field(default="material", compare=False)
 
     def __post_init__(self):
-        E = finite(self.E, "material.E")
-        nu = finite(self.nu, "material.nu")
+        E = finite(self.E, f"{self.name}.E")
+        nu = finite(self.nu, f"{self.name}.nu")
         if E <= 0:
-            raise SceneError("material.E", f"Young's modulus must be positive, got {E}")
+            raise SceneError(f"{self.name}.E", f"Young's modulus must be positive, got {E}")
         if not -1 < nu < 0.5:
             raise SceneError(
-                "material.nu",
+                f"{self.name}.nu",
                 f"Poisson's ratio must lie in (-1, 0.5), got {nu}",
                 "for near-incompressible bodies use e.g. 0.4999 with P2 or Q2",
             )
@@ -72,8 +75,8 @@ class Rectangle:
 
     Boundaries are named ``left``, ``right``, ``bottom``, ``top``. ``grading``
     (≥ 1) is the ratio of the largest to the smallest element size: in x the
-    elements are finest at ``refine_x``; in y they are finest at the side named
-    ``refine_y`` ("top" or "bottom").
+    elements are finest at ``refine_x`` (default: the middle); in y they are finest
+    at the side named ``refine_y`` ("top" or "bottom").
     """
 
     width: float = 1.0
@@ -87,19 +90,21 @@ class Rectangle:
 
     def __post_init__(self):
         for name in ("width", "height"):
-            if finite(getattr(self, name), f"body.{name}") <= 0:
+            value = finite(getattr(self, name), f"body.{name}")
+            if value <= 0:
                 raise SceneError(f"body.{name}", "must be positive")
+            object.__setattr__(self, name, value)
         for name in ("nx", "ny"):
             value = getattr(self, name)
-            if not isinstance(value, (int, np.integer)) or value < 1:
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise SceneError(f"body.{name}", f"expected a positive integer, got {value!r}")
         object.__setattr__(self, "origin", finite_vector(self.origin, "body.origin"))
         grading = finite_vector(self.grading, "body.grading")
         if min(grading) < 1:
             raise SceneError("body.grading", f"ratios must be ≥ 1, got {grading}")
         object.__setattr__(self, "grading", grading)
-        if self.refine_x is not None:
-            finite(self.refine_x, "body.refine_x")
+        refine_x = self.origin[0] + self.width / 2 if self.refine_x is None else finite(self.refine_x, "body.refine_x")
+        object.__setattr__(self, "refine_x", refine_x)
         if self.refine_y not in ("top", "bottom"):
             raise SceneError("body.refine_y", f"expected 'top' or 'bottom', got {self.refine_y!r}")
 
@@ -121,7 +126,7 @@ class MeshFile:
 class Body:
     """Geometry, element and 2-D hypothesis of the elastic body."""
 
-    geometry: Union[Rectangle, MeshFile]
+    geometry: Rectangle | MeshFile
     element: str = "P1"
     plane: str = "strain"
 
@@ -192,18 +197,19 @@ class Obstacle:
     center: float = 0.0
     depth: float | None = None
     force: float | None = None
-    expression: Union[str, GapFunction, None] = None
+    expression: str | GapFunction | None = None
 
     SHAPES = ("flat", "parabolic", "cylinder", "expression")
 
     def __post_init__(self):
         if self.shape not in self.SHAPES:
             raise SceneError("obstacle.shape", f"unknown shape {self.shape!r}", f"use one of {self.SHAPES}")
-        finite(self.gap, "obstacle.gap")
-        finite(self.center, "obstacle.center")
-        if self.shape in ("parabolic", "cylinder"):
-            if self.radius is None or finite(self.radius, "obstacle.radius") <= 0:
-                raise SceneError("obstacle.radius", "a punch needs a positive radius")
+        for name in ("gap", "center", "radius", "depth", "force"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, finite(value, f"obstacle.{name}"))
+        if self.shape in ("parabolic", "cylinder") and (self.radius is None or self.radius <= 0):
+            raise SceneError("obstacle.radius", "a punch needs a positive radius")
         if self.shape == "expression":
             if self.expression is None:
                 raise SceneError("obstacle.expression", "missing", "give a formula in x and y, e.g. 'x**2/2 - 0.01'")
@@ -213,9 +219,7 @@ class Obstacle:
                 compile_expression(self.expression, "obstacle.expression")
         if self.depth is not None and self.force is not None:
             raise SceneError("obstacle", "both depth and force given", "give depth (displacement control) or force")
-        if self.depth is not None:
-            finite(self.depth, "obstacle.depth")
-        if self.force is not None and finite(self.force, "obstacle.force") < 0:
+        if self.force is not None and self.force < 0:
             raise SceneError("obstacle.force", "must be ≥ 0 (it presses the obstacle on the body)")
 
     @property
@@ -283,7 +287,7 @@ class Scene:
     """A complete contact problem of 2-D linear elastostatics."""
 
     body: Body
-    materials: Union[Material, dict[str, Material]]
+    materials: Material | dict[str, Material]
     dirichlet: tuple[Dirichlet, ...]
     contact: Contact
     tractions: tuple[Traction, ...] = ()

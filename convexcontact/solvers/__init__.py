@@ -30,4 +30,4 @@ def solve(program: ConicProgram, solver: str = "clarabel", **options) -> ConicSo
     return cvxpy_model.solve(program, solver=sub or None, **options)
 
 
-__all__ = ["SOLVERS", "ConeNotSupported", "check_name", "solve", "cvxpy_model"]
+__all__ = ["SOLVERS", "ConeNotSupported", "check_name", "cvxpy_model", "solve"]

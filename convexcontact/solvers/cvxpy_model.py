@@ -38,7 +38,7 @@ class CvxpyModel:
     x: cp.Variable
     cone_constraints: tuple
 
-    def extended(self, constraints=(), objective=None) -> "CvxpyModel":
+    def extended(self, constraints=(), objective=None) -> CvxpyModel:
         """A new model with extra constraints and/or another objective."""
         problem = cp.Problem(
             objective if objective is not None else self.problem.objective,

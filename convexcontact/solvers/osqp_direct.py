@@ -72,7 +72,7 @@ def solve(
     """Solve ``program`` with OSQP, polishing on (an active-set answer when it succeeds)."""
     A, lower, upper, to_z = _linear_rows(program)
     solver = osqp.OSQP()
-    options = dict(eps_abs=tol, eps_rel=tol, max_iter=max_iter, polishing=True, verbose=verbose)
+    options = {"eps_abs": tol, "eps_rel": tol, "max_iter": max_iter, "polishing": True, "verbose": verbose}
     options.update(native)
     solver.setup(sp.triu(program.P, format="csc"), program.q, A, lower, upper, **options)
     result = solver.solve()

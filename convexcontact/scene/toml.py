@@ -1,0 +1,207 @@
+"""Scene files: TOML → the dataclasses of :mod:`convexcontact.scene.model`.
+
+This module only maps keys to fields and checks TOML types; every value is
+validated by the model. Unknown keys are errors, never ignored. The schema is
+described in docs/scenes.md.
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+from pathlib import Path
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+from .model import (
+    Body,
+    Contact,
+    Dirichlet,
+    Material,
+    MeshFile,
+    Obstacle,
+    Rectangle,
+    Scene,
+    SceneError,
+    Signorini,
+    Traction,
+)
+
+NUMBER, INTEGER, TEXT, PAIR = "a number", "an integer", "a string", "two numbers [a, b]"
+TABLE, TABLES = "a table [name]", "an array of tables [[name]]"
+
+TOP = {
+    "name": TEXT, "body_force": PAIR, "body": TABLE, "material": TABLE, "materials": TABLE,
+    "dirichlet": TABLES, "traction": TABLES, "contact": TABLE, "obstacle": TABLE,
+}
+BODY = {"mesh": TEXT, "element": TEXT, "plane": TEXT}
+RECTANGLE = {
+    **BODY, "width": NUMBER, "height": NUMBER, "origin": PAIR, "nx": INTEGER, "ny": INTEGER,
+    "grading": PAIR, "refine_x": NUMBER, "refine_y": TEXT,
+}
+MATERIAL = {"E": NUMBER, "nu": NUMBER}
+DIRICHLET = {"boundary": TEXT, "ux": NUMBER, "uy": NUMBER}
+TRACTION = {"boundary": TEXT, "pressure": NUMBER, "vector": PAIR}
+CONTACT = {"boundary": TEXT, "law": TEXT}
+PUNCH = {"shape": TEXT, "radius": NUMBER, "center": NUMBER, "depth": NUMBER, "force": NUMBER}
+OBSTACLES = {
+    "flat": {"shape": TEXT, "gap": NUMBER, "depth": NUMBER, "force": NUMBER},
+    "parabolic": PUNCH,
+    "cylinder": PUNCH,
+    "expression": {"shape": TEXT, "expression": TEXT, "depth": NUMBER, "force": NUMBER},
+}
+
+LAWS = {
+    # law name → (model class, its keys in [contact] besides boundary and law)
+    "signorini": (Signorini, {"non_penetration": TEXT}),
+}
+
+EXAMPLES = {
+    "body": '[body]\nmesh = "rectangle"\nwidth = 1.0\nheight = 1.0\nnx = 16\nny = 16',
+    "body.mesh": 'mesh = "rectangle" (built-in, boundaries left/right/bottom/top) or mesh = "part.msh"',
+    "material": "[material]\nE = 1.0\nnu = 0.3\n(or one [materials.NAME] table per mesh subdomain)",
+    "E": "E = 1.0",
+    "nu": "nu = 0.3",
+    "dirichlet": '[[dirichlet]]\nboundary = "bottom"\nux = 0.0\nuy = 0.0',
+    "contact": '[contact]\nboundary = "top"\nlaw = "signorini"',
+    "boundary": 'boundary = "top"',
+}
+
+
+def load_scene(path) -> Scene:
+    """Read the TOML scene file at ``path``; mesh paths are relative to its folder."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as error:
+        raise SceneError("toml", f"cannot read {path}: {error.strerror or error}") from None
+    except UnicodeDecodeError as error:
+        raise SceneError("toml", f"{path.name} is not UTF-8 text ({error.reason})") from None
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError("toml", f"{path.name}: {_decode_message(error)}", "fix the TOML syntax there") from None
+    data.setdefault("name", path.stem)
+    return scene_from_dict(data, path.parent)
+
+
+def scene_from_dict(data: dict, base_dir: Path | str = ".") -> Scene:
+    """Build a :class:`Scene` from parsed TOML ``data``; mesh paths are relative to ``base_dir``."""
+    data = _table(data, "", TOP, required=("body", "dirichlet", "contact"))
+    if "material" in data and "materials" in data:
+        raise SceneError("material", "both [material] and [materials.NAME] given", "keep one of them")
+    if "material" not in data and "materials" not in data:
+        raise SceneError("material", "missing", "add, for example:\n" + EXAMPLES["material"])
+    if "material" in data:
+        materials = Material(**_table(data["material"], "material", MATERIAL, required=("E", "nu")))
+    else:
+        materials = {
+            name: Material(**_table(entry, f"materials.{name}", MATERIAL, required=("E", "nu")), name=f"materials.{name}")
+            for name, entry in _table(data["materials"], "materials", None).items()
+        }
+    return Scene(
+        body=_body(data["body"], Path(base_dir)),
+        materials=materials,
+        dirichlet=[Dirichlet(**entry) for entry in _entries(data, "dirichlet", DIRICHLET)],
+        tractions=[Traction(**entry) for entry in _entries(data, "traction", TRACTION)],
+        contact=_contact(data["contact"], data.get("obstacle", {})),
+        **{key: data[key] for key in ("name", "body_force") if key in data},
+    )
+
+
+def _body(table, base_dir: Path) -> Body:
+    mesh = _table(table, "body", None, required=("mesh",))["mesh"]
+    _check_type(mesh, TEXT, "body.mesh")
+    if mesh == "rectangle":
+        keys = _table(table, "body", RECTANGLE, context=' with mesh = "rectangle"')
+    else:
+        keys = _table(table, "body", BODY, context=" with a mesh file")
+    del keys["mesh"]
+    options = {key: keys.pop(key) for key in ("element", "plane") if key in keys}
+    geometry = Rectangle(**keys) if mesh == "rectangle" else MeshFile(base_dir / mesh)
+    return Body(geometry, **options)
+
+
+def _contact(table, obstacle) -> Contact:
+    law_name = _table(table, "contact", None).get("law", "signorini")
+    _check_type(law_name, TEXT, "contact.law")
+    if law_name not in LAWS:
+        raise SceneError("contact.law", f"unknown law {law_name!r}", f"available laws: {', '.join(LAWS)}")
+    law, law_keys = LAWS[law_name]
+    keys = _table(table, "contact", CONTACT | law_keys, required=("boundary",))
+    shape = _table(obstacle, "obstacle", None).get("shape", "flat")
+    _check_type(shape, TEXT, "obstacle.shape")
+    if shape not in OBSTACLES:
+        Obstacle(shape=shape)  # raises, listing the shapes
+    return Contact(
+        boundary=keys["boundary"],
+        obstacle=Obstacle(**_table(obstacle, "obstacle", OBSTACLES[shape], context=f" with shape = {shape!r}")),
+        law=law(**{key: keys[key] for key in law_keys if key in keys}),
+    )
+
+
+def _entries(data: dict, name: str, spec: dict) -> list[dict]:
+    """The tables of the array ``[[name]]``, each checked against ``spec``."""
+    return [
+        _table(entry, f"{name}[{_label(entry, i)}]", spec, required=("boundary",))
+        for i, entry in enumerate(data.get(name, []))
+    ]
+
+
+def _label(entry, index: int):
+    boundary = entry.get("boundary") if isinstance(entry, dict) else None
+    return boundary if isinstance(boundary, str) else index
+
+
+def _table(value, path: str, spec: dict | None, required: tuple = (), context: str = "") -> dict:
+    """Check that ``value`` is a table with only ``spec``'s keys, of ``spec``'s types (None: any keys)."""
+    if not isinstance(value, dict):
+        raise SceneError(path, f"expected {TABLE.replace('name', path)}, got {value!r}")
+    prefix = f"{path}." if path else ""
+    if spec is not None:
+        for key in value:
+            if key not in spec:
+                raise SceneError(prefix + key, "unknown key", _allowed(key, path, spec, context))
+            _check_type(value[key], spec[key], prefix + key)
+    for key in required:
+        if key not in value:
+            example = EXAMPLES.get(key if key in ("E", "nu", "boundary") else prefix + key)
+            raise SceneError(prefix + key, "missing", f"add, for example:\n{example}" if example else "")
+    return dict(value)
+
+
+def _allowed(key: str, path: str, spec: dict, context: str) -> str:
+    where = f"in [{path}]{context}" if path else "at the top level"
+    hint = f"allowed keys {where}: {', '.join(spec)}"
+    close = difflib.get_close_matches(key, spec, n=1)
+    if close:
+        hint = f"did you mean {close[0]!r}? " + hint
+    if path and key in TOP:
+        hint += f"; top-level keys such as {key!r} must come before the first [table] header"
+    return hint
+
+
+def _check_type(value, kind: str, path: str) -> None:
+    def number(x):
+        return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+    ok = {
+        NUMBER: number(value),
+        INTEGER: isinstance(value, int) and not isinstance(value, bool),
+        TEXT: isinstance(value, str),
+        PAIR: isinstance(value, list) and len(value) == 2 and all(number(x) for x in value),
+        TABLE: isinstance(value, dict),
+        TABLES: isinstance(value, list) and all(isinstance(x, dict) for x in value),
+    }[kind]
+    if not ok:
+        raise SceneError(path, f"expected {kind.replace('name', path)}, got {value!r}")
+
+
+def _decode_message(error: Exception) -> str:
+    """'line L, column C: problem' from a TOMLDecodeError (its message on Python < 3.14)."""
+    message = str(error)
+    if getattr(error, "lineno", None):
+        return f"line {error.lineno}, column {error.colno}: {getattr(error, 'msg', message)}"
+    found = re.fullmatch(r"(.*) \(at line (\d+), column (\d+)\)", message, flags=re.DOTALL)
+    return f"line {found[2]}, column {found[3]}: {found[1]}" if found else message
