@@ -117,7 +117,7 @@ def test_certificate_detects_a_perturbed_solution(hertz_model, hertz_reference):
     from convexcontact.results.certificate import certify
 
     fem = hertz_model.fem
-    C = hertz_model.contact_weights
+    C = hertz_model.C
     scaling = fem.scaling
     u = hertz_reference.displacement[fem.free] / scaling.displacement
     pressure = hertz_reference.contact.pressure / scaling.pressure
@@ -141,3 +141,5 @@ def test_cvxpy_model_can_be_extended(hertz_model, hertz_reference):
     assert result.status == "solved"
     assert result.obstacle_advance == pytest.approx(0.5 * hertz_reference.obstacle_advance, rel=1e-6)
     assert result.normal_force < 0.9 * hertz_reference.normal_force
+    assert result.certificate.residuals["obstacle_balance"] > 0.1  # the user's constraint holds the punch back
+    assert "extended" in result.message

@@ -23,7 +23,9 @@ class ContactTrace:
     point towards increasing ``coordinate`` (the position along Γ_C projected on
     its mean tangent). ``weights`` are w_i = ∫ψ_i ds, ``mass`` the consistent
     boundary mass M of the trace space. ``obstacle_coupling`` (force control only)
-    is how much a unit advance of the obstacle closes the gap at each node.
+    is how much a unit advance of the obstacle closes the gap at each node;
+    ``tangential_coupling`` (tangential force only) is the tangential motion of each
+    node's obstacle point for a unit tangential translation of the obstacle.
     """
 
     facets: np.ndarray
@@ -41,6 +43,8 @@ class ContactTrace:
     gap: np.ndarray
     obstacle_coupling: np.ndarray | None
     obstacle_force: float
+    tangential_coupling: np.ndarray | None = None
+    obstacle_tangential_force: float = 0.0
 
     @property
     def m(self) -> int:
@@ -86,10 +90,10 @@ def contact_trace(
     user_coords = coords * scaling.length
     gap = obstacle.shape_gap(user_coords[:, 0], user_coords[:, 1], coordinate * scaling.length)
     gap = (gap - (obstacle.depth or 0.0)) / scaling.displacement
-    coupling = None
-    if obstacle.force_controlled:
-        mean_normal = weights @ normals
-        coupling = normals @ (mean_normal / np.linalg.norm(mean_normal))
+    mean_normal = weights @ normals
+    mean_normal /= np.linalg.norm(mean_normal)
+    coupling = normals @ mean_normal if obstacle.force_controlled else None
+    tangential = tangents @ mean_tangent if obstacle.tangential_force is not None else None
 
     return ContactTrace(
         facets=facets,
@@ -107,4 +111,6 @@ def contact_trace(
         gap=gap,
         obstacle_coupling=coupling,
         obstacle_force=(obstacle.force or 0.0) / scaling.force,
+        tangential_coupling=tangential,
+        obstacle_tangential_force=(obstacle.tangential_force or 0.0) / scaling.force,
     )

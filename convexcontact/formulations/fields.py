@@ -9,15 +9,17 @@ import numpy as np
 
 @dataclass
 class ContactFields:
-    """Free displacement DOFs and contact tractions at the contact nodes.
+    """Free displacement DOFs and contact tractions.
 
-    ``pressure`` λ_N ≥ 0 and ``friction`` λ_T are nodal values of traction
-    fields along Γ_C (force per unit length); the nodal forces on the body are
-    −Nᵀ C λ_N − Tᵀ C λ_T with C the contact weights of the formulation.
-    ``obstacle_advance`` is the unknown indentation under force control.
+    ``pressure`` λ_N ≥ 0 holds nodal values of the pressure along Γ_C; the normal
+    nodal forces on the body are −Nᵀ C λ_N. ``friction`` λ_T holds the friction
+    traction on the body along the tangent at the friction points (force Rᵀ λ_T).
+    ``obstacle_advance`` and ``obstacle_shift`` are the obstacle's unknown normal
+    and tangential translations under force control.
     """
 
     u: np.ndarray
     pressure: np.ndarray
     friction: np.ndarray | None = None
     obstacle_advance: float = 0.0
+    obstacle_shift: float = 0.0

@@ -7,10 +7,17 @@ mesh and in any units:
 - ``non_penetration``   max (u_N − g)_+ / u_ref         (weighted by C for the weak form)
 - ``pressure_sign``     max (−λ_N)_+ / p_ref
 - ``complementarity``   max |λ_N (u_N − g)| / (p_ref u_ref)
-- ``equilibrium``       ‖Ku − f + NᵀCλ_N + TᵀCλ_T‖∞ / f_ref
-- ``obstacle_balance``  |Σ contact force − P| / P    (force control only)
+- ``equilibrium``       ‖Ku − f + NᵀCλ_N − Rᵀλ_T‖∞ / f_ref
+- ``obstacle_balance``  |Σ contact force − P| / P, likewise Q  (force control only)
 - ``friction_bound``    max (|λ_T| − s)_+ / p_ref     (friction only)
-- ``slip_direction``    max |λ_T + s u_T/|u_T|| / p_ref over slipping nodes (friction only)
+- ``slip_direction``    max |λ_T |v|_ε + s v| / (ω p_ref u_ref) (friction only), v = R u the
+                        weighted slip at the friction points and |v|_ε = sqrt(v² + ε²ω²)
+                        (|v| for the exact law): λ_T = −s v/|v|_ε, written as a product so
+                        that it vanishes in the stick zone and is not amplified where the
+                        slip is below ε
+
+For Coulomb friction s = F λ_N of the same solution: the residuals then measure how far
+the answer is from a fixed point of the Picard map, i.e. from the discrete Coulomb law.
 
 u_ref, p_ref and f_ref are the largest displacement (or obstacle advance), pressure
 and nodal force of the problem (data or solution).
@@ -24,6 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..fem.contact import ContactTrace
+from ..fem.friction import FrictionPoints
 from ..formulations.fields import ContactFields
 
 TINY = 1e-300
@@ -58,19 +66,20 @@ def certify(
     contact: ContactTrace,
     C: sp.spmatrix,
     fields: ContactFields,
+    friction: FrictionPoints | None = None,
     slip_bound: np.ndarray | None = None,
+    epsilon: float | None = None,
 ) -> Certificate:
-    """Residuals of the Signorini (and, with ``slip_bound``, Tresca) conditions."""
+    """Residuals of the Signorini (and, with ``friction``, Tresca) conditions."""
     lam_N = fields.pressure
-    lam_T = fields.friction
     gap = normal_gap(contact, fields)
     weighted_gap = (C @ gap) / contact.weights  # u_N − g for nodal contact, its P1 projection for weak
     contact_force = contact.N.T @ (C @ lam_N)
-    if lam_T is not None:
-        contact_force = contact_force + contact.T.T @ (C @ lam_T)
+    if friction is not None:
+        contact_force = contact_force - friction.R.T @ fields.friction
     elastic_force = K @ fields.u
 
-    u_ref = max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_advance), TINY)
+    u_ref = max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_advance), abs(fields.obstacle_shift), TINY)
     p_ref = max(np.abs(lam_N).max(initial=0.0), TINY)
     f_ref = max(np.abs(f).max(initial=0.0), np.abs(elastic_force).max(initial=0.0), TINY)
     residuals = {
@@ -79,21 +88,34 @@ def certify(
         "complementarity": np.abs(lam_N * weighted_gap).max(initial=0.0) / (p_ref * u_ref),
         "equilibrium": np.abs(elastic_force - f + contact_force).max(initial=0.0) / f_ref,
     }
+    balance = []
     if contact.obstacle_coupling is not None:
         resultant = contact.obstacle_coupling @ (C @ lam_N)
-        residuals["obstacle_balance"] = abs(resultant - contact.obstacle_force) / max(contact.obstacle_force, TINY)
-    if slip_bound is not None:
-        residuals.update(friction_residuals(contact, fields, slip_bound, p_ref, u_ref))
+        balance.append(abs(resultant - contact.obstacle_force) / max(contact.obstacle_force, TINY))
+    if contact.tangential_coupling is not None:
+        resultant = friction.coupling @ fields.friction
+        scale = max(abs(contact.obstacle_tangential_force), contact.obstacle_force, TINY)
+        balance.append(abs(resultant - contact.obstacle_tangential_force) / scale)
+    if balance:
+        residuals["obstacle_balance"] = max(balance)
+    if friction is not None:
+        residuals.update(friction_residuals(friction, fields, slip_bound, p_ref, u_ref, epsilon))
     return Certificate({k: float(v) for k, v in residuals.items()})
 
 
-def friction_residuals(contact, fields, slip_bound, p_ref, u_ref) -> dict[str, float]:
-    """|λ_T| ≤ s, and λ_T = −s u_T/|u_T| where the node slips (|u_T| above round-off)."""
+def weighted_slip(friction: FrictionPoints, fields: ContactFields) -> np.ndarray:
+    """v = R u + offset − coupling δ_T: slip relative to the obstacle, weighted, at the friction points."""
+    shift = 0.0 if friction.coupling is None else friction.coupling * fields.obstacle_shift
+    return friction.slip(fields.u) - shift
+
+
+def friction_residuals(friction, fields, slip_bound, p_ref, u_ref, epsilon=None) -> dict[str, float]:
+    """|λ_T| ≤ s, and λ_T |v|_ε + s v = 0 (λ_T = −s v/|v|_ε where the point slips)."""
     lam_T = fields.friction
-    u_T = contact.T @ fields.u + contact.tangent_offset
-    slipping = np.abs(u_T) > 1e-9 * u_ref
-    direction_error = np.abs(lam_T + slip_bound * np.sign(u_T))[slipping]
+    v = weighted_slip(friction, fields)
+    magnitude = np.hypot(v, (epsilon or 0.0) * friction.weights)
+    direction = np.abs(lam_T * magnitude + slip_bound * v) / (friction.weights * u_ref)
     return {
         "friction_bound": np.maximum(np.abs(lam_T) - slip_bound, 0.0).max(initial=0.0) / p_ref,
-        "slip_direction": direction_error.max(initial=0.0) / p_ref,
+        "slip_direction": direction.max(initial=0.0) / p_ref,
     }

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..fem.assembly import FEModel
+from ..fem.friction import FrictionPoints
 from ..formulations.fields import ContactFields
 from .certificate import Certificate, normal_gap
 
@@ -14,17 +15,30 @@ CLOSED_PRESSURE = 1e-6
 """A node is closed when its pressure exceeds this fraction of the largest pressure."""
 
 
+SLIP = 1e-7
+"""A closed node slips when its tangential slip exceeds this fraction of the largest displacement."""
+
+
 @dataclass
 class ContactNodes:
-    """Fields at the contact nodes (user units). ``status`` is open/closed (/stick/slip)."""
+    """Fields at the contact nodes (user units).
+
+    ``status`` is open / closed without friction, open / stick / slip+ / slip− with
+    friction (slip± = slipping towards increasing / decreasing coordinate).
+    ``forces`` (m × 2) are the nodal contact forces on the body; ``friction`` the
+    friction traction along the tangent, ``slip`` the tangential slip u_T relative
+    to the obstacle.
+    """
 
     coords: np.ndarray
     coordinate: np.ndarray
     normals: np.ndarray
+    tangents: np.ndarray
     gap: np.ndarray  # initial gap to the obstacle at its final position
     normal_displacement: np.ndarray
     pressure: np.ndarray
     status: np.ndarray
+    forces: np.ndarray
     friction: np.ndarray | None = None
     slip: np.ndarray | None = None
 
@@ -40,10 +54,11 @@ class ContactResult:
     iterations: int
     timings: dict[str, float]
     certificate: Certificate | None
-    contact_weights: object  # C of the formulation (scaled), nodal force = C λ
     displacement: np.ndarray | None  # full DOF vector, user units
     contact: ContactNodes | None
     obstacle_advance: float | None = None
+    obstacle_shift: float | None = None
+    formulation: str = "primal"
     message: str = ""
     extra: dict = field(default_factory=dict)
 
@@ -66,7 +81,7 @@ class ContactResult:
     @property
     def contact_force(self) -> np.ndarray:
         """Resultant force of the obstacle on the body (per unit thickness), user units."""
-        return -(self._nodal_contact_forces[:, None] * self.contact.normals).sum(axis=0)
+        return self.contact.forces.sum(axis=0)
 
     @property
     def normal_force(self) -> float:
@@ -75,8 +90,10 @@ class ContactResult:
         return float(-self.contact_force @ (mean / np.linalg.norm(mean)))
 
     @property
-    def _nodal_contact_forces(self) -> np.ndarray:
-        return self.contact_weights @ self.contact.pressure * self.fem.scaling.length
+    def tangential_force(self) -> float:
+        """Friction resultant along the mean tangent of Γ_C."""
+        mean = self.fem.contact.weights @ self.fem.contact.tangents
+        return float(self.contact_force @ (mean / np.linalg.norm(mean)))
 
     @property
     def max_pressure(self) -> float:
@@ -103,6 +120,8 @@ class ContactResult:
             "solver": self.solver,
             "status": self.status,
             "solver_status": self.solver_status,
+            "law": type(self.scene.contact.law).__name__.lower(),
+            "formulation": self.formulation,
             "iterations": self.iterations,
             "timings": self.timings,
             "message": self.message,
@@ -130,8 +149,16 @@ class ContactResult:
         )
         if self.obstacle_advance is not None:
             out["obstacle_advance"] = self.obstacle_advance
+        if self.obstacle_shift is not None:
+            out["obstacle_shift"] = self.obstacle_shift
         if c.friction is not None:
+            out["tangential_force"] = self.tangential_force
+            out["n_stick"] = int((c.status == "stick").sum())
+            out["n_slip"] = int(np.char.startswith(c.status.astype(str), "slip").sum())
             out["contact_nodes"].update(lambda_T=c.friction.tolist(), u_T=c.slip.tolist())
+        out.update({k: v for k, v in self.extra.items() if k != "history"})
+        if "history" in self.extra:
+            out["picard_history"] = self.extra["history"]
         return out
 
     def save(self, directory, formats=("json", "vtk", "png")) -> list:
@@ -141,7 +168,9 @@ class ContactResult:
         return save(self, directory, formats)
 
 
-def contact_nodes(fem: FEModel, fields: ContactFields) -> ContactNodes:
+def contact_nodes(
+    fem: FEModel, fields: ContactFields, C, friction: FrictionPoints | None = None
+) -> ContactNodes:
     """Contact-node fields in user units; open where the pressure is negligible."""
     contact, scaling = fem.contact, fem.scaling
     pressure = fields.pressure * scaling.pressure
@@ -149,12 +178,27 @@ def contact_nodes(fem: FEModel, fields: ContactFields) -> ContactNodes:
     closed = (pressure > CLOSED_PRESSURE * largest) if largest > 0 else np.zeros(contact.m, bool)
     u_N = contact.N @ fields.u + contact.normal_offset
     gap = u_N - normal_gap(contact, fields)
+    forces = -(C @ fields.pressure)[:, None] * contact.normals
+    status = np.where(closed, "closed", "open")
+    traction = slip = None
+    if friction is not None:
+        shift = 0.0 if contact.tangential_coupling is None else contact.tangential_coupling * fields.obstacle_shift
+        slip = contact.T @ fields.u + contact.tangent_offset - shift
+        forces = forces + (contact.T @ (friction.R.T @ fields.friction))[:, None] * contact.tangents
+        traction = friction.nodal_traction(contact, fields.friction) * scaling.pressure
+        moving = np.abs(slip) > SLIP * max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_shift))
+        status = np.where(~closed, "open", np.where(~moving, "stick", np.where(slip > 0, "slip+", "slip-")))
+        slip = slip * scaling.displacement
     return ContactNodes(
         coords=contact.coords * scaling.length,
         coordinate=contact.coordinate * scaling.length,
         normals=contact.normals,
+        tangents=contact.tangents,
         gap=gap * scaling.displacement,
         normal_displacement=u_N * scaling.displacement,
         pressure=pressure,
-        status=np.where(closed, "closed", "open"),
+        status=status,
+        forces=forces * scaling.force,
+        friction=traction,
+        slip=slip,
     )

@@ -189,6 +189,8 @@ class Obstacle:
     (resultant P per unit thickness pressing the obstacle on the body, force
     control: d becomes an unknown) may be given for the shaped obstacles; a flat
     obstacle or an expression uses ``depth`` = 0 unless told otherwise.
+    ``tangential_force`` Q (friction laws only) pulls the obstacle along the mean
+    tangent of Γ_C; its tangential translation becomes an unknown.
     """
 
     shape: str = "flat"
@@ -198,13 +200,14 @@ class Obstacle:
     depth: float | None = None
     force: float | None = None
     expression: str | GapFunction | None = None
+    tangential_force: float | None = None
 
     SHAPES = ("flat", "parabolic", "cylinder", "expression")
 
     def __post_init__(self):
         if self.shape not in self.SHAPES:
             raise SceneError("obstacle.shape", f"unknown shape {self.shape!r}", f"use one of {self.SHAPES}")
-        for name in ("gap", "center", "radius", "depth", "force"):
+        for name in ("gap", "center", "radius", "depth", "force", "tangential_force"):
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, finite(value, f"obstacle.{name}"))
@@ -270,7 +273,126 @@ class Signorini:
             raise SceneError("contact.non_penetration", f"got {self.non_penetration!r}", "use 'nodal' or 'weak'")
 
 
-ContactLaw = Signorini
+NodalValues = float | str | np.ndarray | Callable
+"""A field on Γ_C: a constant, a formula in x and y, a callable f(x, y), or nodal values."""
+
+
+def check_field(value, field_name: str, minimum: float = 0.0):
+    """Validate a :data:`NodalValues` field (finite, ≥ ``minimum``); return it unchanged in kind."""
+    if isinstance(value, str):
+        from .expressions import compile_expression
+
+        compile_expression(value, field_name)
+        return value
+    if callable(value):
+        return value
+    if np.ndim(value) == 0:
+        number = finite(value, field_name)
+        if number < minimum:
+            raise SceneError(field_name, f"must be ≥ {minimum}, got {number}")
+        return number
+    array = np.array(value, dtype=float)  # a copy: the user's array is never changed
+    if array.ndim != 1 or not np.isfinite(array).all() or (array < minimum).any():
+        raise SceneError(field_name, f"nodal values must be a 1-D array of finite numbers ≥ {minimum}")
+    return array
+
+
+def evaluate_field(value, field_name: str, x: np.ndarray, y: np.ndarray, minimum: float = 0.0) -> np.ndarray:
+    """Values of a :data:`NodalValues` field at the points (x, y)."""
+    if isinstance(value, str):
+        from .expressions import compile_expression
+
+        values = compile_expression(value, field_name)(x=x, y=y)
+    elif callable(value):
+        values = np.broadcast_to(np.asarray(value(x, y), dtype=float), x.shape).copy()
+    elif np.ndim(value) == 0:
+        values = np.full(x.shape, float(value))
+    else:
+        if value.size != x.size:
+            raise SceneError(field_name, f"{value.size} nodal values for {x.size} contact nodes",
+                             "give one value per contact node, ordered as result.contact.coords")
+        values = np.array(value)
+    if not np.isfinite(values).all() or (values < minimum).any():
+        raise SceneError(field_name, f"values must be finite and ≥ {minimum}")
+    return values
+
+
+QUADRATURES = ("nodal", "gauss")
+
+
+@dataclass(frozen=True)
+class Tresca:
+    """Friction with a given slip bound s(x) ≥ 0 (traction per unit length): exact SOCP.
+
+    ``quadrature`` of the friction term Σ s|u_T|: at the contact nodes (lumped) or at
+    Gauss points of Γ_C. ``regularization`` ε > 0 (a length) replaces |u_T| by
+    sqrt(u_T² + ε²) (Hild's regularized law), to measure how far ε moves the answer.
+    """
+
+    slip_bound: NodalValues = 0.0
+    non_penetration: str = "nodal"
+    quadrature: str = "nodal"
+    regularization: float | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "slip_bound", check_field(self.slip_bound, "contact.slip_bound"))
+        _check_options(self)
+
+
+@dataclass(frozen=True)
+class Coulomb:
+    """Coulomb friction, coefficient F(x) ≥ 0, solved by a Picard map over normal pressures.
+
+    s ← (1 − ω) s + ω F·S(λ_N(s)), each step an exact Tresca program. ``smoothing_radius``
+    ρ > 0 gives Oden–Duvaut's nonlocal law (S the mollifier ω_ρ along Γ_C); ρ = 0 is the
+    local law. ``initial_pressure``: None starts from the frictionless (Signorini)
+    pressures, as Oden's algorithm III; otherwise a field of pressures.
+    """
+
+    friction: NodalValues = 0.0
+    non_penetration: str = "nodal"
+    quadrature: str = "nodal"
+    regularization: float | None = None
+    smoothing_radius: float = 0.0
+    relaxation: float = 1.0
+    tol: float = 1e-8
+    max_iterations: int = 100
+    initial_pressure: NodalValues | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "friction", check_field(self.friction, "contact.friction"))
+        _check_options(self)
+        if finite(self.smoothing_radius, "contact.smoothing_radius") < 0:
+            raise SceneError("contact.smoothing_radius", "must be ≥ 0 (0 is the local law)")
+        if not 0 < finite(self.relaxation, "contact.relaxation") <= 1:
+            raise SceneError("contact.relaxation", f"ω must lie in (0, 1], got {self.relaxation}")
+        if finite(self.tol, "contact.tol") <= 0:
+            raise SceneError("contact.tol", "must be positive")
+        if not isinstance(self.max_iterations, (int, np.integer)) or self.max_iterations < 1:
+            raise SceneError("contact.max_iterations", f"expected a positive integer, got {self.max_iterations!r}")
+        if self.initial_pressure is not None:
+            object.__setattr__(
+                self, "initial_pressure", check_field(self.initial_pressure, "contact.initial_pressure")
+            )
+
+
+def _check_options(law):
+    if law.non_penetration not in ("nodal", "weak"):
+        raise SceneError("contact.non_penetration", f"got {law.non_penetration!r}", "use 'nodal' or 'weak'")
+    if law.quadrature not in QUADRATURES:
+        raise SceneError("contact.quadrature", f"got {law.quadrature!r}", f"use one of {QUADRATURES}")
+    if law.quadrature == "gauss" and law.non_penetration == "weak":
+        raise SceneError("contact.quadrature", "Gauss points go with nodal non-penetration",
+                         "the weak form already integrates the friction term with the boundary mass M")
+    if law.regularization is not None and finite(law.regularization, "contact.regularization") <= 0:
+        raise SceneError("contact.regularization", "ε must be positive (omit it for the exact law)")
+
+
+ContactLaw = Signorini | Tresca | Coulomb
+
+
+def has_friction(law: ContactLaw) -> bool:
+    return not isinstance(law, Signorini)
 
 
 @dataclass(frozen=True)
@@ -280,6 +402,11 @@ class Contact:
     boundary: str
     obstacle: Obstacle = field(default_factory=Obstacle)
     law: ContactLaw = field(default_factory=Signorini)
+
+    def __post_init__(self):
+        if self.obstacle.tangential_force is not None and not has_friction(self.law):
+            raise SceneError("obstacle.tangential_force", "a tangential force needs friction",
+                             "use law = 'tresca' or 'coulomb', or drop the tangential force")
 
 
 @dataclass(frozen=True)

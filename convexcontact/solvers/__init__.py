@@ -20,14 +20,22 @@ def check_name(name: str) -> str:
     return name
 
 
-def solve(program: ConicProgram, solver: str = "clarabel", **options) -> ConicSolution:
-    """Solve ``program`` with the named solver; ``options`` go to that adapter."""
+def session(program: ConicProgram, solver: str = "clarabel", **options):
+    """A solver set up for ``program``, with ``update(q=, b=)`` and ``solve()`` for re-solves.
+
+    Clarabel keeps its setup, OSQP its factorization and warm start; cvxpy rebuilds.
+    """
     base, _, sub = check_name(solver).partition(":")
     if base == "clarabel":
-        return clarabel_direct.solve(program, **options)
+        return clarabel_direct.Session(program, **options)
     if base == "osqp":
-        return osqp_direct.solve(program, **options)
-    return cvxpy_model.solve(program, solver=sub or None, **options)
+        return osqp_direct.Session(program, **options)
+    return cvxpy_model.Session(program, solver=sub or None, **options)
+
+
+def solve(program: ConicProgram, solver: str = "clarabel", **options) -> ConicSolution:
+    """Solve ``program`` with the named solver; ``options`` go to that adapter."""
+    return session(program, solver, **options).solve()
 
 
 __all__ = ["SOLVERS", "ConeNotSupported", "check_name", "cvxpy_model", "solve"]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import clarabel
 import numpy as np
 import scipy.sparse as sp
@@ -38,25 +40,51 @@ def settings(tol: float = 1e-10, max_iter: int = 200, verbose: bool = False, **n
     return s
 
 
-def solve(program: ConicProgram, tol: float = 1e-10, max_iter: int = 200, verbose: bool = False, **native) -> ConicSolution:
-    """Solve ``program`` with Clarabel (upper triangle of P, sparse CSC)."""
-    solver = clarabel.DefaultSolver(
-        sp.triu(program.P, format="csc"),
-        program.q,
-        sp.csc_matrix(program.A),
-        program.b,
-        [_CONES[c.kind](c.dim) for c in program.cones],
-        settings(tol, max_iter, verbose, **native),
-    )
-    result = solver.solve()
-    word = str(result.status).split(".")[-1]
-    return ConicSolution(
-        x=np.asarray(result.x),
-        z=np.asarray(result.z),
-        s=np.asarray(result.s),
-        status=_STATUS.get(word, "failed"),
-        solver_status=word,
-        iterations=int(result.iterations),
-        solve_time=float(result.solve_time),
-        solver="clarabel",
-    )
+class Session:
+    """A Clarabel solver set up once; :meth:`update` changes q and b, keeping the setup.
+
+    Clarabel has no warm start; an update saves the setup (symbolic work), not
+    iterations. When presolve removed rows the data cannot be updated and the
+    session sets the solver up again.
+    """
+
+    def __init__(self, program: ConicProgram, tol: float = 1e-10, max_iter: int = 200, verbose: bool = False, **native):
+        self.program = program
+        self._settings = settings(tol, max_iter, verbose, **native)
+        self._solver = self._setup(program)
+
+    def _setup(self, program: ConicProgram):
+        return clarabel.DefaultSolver(
+            sp.triu(program.P, format="csc"),
+            program.q,
+            sp.csc_matrix(program.A),
+            program.b,
+            [_CONES[c.kind](c.dim) for c in program.cones],
+            self._settings,
+        )
+
+    def update(self, q: np.ndarray | None = None, b: np.ndarray | None = None):
+        self.program = replace(self.program, q=self.program.q if q is None else q, b=self.program.b if b is None else b)
+        if self._solver.is_data_update_allowed():
+            self._solver.update(**{k: v for k, v in (("q", q), ("b", b)) if v is not None})
+        else:
+            self._solver = self._setup(self.program)
+
+    def solve(self) -> ConicSolution:
+        result = self._solver.solve()
+        word = str(result.status).split(".")[-1]
+        return ConicSolution(
+            x=np.asarray(result.x),
+            z=np.asarray(result.z),
+            s=np.asarray(result.s),
+            status=_STATUS.get(word, "failed"),
+            solver_status=word,
+            iterations=int(result.iterations),
+            solve_time=float(result.solve_time),
+            solver="clarabel",
+        )
+
+
+def solve(program: ConicProgram, **options) -> ConicSolution:
+    """Solve ``program`` with Clarabel (upper triangle of P, sparse CSC); options as :class:`Session`."""
+    return Session(program, **options).solve()

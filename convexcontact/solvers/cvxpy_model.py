@@ -9,10 +9,11 @@ the mechanics recovered from the solution does not depend on the solver used.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cvxpy as cp
 import numpy as np
+import scipy.sparse as sp
 
 from ..conic import ConicProgram, ConicSolution
 
@@ -30,8 +31,9 @@ _STATUS = {
 class CvxpyModel:
     """A cvxpy Problem over the variable ``x`` of a ConicProgram.
 
-    ``cone_constraints`` are the constraints of the program's cone blocks, in order;
-    ``problem`` may hold more (added by the user).
+    ``cone_constraints`` pair each constraint of the program's cones with the rows
+    it covers (consecutive second-order cones of one dimension share a single
+    vectorized ``cp.SOC``); ``problem`` may hold more constraints (added by the user).
     """
 
     problem: cp.Problem
@@ -47,26 +49,43 @@ class CvxpyModel:
         return CvxpyModel(problem, self.x, self.cone_constraints)
 
 
+def _runs(program: ConicProgram):
+    """(kind, dim, rows) for each cone block, consecutive equal SOCs merged (rows interleaved)."""
+    runs = []
+    for cone, rows in program.blocks():
+        last = runs[-1] if runs else None
+        if cone.kind == "soc" and last and last[0] == "soc" and last[1] == cone.dim and last[2].stop == rows.start:
+            runs[-1] = ("soc", cone.dim, slice(last[2].start, rows.stop))
+        else:
+            runs.append((cone.kind, cone.dim, rows))
+    return runs
+
+
 def model(program: ConicProgram) -> CvxpyModel:
     """The cvxpy Problem of ``program`` (P is wrapped in psd_wrap: no dense PSD check)."""
     x = cp.Variable(program.n_variables, name="x")
     objective = 0.5 * cp.quad_form(x, cp.psd_wrap(program.P)) + program.q @ x
+    A, b = sp.csr_matrix(program.A), program.b
     constraints = []
-    for cone, rows in program.blocks():
-        slack = program.b[rows] - program.A[rows] @ x
-        if cone.kind == "zero":
-            constraints.append(slack == 0)
-        elif cone.kind == "nonnegative":
-            constraints.append(slack >= 0)
-        else:
-            constraints.append(cp.SOC(slack[0], slack[1:]))
-    return CvxpyModel(cp.Problem(cp.Minimize(objective), constraints), x, tuple(constraints))
+    for kind, dim, rows in _runs(program):
+        if kind != "soc":
+            slack = b[rows] - A[rows] @ x
+            constraints.append(((slack == 0) if kind == "zero" else (slack >= 0), kind, rows))
+            continue
+        index = np.arange(rows.start, rows.stop).reshape(-1, dim).T  # (dim, cones): row of component j of cone i
+        t = b[index[0]] - A[index[0]] @ x
+        rest = index[1:].ravel()
+        vectors = cp.reshape(b[rest] - A[rest] @ x, (dim - 1, index.shape[1]), order="C")
+        constraints.append((cp.SOC(t, vectors, axis=0), kind, rows))
+    problem = cp.Problem(cp.Minimize(objective), [c for c, _, _ in constraints])
+    return CvxpyModel(problem, x, tuple(constraints))
 
 
-def _dual(constraint, kind: str) -> np.ndarray:
+def _dual(constraint, kind: str, rows: slice) -> np.ndarray:
     value = constraint.dual_value
-    if kind == "soc":
-        return np.concatenate([np.atleast_1d(v) for v in value])
+    if kind == "soc":  # [t duals (cones,), vector duals (dim−1, cones)] → interleaved rows
+        t, vectors = value
+        return np.vstack([np.atleast_1d(t), np.reshape(vectors, (-1, np.size(t)))]).T.ravel()
     if kind == "zero":  # cvxpy's multiplier of slack == 0 has the opposite sign of Clarabel's z
         return -np.atleast_1d(value)
     return np.atleast_1d(value)
@@ -96,7 +115,7 @@ def solve(
     status = _STATUS.get(m.problem.status, "failed")
     if status in ("solved", "inaccurate"):
         x = np.asarray(m.x.value, dtype=float)
-        z = np.concatenate([_dual(c, cone.kind) for c, cone in zip(m.cone_constraints, program.cones)])
+        z = np.concatenate([_dual(c, kind, rows) for c, kind, rows in m.cone_constraints])
     else:
         x = np.full(program.n_variables, np.nan)
         z = np.full(program.n_constraints, np.nan)
@@ -111,3 +130,16 @@ def solve(
         solve_time=elapsed,
         solver=f"cvxpy:{stats.solver_name if stats is not None else name}",
     )
+
+
+class Session:
+    """Re-solves by rebuilding the cvxpy model: transparent, not fast (see DESIGN.md)."""
+
+    def __init__(self, program: ConicProgram, **options):
+        self.program, self._options = program, options
+
+    def update(self, q: np.ndarray | None = None, b: np.ndarray | None = None):
+        self.program = replace(self.program, q=self.program.q if q is None else q, b=self.program.b if b is None else b)
+
+    def solve(self) -> ConicSolution:
+        return solve(self.program, **self._options)

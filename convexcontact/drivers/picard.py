@@ -1,0 +1,134 @@
+"""Coulomb and nonlocal Coulomb friction: a Picard map over normal pressures.
+
+    s^{k+1} = (1 − ω) s^k + ω F·S(λ_N(s^k)),
+
+λ_N(s) the pressure of the exact Tresca program with slip bound s (Oden's
+algorithm III/IV, Hild's map Φ). Only the slip bounds change between steps: the
+program, the factorization (dual) and the solver's setup are built once, and each
+step updates the data of one solver session (OSQP also warm-starts).
+
+The map converges only for small enough F (Hild); otherwise it may stagnate, cycle
+or diverge. That is a reported outcome — with the best iterate, its Coulomb
+residuals and the whole history — never an exception and never a silent success.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from .. import solvers
+from ..fem.mollifier import mollifier
+from ..results.certificate import certify
+from ..scene.model import Coulomb, evaluate_field
+from .solve import Model, field_at_points, timed
+
+CYCLE_PERIODS = (2, 3, 4)
+WINDOW = 8
+"""Iterations looked back on to call the map cycling, diverging or stagnating."""
+
+
+def pressure_map(model: Model):
+    """s(λ_N) = F · G S λ_N at the friction points (scaled units)."""
+    law: Coulomb = model.law
+    fem, friction = model.fem, model.friction
+    coefficient = field_at_points(law.friction, "contact.friction", fem, friction)
+    smoothing = None
+    if law.smoothing_radius > 0:
+        smoothing = mollifier(fem.contact.coords, fem.contact.weights, law.smoothing_radius / fem.scaling.length)
+
+    def bound(pressure):
+        smoothed = pressure if smoothing is None else smoothing @ pressure
+        return coefficient * (friction.interpolation @ np.maximum(smoothed, 0.0))
+
+    return bound
+
+
+def initial_pressure(model: Model, solver: str, options: dict) -> np.ndarray:
+    """The frictionless (Signorini) pressure, or the law's initial pressure field."""
+    law: Coulomb = model.law
+    fem = model.fem
+    if law.initial_pressure is not None:
+        x, y = fem.contact.coords.T * fem.scaling.length
+        return evaluate_field(law.initial_pressure, "contact.initial_pressure", x, y) / fem.scaling.pressure
+    # frictionless first step: the obstacle is not pulled tangentially yet
+    frictionless = replace(fem.contact, tangential_coupling=None)
+    program, recover, _ = model.build(None, None, None, frictionless)
+    return recover(solvers.solve(program, solver, **options)).pressure
+
+
+def outcome(changes: list[float], tol: float, states: list[np.ndarray]) -> str | None:
+    """converged / cycling (period p) / diverging, or None to go on."""
+    if changes[-1] < tol:
+        return "converged"
+    scale = max(np.abs(states[-1]).max(), 1e-300)
+    for period in CYCLE_PERIODS:
+        if len(states) > period + 1 and np.abs(states[-1] - states[-1 - period]).max() < tol * scale:
+            return f"cycling (period {period})"
+    recent = changes[-WINDOW:]
+    if len(recent) == WINDOW and all(b > a for a, b in itertools.pairwise(recent)) and recent[-1] > 1:
+        return "diverging"
+    return None
+
+
+def unfinished(changes: list[float]) -> str:
+    """Why the iteration limit was reached: stagnation, or a slow but steady decrease."""
+    if len(changes) > 2 * WINDOW and min(changes[-WINDOW:]) > 0.5 * min(changes[:-WINDOW]):
+        return "stagnated"
+    return "not converged (still decreasing: raise max_iterations)"
+
+
+def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
+    """Run the Picard map for the model's Coulomb law; return the best iterate's result."""
+    law: Coulomb = model.law
+    fem = model.fem
+    timings = dict(model.timings)
+    with timed(timings, "initial"):
+        bound = pressure_map(model)
+        s = bound(initial_pressure(model, solver, options))
+    session = solvers.session(model.program, solver, **options)
+    history, states, changes = [], [s], []
+    best = None
+    status = None
+    for k in range(1, law.max_iterations + 1):
+        start = time.perf_counter()
+        session.update(**model.bound_update(s))
+        solution = session.solve()
+        inner = time.perf_counter() - start
+        timings["solve"] = timings.get("solve", 0.0) + inner
+        if not solution.solved:
+            status = f"failed (inner solve {solution.solver_status})"
+            break
+        fields = model.recover(solution)
+        target = bound(fields.pressure)
+        change = float(np.abs(target - s).max() / max(np.abs(target).max(), 1e-300))
+        residual = certify(fem.K, fem.f, fem.contact, model.C, fields, model.friction, target, model.epsilon)
+        history.append({"iteration": k, "relative_change": change, "coulomb_residual": residual.worst,
+                        "inner_iterations": solution.iterations, "inner_time": inner})
+        if best is None or residual.worst <= best[0]:
+            best = (residual.worst, solution, fields, target)
+        if progress is not None:
+            progress(k, change)
+        changes.append(change)
+        s = (1.0 - law.relaxation) * s + law.relaxation * target
+        states.append(s)
+        status = outcome(changes, law.tol, states)
+        if status is not None:
+            break
+    else:
+        status = unfinished(changes)
+    extra = {"picard": {"outcome": status, "iterations": len(history), "relaxation": law.relaxation,
+                        "tol": law.tol, "best_iteration": None}, "history": history}
+    if best is None:
+        return model.result(solution, timings, None, extra=extra)
+    _, solution, fields, target = best
+    extra["picard"]["best_iteration"] = 1 + next(i for i, h in enumerate(history) if h["coulomb_residual"] == _)
+    with timed(timings, "postprocess"):
+        result = model.result(solution, timings, target, fields=fields, extra=extra)
+    if status != "converged":
+        result.status = "not converged"
+        result.message = f"Picard map {status} after {len(history)} iterations; best iterate reported"
+    return result

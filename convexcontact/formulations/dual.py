@@ -1,0 +1,89 @@
+"""The mixed multiplier saddle point, solved as its dual over the contact multipliers.
+
+With r = (λ_N, λ_T) and B = [C N; −R] (C, R as in :mod:`.primal`), eliminating u
+from the Lagrangian ½uᵀKu − fᵀu + rᵀ(B u + c) with one factorization of K gives
+
+    min ½ rᵀ W r − rᵀ h,   W = B K⁻¹ Bᵀ,   h = B K⁻¹ f + c,
+    s.t. λ_N ≥ 0,  (s_k, λ_T,k) ∈ SOC  (|λ_T,k| ≤ s_k),
+
+and u = K⁻¹(f − Bᵀ r). With C = M and R = M T this is Hild's mixed method with
+continuous P1 multipliers; with C = diag(w) its node-wise (lumped) counterpart. The
+ε-regularized friction adds μ_k with cost −ε ω_k μ_k and (s_k, λ_T,k, μ_k) ∈ SOC.
+Force control adds the equalities Σ (C c)ᵢ λ_N,i = P and couplingᵀ λ_T = Q; their
+multipliers are minus the obstacle's advance and shift.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..conic import ConicProgram, ConicSolution, nonnegative, soc, zero
+from ..fem.contact import ContactTrace
+from ..fem.factorization import StiffnessFactorization
+from ..fem.friction import FrictionPoints
+from .fields import ContactFields
+
+
+def dual(
+    K: sp.spmatrix,
+    f: np.ndarray,
+    contact: ContactTrace,
+    C: sp.spmatrix,
+    friction: FrictionPoints | None = None,
+    slip_bound: np.ndarray | None = None,
+    epsilon: float | None = None,
+    factorization: StiffnessFactorization | None = None,
+):
+    """The dual program, its recovery map and ``bound_update(s) -> {"b": ...}``."""
+    factorization = factorization or StiffnessFactorization(K)
+    m = contact.m
+    count = friction.count if friction is not None else 0
+    extra = count if epsilon is not None else 0
+    B = sp.vstack([C @ contact.N] + ([-friction.R] if friction is not None else [])).tocsr()
+    c = np.concatenate([C @ (contact.normal_offset - contact.gap)] + ([-friction.offset] if count else []))
+    Kf = factorization.solve(f)
+    size = m + count + extra
+    P = sp.block_diag([sp.csc_matrix(factorization.schur(B)), sp.csc_matrix((extra, extra))], format="csc")
+    q = np.concatenate([-(B @ Kf + c), -epsilon * friction.weights if extra else np.zeros(0)])
+
+    rows, b, cones = [], [], []
+    if contact.obstacle_coupling is not None:
+        rows.append(sp.csr_matrix(np.concatenate([C @ contact.obstacle_coupling, np.zeros(size - m)])[None, :]))
+        b.append([contact.obstacle_force])
+    if contact.tangential_coupling is not None:
+        rows.append(sp.csr_matrix(np.concatenate([np.zeros(m), friction.coupling, np.zeros(extra)])[None, :]))
+        b.append([contact.obstacle_tangential_force])
+    equalities = len(rows)
+    if equalities:
+        cones.append(zero(equalities))
+    rows.append(-sp.eye(m, size, format="csr"))
+    b.append(np.zeros(m))
+    cones.append(nonnegative(m))
+    if count:
+        dim = 2 if epsilon is None else 3
+        pick = [sp.csr_matrix((count, size))] + [-sp.eye(count, size, m + j * count) for j in range(dim - 1)]
+        order = np.arange(dim * count).reshape(dim, count).T.ravel()
+        rows.append(sp.vstack(pick).tocsr()[order])
+        b.append(np.concatenate([slip_bound, np.zeros((dim - 1) * count)])[order])
+        cones += [soc(dim)] * count
+    program = ConicProgram(P, q, sp.vstack(rows).tocsc(), np.concatenate(b), tuple(cones))
+    bound_rows = equalities + m + np.arange(count) * (2 if epsilon is None else 3)
+
+    def recover(solution: ConicSolution) -> ContactFields:
+        r = solution.x[: m + count]
+        motion = iter(-solution.z[:equalities])
+        return ContactFields(
+            u=factorization.solve(f - B.T @ r),
+            pressure=r[:m],
+            friction=r[m:] if count else None,
+            obstacle_advance=float(next(motion)) if contact.obstacle_coupling is not None else 0.0,
+            obstacle_shift=float(next(motion)) if contact.tangential_coupling is not None else 0.0,
+        )
+
+    def bound_update(s: np.ndarray) -> dict:
+        updated = program.b.copy()
+        updated[bound_rows] = s
+        return {"b": updated}
+
+    return program, recover, bound_update
