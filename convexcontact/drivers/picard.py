@@ -32,7 +32,8 @@ WINDOW = 8
 
 
 def pressure_map(model: Model):
-    """s(λ_N) = F · G S λ_N at the friction points (scaled units)."""
+    """s(λ_N) = F · G S λ_N at the friction points (scaled units), and the slip bound of a unit
+    pressure (the scale below which changes of s are measured absolutely)."""
     law: Coulomb = model.law
     fem, friction = model.fem, model.friction
     coefficient = field_at_points(law.friction, "contact.friction", fem, friction)
@@ -44,7 +45,7 @@ def pressure_map(model: Model):
         smoothed = pressure if smoothing is None else smoothing @ pressure
         return coefficient * (friction.interpolation @ np.maximum(smoothed, 0.0))
 
-    return bound
+    return bound, max(coefficient.max(initial=0.0), 1e-300)
 
 
 def initial_pressure(model: Model, solver: str, options: dict) -> np.ndarray:
@@ -61,12 +62,20 @@ def initial_pressure(model: Model, solver: str, options: dict) -> np.ndarray:
 
 
 def outcome(changes: list[float], tol: float, states: list[np.ndarray]) -> str | None:
-    """converged / cycling (period p) / diverging, or None to go on."""
+    """converged / cycling (period p) / diverging, or None to go on.
+
+    Cycling: the state returns to itself after p steps while the step size does not
+    shrink (an alternating but converging sequence has shrinking steps).
+    """
     if changes[-1] < tol:
         return "converged"
     scale = max(np.abs(states[-1]).max(), 1e-300)
     for period in CYCLE_PERIODS:
-        if len(states) > period + 1 and np.abs(states[-1] - states[-1 - period]).max() < tol * scale:
+        if (
+            len(changes) > 2 * period
+            and np.abs(states[-1] - states[-1 - period]).max() < tol * scale
+            and changes[-1] > 0.5 * changes[-1 - period]
+        ):
             return f"cycling (period {period})"
     recent = changes[-WINDOW:]
     if len(recent) == WINDOW and all(b > a for a, b in itertools.pairwise(recent)) and recent[-1] > 1:
@@ -87,7 +96,7 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
     fem = model.fem
     timings = dict(model.timings)
     with timed(timings, "initial"):
-        bound = pressure_map(model)
+        bound, unit_bound = pressure_map(model)
         s = bound(initial_pressure(model, solver, options))
     session = solvers.session(model.program, solver, **options)
     history, states, changes = [], [s], []
@@ -104,7 +113,7 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
             break
         fields = model.recover(solution)
         target = bound(fields.pressure)
-        change = float(np.abs(target - s).max() / max(np.abs(target).max(), 1e-300))
+        change = float(np.abs(target - s).max() / max(np.abs(target).max(), unit_bound))
         residual = certify(fem.K, fem.f, fem.contact, model.C, fields, model.friction, target, model.epsilon)
         history.append({"iteration": k, "relative_change": change, "coulomb_residual": residual.worst,
                         "inner_iterations": solution.iterations, "inner_time": inner})
@@ -130,5 +139,10 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
         result = model.result(solution, timings, target, fields=fields, extra=extra)
     if status != "converged":
         result.status = "not converged"
-        result.message = f"Picard map {status} after {len(history)} iterations; best iterate reported"
+        result.message = (
+            f"Picard map {status} after {len(history)} iterations (smallest relative change "
+            f"{min(changes, default=float('nan')):.1e}, tol {law.tol:g}); best iterate reported. A change that stalls "
+            "near the inner solver's accuracy needs a tighter solver tol or a looser Picard tol; a large one, "
+            "a smaller relaxation or a smaller friction coefficient (the map contracts only for small F)"
+        )
     return result

@@ -23,6 +23,7 @@ from ..fem.contact import ContactTrace
 from ..fem.factorization import StiffnessFactorization
 from ..fem.friction import FrictionPoints
 from .fields import ContactFields
+from .primal import carrying
 
 
 def dual(
@@ -69,9 +70,10 @@ def dual(
         cones += [soc(dim)] * count
     program = ConicProgram(P, q, sp.vstack(rows).tocsc(), np.concatenate(b), tuple(cones))
     bound_rows = equalities + m + np.arange(count) * (2 if epsilon is None else 3)
+    carries = carrying(B)
 
     def recover(solution: ConicSolution) -> ContactFields:
-        r = solution.x[: m + count]
+        r = np.where(carries, solution.x[: m + count], 0.0)
         motion = iter(-solution.z[:equalities])
         return ContactFields(
             u=factorization.solve(f - B.T @ r),

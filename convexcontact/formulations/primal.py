@@ -28,6 +28,12 @@ def contact_weights(contact: ContactTrace, non_penetration: str) -> sp.csr_matri
     return contact.mass
 
 
+def carrying(rows: sp.spmatrix) -> np.ndarray:
+    """Mask of the rows that touch an unknown; the multiplier of an empty row (a contact node
+    whose displacement is all prescribed) carries no force, is arbitrary, and is reported as 0."""
+    return np.diff(sp.csr_matrix(rows).indptr) > 0
+
+
 class Layout:
     """Where each unknown sits in x = (u, [δ_N], [δ_T], [t])."""
 
@@ -105,11 +111,14 @@ def primal(
         A, b, cones = sp.vstack([A, A_T]), np.concatenate([b, b_T]), cones + cones_T
     program = ConicProgram(P, q, sp.csc_matrix(A), b, tuple(cones))
     dim = 2 if epsilon is None else 3
+    normal_carries = carrying(C @ contact.N)
+    friction_carries = carrying(friction.R) if friction is not None else None
 
     def recover(solution: ConicSolution) -> ContactFields:
         z = solution.z
-        traction = z[contact.m + 1 :: dim] if friction is not None else None  # λ_T = z₁ of each cone
-        return ContactFields(pressure=z[: contact.m], friction=traction, **layout.unpack(solution.x))
+        pressure = np.where(normal_carries, z[: contact.m], 0.0)
+        traction = np.where(friction_carries, z[contact.m + 1 :: dim], 0.0) if friction is not None else None
+        return ContactFields(pressure=pressure, friction=traction, **layout.unpack(solution.x))
 
     def bound_update(s: np.ndarray) -> dict:
         updated = program.q.copy()

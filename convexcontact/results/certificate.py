@@ -19,8 +19,11 @@ mesh and in any units:
 For Coulomb friction s = F λ_N of the same solution: the residuals then measure how far
 the answer is from a fixed point of the Picard map, i.e. from the discrete Coulomb law.
 
-u_ref, p_ref and f_ref are the largest displacement (or obstacle advance), pressure
-and nodal force of the problem (data or solution).
+u_ref and p_ref are the largest displacement (or obstacle motion) and pressure of
+the solution, but at least the displacement and pressure scales of the data — both 1
+in the scaled units of :mod:`convexcontact.fem.scaling` — so that a solution that
+should be zero (stick, no contact) is not judged against its own round-off. f_ref is
+the largest nodal force of the data or the solution.
 """
 
 from __future__ import annotations
@@ -79,8 +82,8 @@ def certify(
         contact_force = contact_force - friction.R.T @ fields.friction
     elastic_force = K @ fields.u
 
-    u_ref = max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_advance), abs(fields.obstacle_shift), TINY)
-    p_ref = max(np.abs(lam_N).max(initial=0.0), TINY)
+    u_ref = max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_advance), abs(fields.obstacle_shift), 1.0)
+    p_ref = max(np.abs(lam_N).max(initial=0.0), 1.0)
     f_ref = max(np.abs(f).max(initial=0.0), np.abs(elastic_force).max(initial=0.0), TINY)
     residuals = {
         "non_penetration": np.maximum(weighted_gap, 0.0).max(initial=0.0) / u_ref,

@@ -16,7 +16,8 @@ CLOSED_PRESSURE = 1e-6
 
 
 SLIP = 1e-7
-"""A closed node slips when its tangential slip exceeds this fraction of the largest displacement."""
+"""A closed node slips when its slip exceeds this fraction of the largest displacement (at least
+the data's displacement scale)."""
 
 
 @dataclass
@@ -186,7 +187,7 @@ def contact_nodes(
         slip = contact.T @ fields.u + contact.tangent_offset - shift
         forces = forces + (contact.T @ (friction.R.T @ fields.friction))[:, None] * contact.tangents
         traction = friction.nodal_traction(contact, fields.friction) * scaling.pressure
-        moving = np.abs(slip) > SLIP * max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_shift))
+        moving = np.abs(slip) > SLIP * max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_shift), 1.0)
         status = np.where(~closed, "open", np.where(~moving, "stick", np.where(slip > 0, "slip+", "slip-")))
         slip = slip * scaling.displacement
     return ContactNodes(
