@@ -30,9 +30,19 @@ def table(result) -> str:
             ("max pressure", f'{s["max_pressure"]:.6g}'),
             ("normal force", f'{s["normal_force"]:.6g}'),
             ("elastic energy", f'{s["elastic_energy"]:.6g}'),
+        ]
+        if "n_stick" in s:
+            rows += [
+                ("stick / slip nodes", f'{s["n_stick"]} / {s["n_slip"]}'),
+                ("tangential force", f'{s["tangential_force"]:.6g}'),
+            ]
+        if "picard" in s:
+            picard = s["picard"]
+            rows.append(("Picard map", f'{picard["outcome"]} after {picard["iterations"]} iterations'))
+        rows += [
             ("certificate (worst)", f'{s["certificate"]["worst"]:.2e}'),
         ]
-    else:
+    if s["message"]:
         rows.append(("message", s["message"]))
     rows.append(("times [s]", ", ".join(f"{k} {v:.3f}" for k, v in s["timings"].items())))
     width = max(len(name) for name, _ in rows)
@@ -59,6 +69,7 @@ def main(argv=None) -> int:
         else:
             command.add_argument("--nx", type=int, default=80, help="elements across the block (default 80)")
         command.add_argument("--solver", default="clarabel", help="clarabel | osqp | cvxpy[:NAME]")
+        command.add_argument("--formulation", default="primal", help="primal | dual (Delassus, condensed on Γ_C)")
         command.add_argument("--tol", type=float, default=None, help="solver tolerance (default: the adapter's)")
         command.add_argument("--out", type=Path, default=Path("out") if name == "demo" else None,
                              help="folder for summary.json, solution.vtu, PNG plots")
@@ -73,7 +84,7 @@ def main(argv=None) -> int:
 
             scene = load_scene(args.scene)
         options = {} if args.tol is None else {"tol": args.tol}
-        result = solve(scene, args.solver, **options)
+        result = solve(scene, args.solver, formulation=args.formulation, **options)
     except (SceneError, ValueError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2

@@ -8,7 +8,7 @@ import skfem as fe
 
 import convexcontact as cc
 from convexcontact.analytic import hertz_plane_strain, hertz_pressure
-from convexcontact.scene.library import HERTZ_FORCE, hertz_punch, pressure_patch
+from convexcontact.scene.library import HERTZ_FORCE, hertz_punch, pressure_patch, punch_mesh
 
 
 def distorted(mesh: fe.Mesh, amount: float = 0.3, seed: int = 0) -> fe.Mesh:
@@ -45,17 +45,7 @@ def test_uniform_pressure_patch(element, mesh_kind, non_penetration):
 
 
 def hertz_mesh(h: float) -> fe.Mesh:
-    """Block [-2, 2] × [-2, 0], uniform cells of size h over |x| < 0.15 near the top, graded away."""
-    def side(length, h0, cells):
-        growth = (length / h0) ** (1 / cells)
-        sizes = h0 * np.geomspace(1, growth ** (cells - 1), cells)
-        return np.cumsum(sizes) * length / sizes.sum()
-
-    fine = np.arange(-0.15, 0.15 + h / 2, h)
-    outer = 0.15 + side(1.85, h, 24)
-    x = np.concatenate([-outer[::-1], fine, outer])
-    y = -np.concatenate([[0.0], np.arange(1, 11) * h, 10 * h + side(2 - 10 * h, h, 30)])[::-1]
-    return fe.MeshTri1.init_tensor(x, y).with_defaults()
+    return punch_mesh(h)
 
 
 def test_hertz_force_control_converges():

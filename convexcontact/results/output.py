@@ -52,4 +52,7 @@ def save(result, directory, formats=FORMATS) -> list[Path]:
         paths += [directory / "deformed.png", directory / "contact.png"]
         plots.deformed_mesh(result, paths[-2])
         plots.contact_tractions(result, paths[-1])
+        if "history" in result.extra:
+            paths.append(directory / "picard.png")
+            plots.picard_convergence(result, paths[-1])
     return paths

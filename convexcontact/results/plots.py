@@ -10,7 +10,7 @@ import numpy as np
 from matplotlib.collections import PolyCollection
 
 from ..analytic import hertz_plane_strain, hertz_pressure
-from ..scene.model import Material
+from ..scene.model import Coulomb, Material, Tresca, evaluate_field
 from .fields_out import element_stress, vertex_displacement
 
 
@@ -56,29 +56,65 @@ def hertz_reference(result):
     return hertz_plane_strain(result.normal_force, obstacle.radius, E, nu)
 
 
+def friction_bound(result) -> tuple[np.ndarray, str] | None:
+    """The nodal slip bound to draw against λ_T: s for Tresca, F λ_N for Coulomb."""
+    law, contact = result.scene.contact.law, result.contact
+    x, y = contact.coords.T
+    if isinstance(law, Tresca):
+        return evaluate_field(law.slip_bound, "contact.slip_bound", x, y), "±s (slip bound)"
+    if isinstance(law, Coulomb):
+        return evaluate_field(law.friction, "contact.friction", x, y) * contact.pressure, "±F λ_N"
+    return None
+
+
 def contact_tractions(result, path):
-    """Contact pressure (and friction traction) along Γ_C, with the Hertz curve for punches."""
+    """Contact pressure and friction traction along Γ_C: Hertz curve for punches, slip bounds and
+    stick (blue) / slip (orange) zones with friction."""
     contact = result.contact
     order = np.argsort(contact.coordinate)
     s = contact.coordinate[order]
     fig, ax = plt.subplots(figsize=(7, 4))
     ax.plot(s, contact.pressure[order], "o-", ms=3, label="λ_N (pressure)")
-    if contact.friction is not None:
+    bound = friction_bound(result)
+    if bound is not None:
+        values, label = bound
         ax.plot(s, contact.friction[order], "s-", ms=3, label="λ_T (friction traction)")
+        ax.plot(s, values[order], "k:", lw=1, label=label)
+        ax.plot(s, -values[order], "k:", lw=1)
+        status = contact.status[order]
+        for name, color in (("stick", "tab:blue"), ("slip", "tab:orange")):
+            inside = np.char.startswith(status.astype(str), name)
+            ax.fill_between(s, 0, 1, where=inside, color=color, alpha=0.12, transform=ax.get_xaxis_transform(),
+                            label=f"{name} zone")
     reference = hertz_reference(result)
     if reference is not None:
         a, p0 = reference
         center = result.scene.contact.obstacle.center
         x = np.linspace(center - 1.5 * a, center + 1.5 * a, 400)
-        ax.plot(x, hertz_pressure(x - center, a, p0), "k--", label=f"Hertz (a = {a:.4g}, p₀ = {p0:.4g})")
-        closed = s[contact.status[order] != "open"]
-        if closed.size:
-            span = max(closed.max() - closed.min(), 3 * a)
-            ax.set_xlim(closed.mean() - span, closed.mean() + span)
+        ax.plot(x, hertz_pressure(x - center, a, p0), "k--", lw=1, label=f"Hertz (a = {a:.4g}, p₀ = {p0:.4g})")
+    closed = s[contact.status[order] != "open"]
+    if closed.size:
+        span = 1.5 * max(closed.max() - closed.min(), 1e-12) / 2 + 0.2 * np.ptp(closed)
+        ax.set_xlim(closed.mean() - span, closed.mean() + span)
     ax.set_xlabel("coordinate along Γ_C")
     ax.set_ylabel("traction")
     ax.axhline(0, color="0.7", lw=0.5)
-    ax.legend()
+    ax.legend(fontsize=8)
     ax.set_title(f"{result.scene.name}: contact tractions")
+    fig.savefig(path, dpi=150, bbox_inches="tight")
+    plt.close(fig)
+
+
+def picard_convergence(result, path):
+    """Relative change of the slip bounds and Coulomb residual per Picard iteration."""
+    history = result.extra["history"]
+    k = [h["iteration"] for h in history]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.semilogy(k, [h["relative_change"] for h in history], "o-", label="relative change of s")
+    ax.semilogy(k, [h["coulomb_residual"] for h in history], "s-", label="Coulomb residual (certificate)")
+    ax.axhline(result.scene.contact.law.tol, color="k", ls=":", label="tol")
+    ax.set_xlabel("Picard iteration")
+    ax.legend()
+    ax.set_title(f"{result.scene.name}: Picard map — {result.extra['picard']['outcome']}")
     fig.savefig(path, dpi=150, bbox_inches="tight")
     plt.close(fig)

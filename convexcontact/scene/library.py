@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
+import skfem as fe
+
 from .model import Body, Contact, Dirichlet, Material, Obstacle, Rectangle, Scene, Signorini, Traction
 
 HERTZ_FORCE = 0.0086307
@@ -38,4 +41,40 @@ def pressure_patch(nx: int = 8, element: str = "P1", pressure: float = 0.1, law=
         dirichlet=(Dirichlet("left", ux=0.0),),
         tractions=(Traction("top", pressure=pressure),),
         contact=Contact("bottom", Obstacle("flat", gap=0.0), law or Signorini()),
+    )
+
+
+def punch_mesh(
+    h: float, fine: float = 0.15, rows: int = 10, width: float = 4.0, depth: float = 2.0, quads: bool = False
+) -> fe.Mesh:
+    """Block [-width/2, width/2] × [-depth, 0], cells of size h over |x| < fine and ``rows`` rows deep.
+
+    Away from that zone the cells grow geometrically (24 columns each side, 30 rows), so
+    the contact zone of a punch is resolved uniformly at little cost. Quadrilaterals keep
+    the mirror symmetry about x = 0 that the one-diagonal triangles break.
+    """
+
+    def growing(length: float, cells: int) -> np.ndarray:
+        sizes = np.geomspace(1.0, (length / h) ** ((cells - 1) / cells), cells)
+        return np.cumsum(sizes) * length / sizes.sum()
+
+    x_fine = np.arange(-fine, fine + h / 2, h)
+    x_out = fine + growing(width / 2 - fine, 24)
+    x = np.concatenate([-x_out[::-1], x_fine, x_out])
+    y = -np.concatenate([np.arange(rows + 1) * h, rows * h + growing(depth - rows * h, 30)])[::-1]
+    return (fe.MeshQuad1 if quads else fe.MeshTri1).init_tensor(x, y).with_defaults()
+
+
+def frictional_punch(h: float = 0.005, depth: float = 0.02, friction: float = 0.6, nu: float = 0.3,
+                     element: str = "P1", law=None) -> Scene:
+    """Oden's example (DESIGN.md case 4): a rigid cylinder (R = 1) indents the block, Coulomb friction."""
+    from .model import Coulomb
+
+    law = law or Coulomb(friction=friction)
+    return Scene(
+        name="frictional_punch",
+        body=Body(punch_mesh(h, quads=element in ("Q1", "Q2")), element=element),
+        materials=Material(E=1.0, nu=nu),
+        dirichlet=(Dirichlet("bottom", ux=0.0, uy=0.0),),
+        contact=Contact("top", Obstacle("parabolic", radius=1.0, depth=depth), law),
     )

@@ -19,6 +19,7 @@ except ModuleNotFoundError:  # Python 3.10
 from .model import (
     Body,
     Contact,
+    Coulomb,
     Dirichlet,
     Material,
     MeshFile,
@@ -28,9 +29,11 @@ from .model import (
     SceneError,
     Signorini,
     Traction,
+    Tresca,
 )
 
 NUMBER, INTEGER, TEXT, PAIR = "a number", "an integer", "a string", "two numbers [a, b]"
+FIELD = "a number or a formula in x and y"
 TABLE, TABLES = "a table [name]", "an array of tables [[name]]"
 
 TOP = {
@@ -46,17 +49,24 @@ MATERIAL = {"E": NUMBER, "nu": NUMBER}
 DIRICHLET = {"boundary": TEXT, "ux": NUMBER, "uy": NUMBER}
 TRACTION = {"boundary": TEXT, "pressure": NUMBER, "vector": PAIR}
 CONTACT = {"boundary": TEXT, "law": TEXT}
-PUNCH = {"shape": TEXT, "radius": NUMBER, "center": NUMBER, "depth": NUMBER, "force": NUMBER}
+MOTION = {"depth": NUMBER, "force": NUMBER, "tangential_force": NUMBER}
+PUNCH = {"shape": TEXT, "radius": NUMBER, "center": NUMBER, **MOTION}
 OBSTACLES = {
-    "flat": {"shape": TEXT, "gap": NUMBER, "depth": NUMBER, "force": NUMBER},
+    "flat": {"shape": TEXT, "gap": NUMBER, **MOTION},
     "parabolic": PUNCH,
     "cylinder": PUNCH,
-    "expression": {"shape": TEXT, "expression": TEXT, "depth": NUMBER, "force": NUMBER},
+    "expression": {"shape": TEXT, "expression": TEXT, **MOTION},
 }
 
+FRICTION_OPTIONS = {"non_penetration": TEXT, "quadrature": TEXT, "regularization": NUMBER}
 LAWS = {
     # law name → (model class, its keys in [contact] besides boundary and law)
     "signorini": (Signorini, {"non_penetration": TEXT}),
+    "tresca": (Tresca, {"slip_bound": FIELD, **FRICTION_OPTIONS}),
+    "coulomb": (Coulomb, {
+        "friction": FIELD, "smoothing_radius": NUMBER, "relaxation": NUMBER, "tol": NUMBER,
+        "max_iterations": INTEGER, "initial_pressure": FIELD, **FRICTION_OPTIONS,
+    }),
 }
 
 EXAMPLES = {
@@ -191,6 +201,7 @@ def _check_type(value, kind: str, path: str) -> None:
         INTEGER: isinstance(value, int) and not isinstance(value, bool),
         TEXT: isinstance(value, str),
         PAIR: isinstance(value, list) and len(value) == 2 and all(number(x) for x in value),
+        FIELD: number(value) or isinstance(value, str),
         TABLE: isinstance(value, dict),
         TABLES: isinstance(value, list) and all(isinstance(x, dict) for x in value),
     }[kind]
