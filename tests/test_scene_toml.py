@@ -213,7 +213,7 @@ BAD = [
     (edit("body.element", "P3"), "body.element"),
     (edit("contact.non_penetration", "strong"), "contact.non_penetration"),
     # unknown law
-    (edit("contact.law", "coulomb"), "contact.law"),
+    (edit("contact.law", "mohr-coulomb"), "contact.law"),
 ]
 
 
@@ -242,7 +242,7 @@ def test_unknown_key_lists_allowed_keys_and_suggests():
 
 def test_unknown_law_lists_available_laws():
     data = hertz_data()
-    data["contact"]["law"] = "coulomb"
+    data["contact"]["law"] = "mohr-coulomb"  # a typo or an unsupported law
     with pytest.raises(SceneError, match="available laws: signorini"):
         scene_from_dict(data, SCENES)
 
