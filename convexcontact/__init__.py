@@ -15,6 +15,7 @@ from .scene import library
 from .scene.model import (
     Body,
     Contact,
+    Coulomb,
     Dirichlet,
     Material,
     MeshFile,
@@ -24,10 +25,11 @@ from .scene.model import (
     SceneError,
     Signorini,
     Traction,
+    Tresca,
 )
 
 __all__ = [
-    "Body", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Dirichlet", "Material", "MeshFile",
-    "Model", "Obstacle", "Rectangle", "Scene", "SceneError", "Signorini", "Traction", "library", "prepare", "solve",
+    "Body", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Coulomb", "Dirichlet", "Material", "MeshFile",
+    "Model", "Obstacle", "Rectangle", "Scene", "SceneError", "Signorini", "Traction", "Tresca", "library", "prepare", "solve",
 ]
 __version__ = "0.1.0"

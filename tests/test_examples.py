@@ -1,0 +1,50 @@
+"""The example scripts run and show what they claim (STYLE.md: examples are documentation)."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def example(name: str):
+    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_signorini_hertz(tmp_path):
+    result = example("signorini_hertz").main(nx=40, out=tmp_path)
+    assert result.max_pressure == pytest.approx(0.054945, rel=0.03)
+    assert (tmp_path / "contact.png").exists() and (tmp_path / "solution.vtu").exists()
+
+
+def test_tresca_regularization(tmp_path):
+    exact, rows = example("tresca_regularization").main(nx=24, out=tmp_path)
+    errors = [error for _, error in rows]
+    assert all(b < a for a, b in zip(errors, errors[1:]))
+    assert exact.certificate.passes(1e-8)
+
+
+def test_coulomb_punch(tmp_path):
+    result = example("coulomb_punch").main(h=0.01, out=tmp_path)
+    assert result.extra["picard"]["outcome"] == "converged"
+    assert (tmp_path / "picard.png").exists()
+
+
+def test_nonlocal_coulomb(tmp_path):
+    results = example("nonlocal_coulomb").main(h=0.01, out=tmp_path)
+    assert all(r.status == "solved" for r in results.values())
+    assert not np.allclose(results[0.04].contact.friction, results[0.0].contact.friction)
+
+
+def test_cattaneo_mindlin_stick_zone(tmp_path):
+    """Case 5: two-step loading with β = 0 gives c/a = sqrt(1 − Q/(F P)) within 5%."""
+    result, stick_ratio = example("cattaneo_mindlin").main(h=0.01, ratio=0.5, out=tmp_path)
+    assert result.extra["picard"]["outcome"] == "converged"
+    assert result.certificate.passes(1e-6)
+    assert result.tangential_force == pytest.approx(0.5 * 0.6 * result.normal_force, rel=1e-6)
+    assert stick_ratio == pytest.approx(np.sqrt(0.5), rel=0.05)
