@@ -9,7 +9,7 @@ from test_friction_hild import LENGTH, NU, E, matches_one_of, triangle_scene
 import convexcontact as cc
 from convexcontact.analytic import hild_one_triangle_solutions
 from convexcontact.fem.mollifier import mollifier
-from convexcontact.scene.library import frictional_punch, hertz_punch
+from convexcontact.scene.library import frictional_punch, hertz_punch, punch_mesh
 from convexcontact.scene.model import Coulomb, Tresca
 
 F = 0.6
@@ -43,6 +43,26 @@ def test_frictional_punch_sticks_in_the_middle_and_slips_at_the_edges(punches):
         np.testing.assert_allclose(s[mirror], -s, atol=1e-12)
         np.testing.assert_allclose(t[mirror], -t, atol=tol)  # antisymmetric shear
         np.testing.assert_allclose(p[mirror], p, atol=tol)
+
+
+def test_no_shear_as_the_body_becomes_incompressible(punches):
+    """ν → 0.5 decouples normal and tangential response: negligible shear against the pressure.
+
+    ν = 0.49999 with Q2 on a large block on rollers (a clamped base couples the two, see
+    docs/friction.md); the Picard tol is 1e-6 because the inner solves of a body with
+    λ/μ ≈ 1e5 are accurate to about 1e-8 only.
+    """
+    compressible = punches[0.02]
+    assert np.abs(compressible.contact.friction).max() > 0.3 * compressible.max_pressure
+    law = Coulomb(friction=F, tol=1e-6)
+    scene = dataclasses.replace(
+        frictional_punch(depth=0.02, nu=0.49999, element="Q2", law=law),
+        body=cc.Body(punch_mesh(0.02, width=16.0, depth=8.0, quads=True), "Q2"),
+        dirichlet=(cc.Dirichlet("bottom", uy=0.0), cc.Dirichlet("left", ux=0.0), cc.Dirichlet("right", ux=0.0)),
+    )
+    result = cc.solve(scene, "clarabel", static_regularization_constant=1e-12)
+    assert result.extra["picard"]["outcome"] == "converged"
+    assert np.abs(result.contact.friction).max() < 0.05 * result.max_pressure
 
 
 def test_frictional_punch_is_self_similar(punches):

@@ -133,3 +133,23 @@ def test_cvxpy_model_can_be_extended(hertz_model, hertz_reference):
     assert result.normal_force < 0.9 * hertz_reference.normal_force
     assert result.certificate.residuals["obstacle_balance"] > 0.1  # the user's constraint holds the punch back
     assert "extended" in result.message
+
+
+@pytest.mark.parametrize("plane, factor", [("strain", 1 - 0.3**2), ("stress", 1.0)])
+def test_patch_top_displacement_plane_strain_and_stress(plane, factor):
+    """Uniaxial compression with free sides: u_y(top) = −p H (1 − ν²)/E (strain) or −p H / E (stress)."""
+    scene = pressure_patch(nx=4, pressure=0.2)
+    scene = dataclasses.replace(scene, body=dataclasses.replace(scene.body, plane=plane))
+    result = cc.solve(scene)
+    top = np.isclose(result.fem.basis.doflocs[1], 1.0 / result.fem.scaling.length)
+    uy = result.displacement[result.fem.basis.nodal_dofs[1]]
+    on_top = top[result.fem.basis.nodal_dofs[1]]
+    np.testing.assert_allclose(uy[on_top], -0.2 * 1.0 * factor / 1.0, rtol=1e-7)
+
+
+def test_body_weight_is_carried_by_the_foundation():
+    """A block under its own weight b on a frictionless foundation: Σ contact force = |b| × area."""
+    scene = dataclasses.replace(pressure_patch(nx=6, pressure=0.0), tractions=(), body_force=(0.0, -0.05))
+    result = cc.solve(scene)
+    assert result.normal_force == pytest.approx(0.05 * 1.0, rel=1e-8)
+    assert result.certificate.passes(1e-8)

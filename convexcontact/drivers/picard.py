@@ -118,7 +118,7 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
         history.append({"iteration": k, "relative_change": change, "coulomb_residual": residual.worst,
                         "inner_iterations": solution.iterations, "inner_time": inner})
         if best is None or residual.worst <= best[0]:
-            best = (residual.worst, solution, fields, target)
+            best = (residual.worst, k, solution, fields, target)
         if progress is not None:
             progress(k, change)
         changes.append(change)
@@ -133,8 +133,7 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
                         "tol": law.tol, "best_iteration": None}, "history": history}
     if best is None:
         return model.result(solution, timings, None, extra=extra)
-    _, solution, fields, target = best
-    extra["picard"]["best_iteration"] = 1 + next(i for i, h in enumerate(history) if h["coulomb_residual"] == _)
+    _, extra["picard"]["best_iteration"], solution, fields, target = best
     with timed(timings, "postprocess"):
         result = model.result(solution, timings, target, fields=fields, extra=extra)
     if status != "converged":
