@@ -1,6 +1,7 @@
 """The example scripts run and show what they claim (STYLE.md: examples are documentation)."""
 
 import importlib.util
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ def test_signorini_hertz(tmp_path):
 def test_tresca_regularization(tmp_path):
     exact, rows = example("tresca_regularization").main(nx=24, out=tmp_path)
     errors = [error for _, error in rows]
-    assert all(b < a for a, b in zip(errors, errors[1:]))
+    assert all(b < a for a, b in itertools.pairwise(errors))
     assert exact.certificate.passes(1e-8)
 
 
