@@ -49,6 +49,10 @@ def table(result) -> str:
     return "\n".join(f"{name:<{width}}  {value}" for name, value in rows)
 
 
+EXIT = {"solved": 0, "inaccurate": 3, "not converged": 3}
+"""Exit codes: 0 solved and certified, 3 an answer with a caveat (see the message), 1 no answer, 2 bad input."""
+
+
 def report(result, out: Path | None, json_file: Path | None) -> int:
     print(table(result))
     if out is not None:
@@ -56,7 +60,7 @@ def report(result, out: Path | None, json_file: Path | None) -> int:
         print("wrote", ", ".join(str(p) for p in paths))
     if json_file is not None:
         json_file.write_text(json.dumps(result.summary(), indent=1))
-    return 0 if result.solved else 1
+    return EXIT.get(result.status, 1)
 
 
 def main(argv=None) -> int:

@@ -102,29 +102,18 @@ class Model:
             "formulation": self.formulation,
             "extra": extra or {},
         }
-        stopped = not solution.solved and np.all(np.isfinite(solution.x)) and np.all(np.isfinite(solution.z))
-        if not solution.solved and not (stopped and solution.status == "failed"):
-            return ContactResult(
-                status=solution.status, certificate=None, displacement=None, contact=None,
-                message=failure_message(solution), **common,
-            )
+        usable = solution.solved or (solution.status == "failed" and np.isfinite(solution.x).all()
+                                     and np.isfinite(solution.z).all())
+        if not usable:
+            return ContactResult(status=solution.status, certificate=None, displacement=None, contact=None,
+                                 message=failure_message(solution), **common)
         fields = fields or self.recover(solution)
         certificate = certify(fem.K, fem.f, fem.contact, self.C, fields, self.friction, slip_bound, self.epsilon)
+        status, message = judge(solution, certificate, extended)
+        if status is None:
+            return ContactResult(status=solution.status, certificate=certificate, displacement=None, contact=None,
+                                 message=message, **common)
         scaling, contact = fem.scaling, fem.contact
-        status, message = solution.status, ""
-        if not solution.solved:  # a solver that stopped early (iterations, progress): judge its last iterate
-            if not certificate.passes(CERTIFIED):
-                return ContactResult(status=solution.status, certificate=certificate, displacement=None, contact=None,
-                                     message=failure_message(solution), **common)
-            status = "inaccurate"
-            message = (f"{solution.solver} stopped with {solution.solver_status}; its last iterate passes the "
-                       f"certificate (worst {certificate.worst:.1e} ≤ {CERTIFIED:g})")
-        elif extended:
-            message = "solved a user-extended cvxpy model: the certificate checks the scene's own conditions"
-        elif not certificate.passes(CERTIFIED):
-            status = "inaccurate"
-            message = (f"{solution.solver} reported {solution.solver_status}, but the certificate's worst residual is "
-                       f"{certificate.worst:.1e} > {CERTIFIED:g}: tighten tol, raise max_iter or try another solver")
         return ContactResult(
             status=status,
             message=message,
@@ -141,6 +130,28 @@ class Model:
 
 CERTIFIED = 1e-6
 """A solve whose certificate is worse than this is reported as inaccurate, whatever the solver said."""
+
+
+def judge(solution: ConicSolution, certificate, extended: bool) -> tuple[str | None, str]:
+    """Our status and message from the solver's word and the certificate (None: no usable answer).
+
+    A solver that stopped early (iterations, progress) is judged by its last iterate; a
+    "solved" whose certificate fails is inaccurate; a user-extended model is a different
+    problem than the scene's, so its certificate is reported but does not judge it.
+    """
+    passes = certificate.passes(CERTIFIED)
+    if not solution.solved:
+        if not passes:
+            return None, failure_message(solution)
+        return "inaccurate", (f"{solution.solver} stopped with {solution.solver_status}; its last iterate passes "
+                              f"the certificate (worst {certificate.worst:.1e} ≤ {CERTIFIED:g})")
+    if extended:
+        return solution.status, "solved a user-extended cvxpy model: the certificate checks the scene's own conditions"
+    if not passes:
+        return "inaccurate", (f"{solution.solver} reported {solution.solver_status}, but the certificate's worst "
+                              f"residual is {certificate.worst:.1e} > {CERTIFIED:g}: tighten tol, raise max_iter "
+                              "or try another solver")
+    return solution.status, ""
 
 
 def failure_message(solution: ConicSolution) -> str:

@@ -1,0 +1,55 @@
+"""The command line: the demo's outputs, `run` on a scene file, exit codes."""
+
+import json
+from pathlib import Path
+
+import meshio
+import numpy as np
+
+from convexcontact.cli import main
+
+SCENES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
+
+
+def test_demo_writes_summary_vtk_and_plots(tmp_path, capsys):
+    assert main(["demo", "--nx", "24", "--out", str(tmp_path)]) == 0
+    assert "certificate (worst)" in capsys.readouterr().out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    for key in ("ndof", "n_contact_nodes", "contact_half_width", "max_pressure", "normal_force", "certificate",
+                "solver", "status", "iterations", "timings", "contact_nodes"):
+        assert key in summary
+    nodes = summary["contact_nodes"]
+    assert len(nodes["x"]) == len(nodes["lambda_N"]) == summary["n_contact_nodes"]
+    assert abs(summary["normal_force"] / 0.0086307 - 1) < 1e-8  # the demo is force-controlled
+    vtk = meshio.read(tmp_path / "solution.vtu")
+    assert {"displacement", "contact_pressure"} <= set(vtk.point_data)
+    assert {"sigma_xx", "sigma_yy", "sigma_xy", "von_mises"} <= set(vtk.cell_data)
+    assert np.isclose(vtk.point_data["contact_pressure"].max(), summary["max_pressure"])
+    assert (tmp_path / "deformed.png").stat().st_size > 0 and (tmp_path / "contact.png").stat().st_size > 0
+
+
+def test_run_scene_file_with_json_and_solver(tmp_path):
+    target = tmp_path / "patch.json"
+    assert main(["run", str(SCENES / "patch.toml"), "--solver", "osqp", "--json", str(target)]) == 0
+    summary = json.loads(target.read_text())
+    assert summary["solver"] == "osqp" and summary["status"] == "solved"
+    assert np.allclose(summary["contact_nodes"]["lambda_N"], 0.1, rtol=1e-7)
+
+
+def test_bad_input_exits_2_and_names_the_field(tmp_path, capsys):
+    broken = tmp_path / "broken.toml"
+    broken.write_text((SCENES / "patch.toml").read_text().replace("nu = 0.3", "nu = 0.5"))
+    assert main(["run", str(broken)]) == 2
+    assert "material.nu" in capsys.readouterr().err
+    assert main(["run", str(SCENES / "patch.toml"), "--solver", "gurobi-direct"]) == 2
+
+
+def test_infeasible_scene_exits_1_with_the_solver_status(tmp_path, capsys):
+    scene = (SCENES / "patch.toml").read_text()
+    infeasible = tmp_path / "infeasible.toml"
+    infeasible.write_text(scene.replace('boundary = "left"\nux = 0.0', 'boundary = "bottom"\nux = 0.0\nuy = 0.0')
+                          .replace("gap = 0.0", "gap = -0.01"))
+    assert main(["run", str(infeasible), "--out", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert "infeasible" in out.lower()
+    assert json.loads((tmp_path / "summary.json").read_text())["status"] == "infeasible"
