@@ -19,6 +19,7 @@ from .scene.model import (
     Dirichlet,
     Material,
     MeshFile,
+    NormalCompliance,
     Obstacle,
     Rectangle,
     Scene,
@@ -30,6 +31,6 @@ from .scene.model import (
 
 __all__ = [
     "Body", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Coulomb", "Dirichlet", "Material", "MeshFile",
-    "Model", "Obstacle", "Rectangle", "Scene", "SceneError", "Signorini", "Traction", "Tresca", "library", "prepare", "solve",
+    "Model", "NormalCompliance", "Obstacle", "Rectangle", "Scene", "SceneError", "Signorini", "Traction", "Tresca", "library", "prepare", "solve",
 ]
 __version__ = "0.1.0"

@@ -4,7 +4,8 @@
     subject to Ax + s = b,   s ∈ K = K₁ × K₂ × …
 
 with cones (in this order of rows) from :data:`CONES`. Dual variables z ∈ K*
-satisfy Px + q + Aᵀz = 0 at optimality.
+satisfy Px + q + Aᵀz = 0 at optimality. The 3-D power cone of exponent α is
+{(x, y, w): x^α y^(1−α) ≥ |w|, x, y ≥ 0}, as in Clarabel.
 """
 
 from __future__ import annotations
@@ -18,19 +19,22 @@ import scipy.sparse as sp
 
 @dataclass(frozen=True)
 class Cone:
-    """One block of rows of the constraint: ``kind`` is zero, nonnegative or soc."""
+    """One block of rows of the constraint: ``kind`` is zero, nonnegative, soc or power."""
 
     kind: str
     dim: int
+    alpha: float | None = None  # exponent of a power cone
 
     def __post_init__(self):
         if self.kind not in CONES:
             raise ValueError(f"cone kind must be one of {CONES}, got {self.kind!r}")
         if self.dim < 1 or (self.kind == "soc" and self.dim < 2):
             raise ValueError(f"{self.kind} cone of dimension {self.dim}")
+        if self.kind == "power" and (self.dim != 3 or not 0 < (self.alpha or 0) < 1):
+            raise ValueError(f"a power cone has dimension 3 and 0 < alpha < 1, got {self.dim}, {self.alpha}")
 
 
-CONES = ("zero", "nonnegative", "soc")
+CONES = ("zero", "nonnegative", "soc", "power")
 
 
 def zero(dim: int) -> Cone:
@@ -44,6 +48,11 @@ def nonnegative(dim: int) -> Cone:
 def soc(dim: int) -> Cone:
     """(t, x) with t ≥ ‖x‖₂; dimension 1 + len(x)."""
     return Cone("soc", dim)
+
+
+def power(alpha: float) -> Cone:
+    """(x, y, w) with x^α y^(1−α) ≥ |w|, x, y ≥ 0."""
+    return Cone("power", 3, alpha)
 
 
 @dataclass(frozen=True)
@@ -78,7 +87,7 @@ class ConicProgram:
     @property
     def is_linear(self) -> bool:
         """True when every cone is polyhedral (zero or nonnegative)."""
-        return all(c.kind != "soc" for c in self.cones)
+        return all(c.kind in ("zero", "nonnegative") for c in self.cones)
 
     def blocks(self):
         """Yield (cone, row slice) for every cone block."""

@@ -153,3 +153,14 @@ def test_body_weight_is_carried_by_the_foundation():
     result = cc.solve(scene)
     assert result.normal_force == pytest.approx(0.05 * 1.0, rel=1e-8)
     assert result.certificate.passes(1e-8)
+
+
+def test_indentation_written_in_a_gap_formula_sets_the_scale():
+    """A punch written as a formula with its indentation inside solves like the same punch with depth."""
+    formula = dataclasses.replace(hertz_punch(nx=24),
+                                  contact=cc.Contact("top", cc.Obstacle("expression", expression="x**2/2 - 0.02")))
+    shaped = dataclasses.replace(hertz_punch(nx=24),
+                                 contact=cc.Contact("top", cc.Obstacle("parabolic", radius=1.0, depth=0.02)))
+    a, b = cc.solve(formula), cc.solve(shaped)
+    assert a.fem.scaling.displacement == pytest.approx(b.fem.scaling.displacement)
+    np.testing.assert_allclose(a.contact.pressure, b.contact.pressure, rtol=1e-9, atol=1e-12 * b.max_pressure)

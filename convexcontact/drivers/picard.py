@@ -114,7 +114,8 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
         fields = model.recover(solution)
         target = bound(fields.pressure)
         change = float(np.abs(target - s).max() / max(np.abs(target).max(), unit_bound))
-        residual = certify(fem.K, fem.f, fem.contact, model.C, fields, model.friction, target, model.epsilon)
+        residual = certify(fem.K, fem.f, fem.contact, model.C, fields, model.friction, target, model.epsilon,
+                           model.compliance)
         history.append({"iteration": k, "relative_change": change, "coulomb_residual": residual.worst,
                         "inner_iterations": solution.iterations, "inner_time": inner})
         if best is None or residual.worst <= best[0]:

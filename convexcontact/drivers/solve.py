@@ -18,7 +18,7 @@ from ..fem.friction import FrictionPoints, friction_points
 from ..formulations import FORMULATIONS, contact_weights
 from ..results.certificate import certify
 from ..results.result import ContactResult, contact_nodes
-from ..scene.model import Coulomb, Scene, SceneError, Tresca, evaluate_field, has_friction
+from ..scene.model import Coulomb, Scene, SceneError, Tresca, compliance_of, evaluate_field, has_friction
 
 
 @contextmanager
@@ -56,6 +56,7 @@ class Model:
     bound_update: Callable
     build: Callable  # formulation with the FE data bound: (friction, slip_bound, epsilon, contact) → triple
     epsilon: float | None = None  # regularization of the friction term (scaled), None = exact
+    compliance: tuple[float, float] | None = None  # (c_N, p) scaled, None = non-penetration
     timings: dict = field(default_factory=dict)
 
     @property
@@ -108,7 +109,8 @@ class Model:
             return ContactResult(status=solution.status, certificate=None, displacement=None, contact=None,
                                  message=failure_message(solution), **common)
         fields = fields or self.recover(solution)
-        certificate = certify(fem.K, fem.f, fem.contact, self.C, fields, self.friction, slip_bound, self.epsilon)
+        certificate = certify(fem.K, fem.f, fem.contact, self.C, fields, self.friction, slip_bound, self.epsilon,
+                              self.compliance)
         status, message = judge(solution, certificate, extended)
         if status is None:
             return ContactResult(status=solution.status, certificate=certificate, displacement=None, contact=None,
@@ -182,13 +184,19 @@ def prepare(scene: Scene, formulation: str = "primal") -> Model:
                 field_at_points(law.slip_bound, "contact.slip_bound", fem, friction) / fem.scaling.pressure
                 if isinstance(law, Tresca) else np.zeros(friction.count)
             )
+        compliance = None
+        if compliance_of(law) is not None:
+            c_N, p = compliance_of(law).stiffness, compliance_of(law).exponent
+            compliance = (c_N * fem.scaling.displacement**p / fem.scaling.pressure, p)
         options = {"factorization": StiffnessFactorization(fem.K)} if formulation == "dual" else {}
 
         def build(friction, slip_bound, epsilon, contact=fem.contact):
-            return FORMULATIONS[formulation](fem.K, fem.f, contact, C, friction, slip_bound, epsilon, **options)
+            return FORMULATIONS[formulation](fem.K, fem.f, contact, C, friction, slip_bound, epsilon, compliance,
+                                             **options)
 
         program, recover, bound_update = build(friction, slip_bound, epsilon)
-    return Model(fem, formulation, C, friction, slip_bound, program, recover, bound_update, build, epsilon, timings)
+    return Model(fem, formulation, C, friction, slip_bound, program, recover, bound_update, build, epsilon,
+                 compliance, timings)
 
 
 def solve(scene: Scene, solver: str = "clarabel", formulation: str = "primal", **options) -> ContactResult:

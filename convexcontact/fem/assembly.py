@@ -138,15 +138,19 @@ def dirichlet(scene: Scene, mesh: fe.Mesh, basis: fe.Basis, displacement_scale: 
     return np.flatnonzero(~fixed), np.where(fixed, values, 0.0)
 
 
-def characteristic_pressure(scene: Scene, length: float, stress: float) -> float:
-    """A pressure that sets the displacement scale: the largest applied load or imposed strain."""
+def characteristic_pressure(scene: Scene, length: float, stress: float, overlap: float) -> float:
+    """A pressure that sets the displacement scale: the largest applied load or imposed strain.
+
+    ``overlap`` is the largest initial interpenetration of the obstacle at the contact
+    nodes (depth, a negative flat gap, or an indentation written in a gap formula).
+    """
     candidates = [abs(t.pressure) if t.pressure is not None else float(np.hypot(*t.vector)) for t in scene.tractions]
     candidates.append(float(np.hypot(*scene.body_force)) * length)
     obstacle = scene.contact.obstacle
-    if obstacle.force is not None:
-        candidates.append(obstacle.force / length)
-    imposed = [abs(d.ux or 0.0) for d in scene.dirichlet] + [abs(d.uy or 0.0) for d in scene.dirichlet]
-    imposed += [abs(obstacle.depth or 0.0), abs(obstacle.gap)]
+    for force in (obstacle.force, obstacle.tangential_force):
+        if force is not None:
+            candidates.append(abs(force) / length)
+    imposed = [abs(d.ux or 0.0) for d in scene.dirichlet] + [abs(d.uy or 0.0) for d in scene.dirichlet] + [overlap]
     candidates.append(stress * max(imposed) / length)
     return max(candidates)
 
@@ -157,16 +161,22 @@ def assemble(scene: Scene) -> FEModel:
     extent = user_mesh.p.max(axis=1) - user_mesh.p.min(axis=1)
     length = float(extent.max())
     E_max = max(m.E for m in ([scene.materials] if isinstance(scene.materials, Material) else scene.materials.values()))
-    pressure = characteristic_pressure(scene, length, E_max)
+    mesh = user_mesh.scaled(1.0 / length)
+    basis = vector_basis(mesh, scene.body.element)
+
+    # the overlap at the contact nodes sets the displacement scale, so the trace is first
+    # taken with displacements in user units (it is cheap: boundary integrals only)
+    free, prescribed = dirichlet(scene, mesh, basis, 1.0)
+    trace = contact_trace(scene.contact, mesh, basis, Scaling(length, E_max, 1.0), free, prescribed)
+    overlap = max(-(trace.gap - trace.normal_offset).min(initial=0.0), 0.0)
+    pressure = characteristic_pressure(scene, length, E_max, overlap)
     # zero load and zero gap: any displacement scale will do, the answer is u = 0
     displacement = length * pressure / E_max if pressure > 0 else length
     scaling = Scaling(length=length, stress=E_max, displacement=displacement)
 
-    mesh = user_mesh.scaled(1.0 / length)
-    basis = vector_basis(mesh, scene.body.element)
     lame = lame_per_element(scene, mesh, scaling.stress)
     K_full = stiffness(basis, lame)
     f_full = load_vector(scene, mesh, basis, scaling)
-    free, prescribed = dirichlet(scene, mesh, basis, scaling.displacement)
+    prescribed = prescribed / scaling.displacement
     contact = contact_trace(scene.contact, mesh, basis, scaling, free, prescribed)
     return FEModel(scene, scaling, mesh, basis, lame, K_full, f_full, free, prescribed, contact)

@@ -22,6 +22,7 @@ from ..conic import ConicProgram, ConicSolution, nonnegative, soc, zero
 from ..fem.contact import ContactTrace
 from ..fem.factorization import StiffnessFactorization
 from ..fem.friction import FrictionPoints
+from ..scene.model import SceneError
 from .fields import ContactFields
 from .primal import carrying
 
@@ -34,9 +35,12 @@ def dual(
     friction: FrictionPoints | None = None,
     slip_bound: np.ndarray | None = None,
     epsilon: float | None = None,
+    compliance: tuple[float, float] | None = None,
     factorization: StiffnessFactorization | None = None,
 ):
     """The dual program, its recovery map and ``bound_update(s) -> {"b": ...}``."""
+    if compliance is not None:
+        raise SceneError("formulation", "normal compliance is formulated in the primal only", "use formulation='primal'")
     factorization = factorization or StiffnessFactorization(K)
     m = contact.m
     count = friction.count if friction is not None else 0

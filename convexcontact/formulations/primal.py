@@ -1,4 +1,4 @@
-"""Signorini contact as an exact QP, and Tresca friction as an exact SOCP.
+"""Signorini contact as an exact QP, Tresca friction as an exact SOCP, normal compliance.
 
     min ½uᵀKu − fᵀu + Σ_k s_k |(R u)_k|   s.t.  C(N u − g) ≤ 0
 
@@ -8,6 +8,13 @@ epigraph variables, (t_k, (R u)_k) ∈ SOC with cost s_k t_k — no smoothing. W
 ``epsilon`` the cone is (t_k, (R u)_k, ε ω_k): the regularized sqrt(u_T² + ε²).
 Under force control the obstacle's normal advance δ_N (work −P δ_N) and tangential
 shift δ_T (work −Q δ_T) are unknowns too. A frictionless scene has no t, no R.
+
+Normal compliance (``compliance`` = (c_N, p), scaled) replaces non-penetration by the
+energy Σ w_i c_N/(p+1) e_i^(p+1) over the excess e ≥ u_N − g, e ≥ 0: a quadratic
+cost for p = 1, epigraphs (r_i, κ, e_i) ∈ power cone(1/(p+1)) with cost
+Σ w_i/(p+1) r_i for p > 1, where κ = c_N^(−1/p) (the excess at unit pressure) keeps r
+of the size of e (with (r, 1, e), r = e^(p+1) underflows the solver's tolerances).
+The multiplier of w(u_N − g − e) ≤ 0 is again the pressure, now c_N e^p.
 """
 
 from __future__ import annotations
@@ -15,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..conic import ConicProgram, ConicSolution, nonnegative, soc
+from ..conic import ConicProgram, ConicSolution, nonnegative, power, soc
 from ..fem.contact import ContactTrace
 from ..fem.friction import FrictionPoints
 from .fields import ContactFields
@@ -35,15 +42,18 @@ def carrying(rows: sp.spmatrix) -> np.ndarray:
 
 
 class Layout:
-    """Where each unknown sits in x = (u, [δ_N], [δ_T], [t])."""
+    """Where each unknown sits in x = (u, [δ_N], [δ_T], [t], [e], [r])."""
 
-    def __init__(self, n: int, contact: ContactTrace, friction: FrictionPoints | None):
+    def __init__(self, n: int, contact: ContactTrace, friction: FrictionPoints | None, compliance=None):
         self.n = n
         self.advance = n if contact.obstacle_coupling is not None else None
         self.shift = n + (self.advance is not None) if contact.tangential_coupling is not None else None
         start = n + (self.advance is not None) + (self.shift is not None)
         self.epigraph = slice(start, start + (friction.count if friction is not None else 0))
-        self.size = self.epigraph.stop
+        self.excess = slice(self.epigraph.stop, self.epigraph.stop + (contact.m if compliance else 0))
+        powered = compliance is not None and compliance[1] > 1
+        self.power = slice(self.excess.stop, self.excess.stop + (contact.m if powered else 0))
+        self.size = self.power.stop
 
     def column(self, index: int | None, values: np.ndarray) -> sp.csr_matrix:
         """A sparse block holding ``values`` in column ``index`` (empty when index is None)."""
@@ -61,11 +71,38 @@ class Layout:
 
 
 def normal_rows(contact: ContactTrace, C: sp.spmatrix, layout: Layout):
-    """Rows (A, b) of C(N u + c δ_N + offset − g) ≤ 0."""
+    """Rows (A, b) of C(N u + c δ_N + offset − g [− e]) ≤ 0."""
     A = sp.hstack([C @ contact.N, sp.csr_matrix((contact.m, layout.size - layout.n))]).tocsr()
     if layout.advance is not None:
         A = A + layout.column(layout.advance, C @ contact.obstacle_coupling)
+    if layout.excess.stop > layout.excess.start:
+        A = A - selector(layout.excess, layout.size, C)
     return A, C @ (contact.gap - contact.normal_offset)
+
+
+def selector(block: slice, size: int, scale: sp.spmatrix | None = None) -> sp.csr_matrix:
+    """Rows picking the unknowns of ``block`` (times ``scale``)."""
+    count = block.stop - block.start
+    pick = sp.csr_matrix((np.ones(count), (np.arange(count), np.arange(block.start, block.stop))), shape=(count, size))
+    return pick if scale is None else sp.csr_matrix(scale @ pick)
+
+
+def compliance_energy(layout: Layout, weights: np.ndarray, compliance):
+    """Cost (P diagonal, q) and cone rows (A, b, cones) of Σ w c/(p+1) e^(p+1), e ≥ 0."""
+    stiffness, exponent = compliance
+    P_diag, q = np.zeros(layout.size), np.zeros(layout.size)
+    rows, b, cones = [-selector(layout.excess, layout.size)], [np.zeros(weights.size)], [nonnegative(weights.size)]
+    if exponent == 1:
+        P_diag[layout.excess] = stiffness * weights
+    else:
+        q[layout.power] = weights / (exponent + 1)
+        count, kappa = weights.size, stiffness ** (-1.0 / exponent)
+        epigraph, excess = -selector(layout.power, layout.size), -selector(layout.excess, layout.size)
+        order = np.arange(3 * count).reshape(3, count).T.ravel()  # cone i = rows (r_i, κ, e_i)
+        rows.append(sp.vstack([epigraph, sp.csr_matrix((count, layout.size)), excess]).tocsr()[order])
+        b.append(np.concatenate([np.zeros(count), np.full(count, kappa), np.zeros(count)])[order])
+        cones += [power(1.0 / (exponent + 1))] * count
+    return P_diag, q, rows, b, cones
 
 
 def friction_rows(friction: FrictionPoints, layout: Layout, epsilon: float | None):
@@ -93,10 +130,14 @@ def primal(
     friction: FrictionPoints | None = None,
     slip_bound: np.ndarray | None = None,
     epsilon: float | None = None,
+    compliance: tuple[float, float] | None = None,
 ):
-    """The primal program, its recovery map and ``bound_update(s) -> {"q": ...}`` for new slip bounds."""
-    layout = Layout(f.size, contact, friction)
-    P = sp.block_diag([K, sp.csc_matrix((layout.size - layout.n,) * 2)], format="csc")
+    """The primal program, its recovery map and ``bound_update(s) -> {"q": ...}`` for new slip bounds.
+
+    ``compliance`` = (c_N, p) in scaled units switches non-penetration to normal compliance.
+    """
+    layout = Layout(f.size, contact, friction, compliance)
+    extra_diag = np.zeros(layout.size - layout.n)
     q = np.zeros(layout.size)
     q[: layout.n] = -f
     if layout.advance is not None:
@@ -104,20 +145,26 @@ def primal(
     if layout.shift is not None:
         q[layout.shift] = -contact.obstacle_tangential_force
     A, b = normal_rows(contact, C, layout)
-    cones = [nonnegative(contact.m)]
+    rows, offsets, cones = [A], [b], [nonnegative(contact.m)]
+    if compliance is not None:
+        P_diag, q_e, rows_e, b_e, cones_e = compliance_energy(layout, contact.weights, compliance)
+        extra_diag, q = P_diag[layout.n :], q + q_e
+        rows, offsets, cones = rows + rows_e, offsets + b_e, cones + cones_e
     if friction is not None:
         q[layout.epigraph] = slip_bound
         A_T, b_T, cones_T = friction_rows(friction, layout, epsilon)
-        A, b, cones = sp.vstack([A, A_T]), np.concatenate([b, b_T]), cones + cones_T
-    program = ConicProgram(P, q, sp.csc_matrix(A), b, tuple(cones))
+        rows, offsets, cones = rows + [A_T], offsets + [b_T], cones + cones_T
+    P = sp.block_diag([K, sp.diags(extra_diag)], format="csc")
+    program = ConicProgram(P, q, sp.vstack(rows).tocsc(), np.concatenate(offsets), tuple(cones))
     dim = 2 if epsilon is None else 3
+    friction_start = program.n_constraints - (friction.count * dim if friction is not None else 0)  # the last rows
     normal_carries = carrying(C @ contact.N)
     friction_carries = carrying(friction.R) if friction is not None else None
 
     def recover(solution: ConicSolution) -> ContactFields:
         z = solution.z
         pressure = np.where(normal_carries, z[: contact.m], 0.0)
-        traction = np.where(friction_carries, z[contact.m + 1 :: dim], 0.0) if friction is not None else None
+        traction = np.where(friction_carries, z[friction_start + 1 :: dim], 0.0) if friction is not None else None
         return ContactFields(pressure=pressure, friction=traction, **layout.unpack(solution.x))
 
     def bound_update(s: np.ndarray) -> dict:

@@ -19,6 +19,9 @@ mesh and in any units:
 For Coulomb friction s = F λ_N of the same solution: the residuals then measure how far
 the answer is from a fixed point of the Picard map, i.e. from the discrete Coulomb law.
 
+With normal compliance, ``non_penetration`` and ``complementarity`` give way to
+- ``compliance_law``    max |λ_N − c_N (u_N − g)_+^p| / p_ref
+
 u_ref and p_ref are the largest displacement (or obstacle motion) and pressure of
 the solution, but at least the displacement and pressure scales of the data — both 1
 in the scaled units of :mod:`convexcontact.fem.scaling` — so that a solution that
@@ -72,8 +75,9 @@ def certify(
     friction: FrictionPoints | None = None,
     slip_bound: np.ndarray | None = None,
     epsilon: float | None = None,
+    compliance: tuple[float, float] | None = None,
 ) -> Certificate:
-    """Residuals of the Signorini (and, with ``friction``, Tresca) conditions."""
+    """Residuals of the Signorini or normal compliance (and, with ``friction``, Tresca) conditions."""
     lam_N = fields.pressure
     gap = normal_gap(contact, fields)
     weighted_gap = (C @ gap) / contact.weights  # u_N − g for nodal contact, its P1 projection for weak
@@ -85,12 +89,17 @@ def certify(
     u_ref = max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_advance), abs(fields.obstacle_shift), 1.0)
     p_ref = max(np.abs(lam_N).max(initial=0.0), 1.0)
     f_ref = max(np.abs(f).max(initial=0.0), np.abs(elastic_force).max(initial=0.0), TINY)
-    residuals = {
-        "non_penetration": np.maximum(weighted_gap, 0.0).max(initial=0.0) / u_ref,
-        "pressure_sign": np.maximum(-lam_N, 0.0).max(initial=0.0) / p_ref,
-        "complementarity": np.abs(lam_N * weighted_gap).max(initial=0.0) / (p_ref * u_ref),
-        "equilibrium": np.abs(elastic_force - f + contact_force).max(initial=0.0) / f_ref,
-    }
+    if compliance is None:
+        residuals = {
+            "non_penetration": np.maximum(weighted_gap, 0.0).max(initial=0.0) / u_ref,
+            "complementarity": np.abs(lam_N * weighted_gap).max(initial=0.0) / (p_ref * u_ref),
+        }
+    else:
+        stiffness, exponent = compliance
+        law = stiffness * np.maximum(gap, 0.0) ** exponent
+        residuals = {"compliance_law": np.abs(lam_N - law).max(initial=0.0) / p_ref}
+    residuals["pressure_sign"] = np.maximum(-lam_N, 0.0).max(initial=0.0) / p_ref
+    residuals["equilibrium"] = np.abs(elastic_force - f + contact_force).max(initial=0.0) / f_ref
     balance = []
     if contact.obstacle_coupling is not None:
         resultant = contact.obstacle_coupling @ (C @ lam_N)

@@ -273,6 +273,30 @@ class Signorini:
             raise SceneError("contact.non_penetration", f"got {self.non_penetration!r}", "use 'nodal' or 'weak'")
 
 
+@dataclass(frozen=True)
+class NormalCompliance:
+    """Normal compliance (penalty) contact: σ_N = −c_N (u_N − g)_+^p (book, ch. 2.6).
+
+    ``stiffness`` c_N > 0 (a pressure per length^p), ``exponent`` p ≥ 1. The energy
+    Σ w_i c_N/(p+1) (u_N,i − g_i)_+^(p+1) is a QP for p = 1 and uses power cones for
+    p > 1. c_N → ∞ recovers Signorini. Alone it is a frictionless law; given as
+    ``compliance`` to Tresca or Coulomb it replaces their non-penetration.
+    """
+
+    stiffness: float
+    exponent: float = 1.0
+
+    def __post_init__(self):
+        if finite(self.stiffness, "contact.stiffness") <= 0:
+            raise SceneError("contact.stiffness", f"c_N must be positive, got {self.stiffness}")
+        if finite(self.exponent, "contact.exponent") < 1:
+            raise SceneError("contact.exponent", f"p must be ≥ 1, got {self.exponent}")
+        object.__setattr__(self, "stiffness", float(self.stiffness))
+        object.__setattr__(self, "exponent", float(self.exponent))
+
+    non_penetration = "nodal"  # the compliance energy is lumped node-wise
+
+
 NodalValues = float | str | np.ndarray | Callable
 """A field on Γ_C: a constant, a formula in x and y, a callable f(x, y), or nodal values."""
 
@@ -333,6 +357,7 @@ class Tresca:
     non_penetration: str = "nodal"
     quadrature: str = "nodal"
     regularization: float | None = None
+    compliance: NormalCompliance | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "slip_bound", check_field(self.slip_bound, "contact.slip_bound"))
@@ -358,6 +383,7 @@ class Coulomb:
     tol: float = 1e-8
     max_iterations: int = 100
     initial_pressure: NodalValues | None = None
+    compliance: NormalCompliance | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "friction", check_field(self.friction, "contact.friction"))
@@ -377,6 +403,10 @@ class Coulomb:
 
 
 def _check_options(law):
+    if law.compliance is not None and not isinstance(law.compliance, NormalCompliance):
+        raise SceneError("contact.compliance", "expected NormalCompliance(stiffness, exponent)")
+    if law.compliance is not None and law.non_penetration != "nodal":
+        raise SceneError("contact.non_penetration", "normal compliance is lumped node-wise", "use 'nodal'")
     if law.non_penetration not in ("nodal", "weak"):
         raise SceneError("contact.non_penetration", f"got {law.non_penetration!r}", "use 'nodal' or 'weak'")
     if law.quadrature not in QUADRATURES:
@@ -388,11 +418,16 @@ def _check_options(law):
         raise SceneError("contact.regularization", "ε must be positive (omit it for the exact law)")
 
 
-ContactLaw = Signorini | Tresca | Coulomb
+ContactLaw = Signorini | NormalCompliance | Tresca | Coulomb
 
 
 def has_friction(law: ContactLaw) -> bool:
-    return not isinstance(law, Signorini)
+    return isinstance(law, (Tresca, Coulomb))
+
+
+def compliance_of(law: ContactLaw) -> NormalCompliance | None:
+    """The normal compliance of a law (None: Signorini's non-penetration)."""
+    return law if isinstance(law, NormalCompliance) else getattr(law, "compliance", None)
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from .model import (
     Dirichlet,
     Material,
     MeshFile,
+    NormalCompliance,
     Obstacle,
     Rectangle,
     Scene,
@@ -58,10 +59,13 @@ OBSTACLES = {
     "expression": {"shape": TEXT, "expression": TEXT, **MOTION},
 }
 
-FRICTION_OPTIONS = {"non_penetration": TEXT, "quadrature": TEXT, "regularization": NUMBER}
+COMPLIANCE = {"stiffness": NUMBER, "exponent": NUMBER}
+FRICTION_OPTIONS = {"non_penetration": TEXT, "quadrature": TEXT, "regularization": NUMBER, **COMPLIANCE}
 LAWS = {
-    # law name → (model class, its keys in [contact] besides boundary and law)
+    # law name → (model class, its keys in [contact] besides boundary and law); with friction,
+    # stiffness (and exponent) switch the normal law to normal compliance
     "signorini": (Signorini, {"non_penetration": TEXT}),
+    "normal_compliance": (NormalCompliance, COMPLIANCE),
     "tresca": (Tresca, {"slip_bound": FIELD, **FRICTION_OPTIONS}),
     "coulomb": (Coulomb, {
         "friction": FIELD, "smoothing_radius": NUMBER, "relaxation": NUMBER, "tol": NUMBER,
@@ -144,10 +148,15 @@ def _contact(table, obstacle) -> Contact:
     _check_type(shape, TEXT, "obstacle.shape")
     if shape not in OBSTACLES:
         Obstacle(shape=shape)  # raises, listing the shapes
+    options = {key: keys[key] for key in law_keys if key in keys}
+    if law is not NormalCompliance and "stiffness" in options:
+        options["compliance"] = NormalCompliance(options.pop("stiffness"), options.pop("exponent", 1.0))
+    elif law is not NormalCompliance and "exponent" in options:
+        raise SceneError("contact.exponent", "an exponent without a stiffness", "add stiffness = c_N (normal compliance)")
     return Contact(
         boundary=keys["boundary"],
         obstacle=Obstacle(**_table(obstacle, "obstacle", OBSTACLES[shape], context=f" with shape = {shape!r}")),
-        law=law(**{key: keys[key] for key in law_keys if key in keys}),
+        law=law(**options),
     )
 
 

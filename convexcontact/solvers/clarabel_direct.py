@@ -10,7 +10,12 @@ import scipy.sparse as sp
 
 from ..conic import ConicProgram, ConicSolution
 
-_CONES = {"zero": clarabel.ZeroConeT, "nonnegative": clarabel.NonnegativeConeT, "soc": clarabel.SecondOrderConeT}
+_CONES = {
+    "zero": clarabel.ZeroConeT,
+    "nonnegative": clarabel.NonnegativeConeT,
+    "soc": clarabel.SecondOrderConeT,
+    "power": lambda dim, alpha: clarabel.PowerConeT(alpha),
+}
 
 _STATUS = {
     "Solved": "solved",
@@ -59,7 +64,7 @@ class Session:
             program.q,
             sp.csc_matrix(program.A),
             program.b,
-            [_CONES[c.kind](c.dim) for c in program.cones],
+            [_CONES[c.kind](c.dim, c.alpha) if c.kind == "power" else _CONES[c.kind](c.dim) for c in program.cones],
             self._settings,
         )
 

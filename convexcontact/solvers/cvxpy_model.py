@@ -50,9 +50,15 @@ class CvxpyModel:
 
 
 def _runs(program: ConicProgram):
-    """(kind, dim, rows) for each cone block, consecutive equal SOCs merged (rows interleaved)."""
+    """(kind, dim, rows) for each cone block, consecutive equal SOCs merged (rows interleaved).
+
+    For a power cone the second entry is its exponent α instead of the dimension.
+    """
     runs = []
     for cone, rows in program.blocks():
+        if cone.kind == "power":
+            runs.append(("power", cone.alpha, rows))
+            continue
         last = runs[-1] if runs else None
         if cone.kind == "soc" and last and last[0] == "soc" and last[1] == cone.dim and last[2].stop == rows.start:
             runs[-1] = ("soc", cone.dim, slice(last[2].start, rows.stop))
@@ -68,6 +74,10 @@ def model(program: ConicProgram) -> CvxpyModel:
     A, b = sp.csr_matrix(program.A), program.b
     constraints = []
     for kind, dim, rows in _runs(program):
+        if kind == "power":
+            slack = b[rows] - A[rows] @ x
+            constraints.append((cp.PowCone3D(slack[0], slack[1], slack[2], dim), kind, rows))
+            continue
         if kind != "soc":
             slack = b[rows] - A[rows] @ x
             constraints.append(((slack == 0) if kind == "zero" else (slack >= 0), kind, rows))
@@ -83,6 +93,8 @@ def model(program: ConicProgram) -> CvxpyModel:
 
 def _dual(constraint, kind: str, rows: slice) -> np.ndarray:
     value = constraint.dual_value
+    if kind == "power":
+        return np.concatenate([np.ravel(v) for v in value])
     if kind == "soc":  # [t duals (cones,), vector duals (dim−1, cones)] → interleaved rows
         t, vectors = value
         return np.vstack([np.atleast_1d(t), np.reshape(vectors, (-1, np.size(t)))]).T.ravel()

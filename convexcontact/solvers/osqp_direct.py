@@ -36,14 +36,15 @@ def _linear_rows(program: ConicProgram):
         if cone.kind in ("zero", "nonnegative"):
             blocks.append(A)
             plan.append((cone.kind, rows))
-        elif cone.dim == 2:
+        elif cone.kind == "soc" and cone.dim == 2:
             # b − Ax = (s0, s1), s0 ≥ |s1|  ⇔  (A0 ∓ A1) x ≤ b0 ∓ b1
             blocks.append(sp.vstack([A[0] - A[1], A[0] + A[1]]))
             plan.append(("soc2", rows))
         else:
+            name = "a power cone" if cone.kind == "power" else f"a second-order cone of dimension {cone.dim}"
             raise ConeNotSupported(
-                f"OSQP takes linear cones only; got a second-order cone of dimension {cone.dim}. "
-                "Use solver='clarabel' or 'cvxpy' for 3-D friction or ε-regularized friction."
+                f"OSQP takes linear cones only; got {name}. Use solver='clarabel' or 'cvxpy' for 3-D friction, "
+                "ε-regularized friction or normal compliance with exponent p > 1."
             )
     return sp.vstack(blocks, format="csc"), plan
 

@@ -1,0 +1,237 @@
+"""Cross-validation of two solutions of the same scene.
+
+Given a reference :class:`ContactResult` (e.g. the exact conic solve) and another
+solution on the same mesh — a second result, a penalty baseline, or nodal arrays
+imported from another code — report how far apart they are:
+
+- ``energy_error``            ‖u − v‖_K / ‖u‖_K, K the reference's stiffness (Dirichlet DOFs included;
+                              a seminorm: a difference by a rigid motion shows only in the L² error)
+- ``l2_displacement_error``   ‖u − v‖_L² / ‖u‖_L², mass matrix of the FE basis
+- ``pressure_l2_error``       ‖λ_N − μ_N‖ / ‖λ_N‖ in the contact weights w_i (Σ w_i e_i² ≈ ∫_Γc e²)
+- ``pressure_max_error``      max |λ_N − μ_N| / max |λ_N|
+- ``friction_l2_error``, ``friction_max_error``  the same for λ_T (when both have friction)
+- ``contact_zone_difference`` length of the symmetric difference of the closed zones along Γ_C:
+                              Σ w_i over the nodes open in one and closed in the other (user units)
+- ``stick_zone_difference``   the same for the stick zones (when both have stick / slip statuses)
+- ``certificates``            {"reference": residuals, "other": residuals or None}
+
+Every error is relative to the same norm of the reference field (L² to L², max to
+max), so it does not depend on the units; a field that is zero in the reference gives
+0 or inf. The zone differences are lengths in the user's units. A
+key whose data are missing on either side (no displacement, no friction) is left
+out of the report rather than set to a dummy value.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import skfem as fe
+from skfem.helpers import dot
+
+from ..results.result import CLOSED_PRESSURE, ContactResult
+
+STATUSES = ("open", "closed", "stick", "slip+", "slip-")
+
+
+@dataclass
+class Fields:
+    """A solution's fields in user units, comparable with a reference on the same mesh.
+
+    ``displacement`` is the full DOF vector (None when unknown); ``pressure``,
+    ``friction`` (None without friction) and ``status`` are arrays over the contact
+    nodes, ordered as the reference's ``contact.coords``. ``residuals`` is the
+    solution's certificate, when it has one.
+    """
+
+    displacement: np.ndarray | None
+    pressure: np.ndarray
+    friction: np.ndarray | None = None
+    status: np.ndarray | None = None
+    residuals: dict[str, float] | None = None
+
+    def __post_init__(self):
+        """Arrays as floats and strings; without a status the contact zone is read from the pressure.
+
+        Closed where the pressure exceeds ``CLOSED_PRESSURE`` × its maximum, as for our own
+        results; the stick zone is then unknown and not compared.
+        """
+        self.pressure = np.asarray(self.pressure, dtype=float)
+        if self.displacement is not None:
+            self.displacement = np.asarray(self.displacement, dtype=float)
+        if self.friction is not None:
+            self.friction = np.asarray(self.friction, dtype=float)
+        if self.status is None:
+            largest = self.pressure.max(initial=0.0)
+            self.status = np.where((largest > 0) & (self.pressure > CLOSED_PRESSURE * largest), "closed", "open")
+        self.status = np.asarray(self.status, dtype=str)
+
+    @classmethod
+    def from_result(cls, result: ContactResult, name: str = "result") -> Fields:
+        if not isinstance(result, ContactResult):
+            raise TypeError(f"{name}: expected a ContactResult, got {type(result).__name__}")
+        if not result.solved:
+            raise ValueError(f"{name}: the solve has no answer to compare (status {result.status!r})")
+        c = result.contact
+        residuals = None if result.certificate is None else dict(result.certificate.residuals)
+        return cls(result.displacement, c.pressure, c.friction, c.status, residuals)
+
+    @classmethod
+    def from_arrays(
+        cls, reference: ContactResult, *, pressure, displacement=None, friction=None, status=None
+    ) -> Fields:
+        """Fields imported from another code, checked against ``reference``'s mesh and contact nodes.
+
+        ``displacement`` is the full DOF vector, the other arrays are nodal at the reference's
+        contact nodes, all in user units; a length that does not match is a ValueError
+        naming the argument.
+        """
+        fields = cls(displacement, pressure, friction, status)
+        check(reference, fields, "")
+        return fields
+
+    @property
+    def closed(self) -> np.ndarray:
+        return self.status != "open"
+
+    @property
+    def has_stick_zone(self) -> bool:
+        """Friction statuses (stick / slip±) rather than only open / closed."""
+        return self.friction is not None and not np.any(self.status == "closed")
+
+
+def check(reference: ContactResult, fields: Fields, prefix: str) -> None:
+    """Lengths and values of ``fields`` against the reference's DOFs and contact nodes."""
+    ndofs, m = reference.fem.basis.N, reference.fem.contact.m
+    nodal = "give one value per contact node, ordered as reference.contact.coords"
+    full = ("give the full DOF vector in user units "
+            "(from free DOFs u: reference.fem.full(u) * reference.fem.scaling.displacement)")
+    arrays = {"displacement": (fields.displacement, ndofs, full), "pressure": (fields.pressure, m, nodal),
+              "friction": (fields.friction, m, nodal), "status": (fields.status, m, nodal)}
+    for name, (values, size, fix) in arrays.items():
+        if values is None:
+            continue
+        if values.shape != (size,):
+            raise ValueError(f"{prefix}{name}: {values.size} values, the reference has {size} — {fix}")
+        if name != "status" and not np.isfinite(values).all():
+            raise ValueError(f"{prefix}{name}: contains NaN or infinity")
+    unknown = set(fields.status.tolist()) - set(STATUSES)
+    if unknown:
+        raise ValueError(f"{prefix}status: unknown values {sorted(unknown)}; use {STATUSES}")
+
+
+def relative(error: float, scale: float) -> float:
+    """error / scale; 0 when both vanish, inf for an error against a zero reference."""
+    if scale > 0:
+        return float(error / scale)
+    return 0.0 if error == 0 else float("inf")
+
+
+def traction_errors(name: str, reference: np.ndarray, other: np.ndarray, weights: np.ndarray) -> dict[str, float]:
+    """Relative L² (with the contact weights) and max errors of a nodal traction."""
+    error = other - reference
+    return {
+        f"{name}_l2_error": relative(np.sqrt(weights @ error**2), np.sqrt(weights @ reference**2)),
+        f"{name}_max_error": relative(np.abs(error).max(initial=0.0), np.abs(reference).max(initial=0.0)),
+    }
+
+
+def contact_errors(reference: Fields, other: Fields, weights: np.ndarray) -> dict:
+    """Traction errors and zone differences at the contact nodes (``weights`` in user lengths)."""
+    report = traction_errors("pressure", reference.pressure, other.pressure, weights)
+    if reference.friction is not None and other.friction is not None:
+        report.update(traction_errors("friction", reference.friction, other.friction, weights))
+    report["contact_zone_difference"] = float(weights[reference.closed != other.closed].sum())
+    if reference.has_stick_zone and other.has_stick_zone:
+        report["stick_zone_difference"] = float(weights[(reference.status == "stick") != (other.status == "stick")].sum())
+    return report
+
+
+@fe.BilinearForm
+def _mass(u, v, w):
+    return dot(u, v)
+
+
+def compare(reference: ContactResult, other: Fields | ContactResult) -> dict:
+    """Errors of ``other`` against ``reference`` on the same mesh (see the module docstring)."""
+    ref = Fields.from_result(reference, "reference")
+    if not isinstance(other, Fields):
+        other = Fields.from_result(other, "other")
+    check(reference, other, "other.")
+    fem = reference.fem
+    report = {}
+    if other.displacement is not None:
+        u = ref.displacement / fem.scaling.displacement
+        error = other.displacement / fem.scaling.displacement - u
+        for name, matrix in (("energy_error", fem.K_full), ("l2_displacement_error", fe.asm(_mass, fem.basis))):
+            report[name] = relative(np.sqrt(max(error @ (matrix @ error), 0.0)), np.sqrt(max(u @ (matrix @ u), 0.0)))
+    report.update(contact_errors(ref, other, fem.contact.weights * fem.scaling.length))
+    report["certificates"] = {"reference": ref.residuals, "other": other.residuals}
+    return report
+
+
+def spacing_weights(s: np.ndarray) -> np.ndarray:
+    """Trapezoid weights of nodes at coordinates ``s``: half the distance between each node's neighbours."""
+    order = np.argsort(s)
+    sorted_s = s[order]
+    edges = np.concatenate([[sorted_s[0]], (sorted_s[1:] + sorted_s[:-1]) / 2, [sorted_s[-1]]])
+    weights = np.empty_like(s)
+    weights[order] = np.diff(edges)
+    return weights
+
+
+def read_summary(path: Path) -> tuple[dict, dict]:
+    data = json.loads(Path(path).read_text())
+    if "contact_nodes" not in data:
+        raise ValueError(f"{path}: no contact_nodes (status {data.get('status')!r}): only a solved result can be compared")
+    return data, data["contact_nodes"]
+
+
+def compare_files(a: Path, b: Path) -> dict:
+    """Compare the contact-node fields of two ``summary.json`` files (``a`` is the reference).
+
+    The files hold no displacement field and no contact weights: the weights are
+    approximated from the node spacing along the contact coordinate s (trapezoid
+    rule). This equals w_i = ∫ψ_i for P1/Q1 on a straight Γ_C; for P2/Q2 (w = h/6
+    at vertices, 2h/3 at mid-sides) and curved boundaries the L² errors and zone
+    lengths are approximations. Both files must have the same contact nodes.
+    """
+    (data_a, nodes_a), (data_b, nodes_b) = read_summary(a), read_summary(b)
+    xy_a, xy_b = (np.column_stack([n["x"], n["y"]]) for n in (nodes_a, nodes_b))
+    extent = np.ptp(xy_a, axis=0).max(initial=0.0)
+    if xy_a.shape != xy_b.shape or not np.allclose(xy_a, xy_b, rtol=0, atol=1e-9 * extent):
+        raise ValueError(
+            f"{b}: its {len(xy_b)} contact nodes are not those of {a} ({len(xy_a)} nodes) — "
+            "compare_files needs two solutions on the same mesh and contact boundary"
+        )
+
+    def fields(nodes, data):
+        residuals = {k: v for k, v in data["certificate"].items() if k != "worst"} if "certificate" in data else None
+        return Fields(None, nodes["lambda_N"], nodes.get("lambda_T"), nodes["status"], residuals)
+
+    reference, other = fields(nodes_a, data_a), fields(nodes_b, data_b)
+    report = contact_errors(reference, other, spacing_weights(np.asarray(nodes_a["s"], float)))
+    report["certificates"] = {"reference": reference.residuals, "other": other.residuals}
+    return report
+
+
+def format_report(report: dict) -> str:
+    """The report as an aligned text table, then the two certificates side by side."""
+    values = {k: v for k, v in report.items() if k != "certificates"}
+    width = max(map(len, values), default=0) + 2
+    lines = [f"{'quantity':<{width}}value"] + [f"{k:<{width}}{v:.3e}" for k, v in values.items()]
+    certificates = report.get("certificates")
+    if certificates:
+        ref, other = certificates.get("reference") or {}, certificates.get("other") or {}
+        names = list(dict.fromkeys([*ref, *other]))
+        width = max(map(len, names), default=0) + 2
+
+        def cell(residuals, name):
+            return f"{residuals[name]:<12.3e}" if name in residuals else f"{'—':<12}"
+
+        lines += ["", f"{'certificate':<{width}}{'reference':<12}other"]
+        lines += [f"{n:<{width}}{cell(ref, n)}{cell(other, n)}".rstrip() for n in names]
+    return "\n".join(lines)
