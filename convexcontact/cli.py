@@ -78,7 +78,19 @@ def main(argv=None) -> int:
         command.add_argument("--out", type=Path, default=Path("out") if name == "demo" else None,
                              help="folder for summary.json, solution.vtu, PNG plots")
         command.add_argument("--json", type=Path, default=None, help="also write the JSON summary here")
+    compare = commands.add_parser("compare", help="compare two summary.json files (contact-node fields)")
+    compare.add_argument("reference", type=Path)
+    compare.add_argument("other", type=Path)
     args = parser.parse_args(argv)
+    if args.command == "compare":
+        from .studies.compare import compare_files, format_report
+
+        try:
+            print(format_report(compare_files(args.reference, args.other)))
+        except (OSError, ValueError) as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        return 0
     try:
         solvers.check_name(args.solver)
         if args.command == "demo":

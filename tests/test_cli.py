@@ -53,3 +53,14 @@ def test_infeasible_scene_exits_1_with_the_solver_status(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "infeasible" in out.lower()
     assert json.loads((tmp_path / "summary.json").read_text())["status"] == "infeasible"
+
+
+def test_compare_two_summaries(tmp_path, capsys):
+    exact, other = tmp_path / "exact.json", tmp_path / "osqp.json"
+    assert main(["run", str(SCENES / "hertz.toml"), "--json", str(exact)]) == 0
+    assert main(["run", str(SCENES / "hertz.toml"), "--solver", "osqp", "--json", str(other)]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(exact), str(other)]) == 0
+    report = capsys.readouterr().out
+    assert "pressure" in report
+    assert main(["compare", str(exact), str(tmp_path / "missing.json")]) == 2
