@@ -44,6 +44,7 @@ def table(result) -> str:
         ]
     if s["message"]:
         rows.append(("message", s["message"]))
+    rows += [("warning", warning) for warning in s["warnings"]]
     rows.append(("times [s]", ", ".join(f"{k} {v:.3f}" for k, v in s["timings"].items())))
     width = max(len(name) for name, _ in rows)
     return "\n".join(f"{name:<{width}}  {value}" for name, value in rows)

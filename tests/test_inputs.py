@@ -119,3 +119,11 @@ def test_gmsh_file_with_subdomain_materials(tmp_path):
     with pytest.raises(cc.SceneError) as caught:
         cc.solve(dataclasses.replace(scene, body=cc.Body(cc.MeshFile(path)), materials={"steel": cc.Material(1, 0.3)}))
     assert caught.value.field == "materials.steel"
+
+
+def test_linear_elements_warn_of_locking_when_nearly_incompressible():
+    locking = dataclasses.replace(pressure_patch(nx=2), materials=cc.Material(1.0, 0.4999))
+    assert "lock" in cc.solve(locking).summary()["warnings"][0]
+    quadratic = dataclasses.replace(locking, body=cc.Body(cc.Rectangle(nx=2, ny=2), "P2"))
+    assert cc.solve(quadratic).summary()["warnings"] == []
+    assert cc.solve(pressure_patch(nx=2)).summary()["warnings"] == []

@@ -34,6 +34,7 @@ class FEModel:
     free: np.ndarray
     prescribed: np.ndarray
     contact: ContactTrace
+    warnings: tuple[str, ...] = ()
 
     @property
     def K(self) -> sp.csr_matrix:
@@ -138,6 +139,20 @@ def dirichlet(scene: Scene, mesh: fe.Mesh, basis: fe.Basis, displacement_scale: 
     return np.flatnonzero(~fixed), np.where(fixed, values, 0.0)
 
 
+LOCKING_NU = 0.45
+"""Poisson's ratio above which linear elements (P1, Q1) lock noticeably."""
+
+
+def locking_warnings(scene: Scene) -> tuple[str, ...]:
+    """A warning when linear elements meet a near-incompressible material."""
+    materials = [scene.materials] if isinstance(scene.materials, Material) else list(scene.materials.values())
+    nu = max(m.nu for m in materials)
+    if scene.body.element in ("P1", "Q1") and nu >= LOCKING_NU and scene.body.plane == "strain":
+        return ((f"{scene.body.element} elements lock for ν = {nu:g} in plane strain (too stiff: smaller contact "
+                "zone, higher pressures); use P2 or Q2"),)
+    return ()
+
+
 def characteristic_pressure(scene: Scene, length: float, stress: float, overlap: float) -> float:
     """A pressure that sets the displacement scale: the largest applied load or imposed strain.
 
@@ -179,4 +194,5 @@ def assemble(scene: Scene) -> FEModel:
     f_full = load_vector(scene, mesh, basis, scaling)
     prescribed = prescribed / scaling.displacement
     contact = contact_trace(scene.contact, mesh, basis, scaling, free, prescribed)
-    return FEModel(scene, scaling, mesh, basis, lame, K_full, f_full, free, prescribed, contact)
+    return FEModel(scene, scaling, mesh, basis, lame, K_full, f_full, free, prescribed, contact,
+                   locking_warnings(scene))

@@ -126,6 +126,7 @@ class ContactResult:
             "iterations": self.iterations,
             "timings": self.timings,
             "message": self.message,
+            "warnings": list(self.fem.warnings),
         }
         if not self.solved:
             return out
