@@ -167,3 +167,18 @@ def test_nonlocal_coulomb_tends_to_local_and_smooths_the_bound():
     # near the contact edge the mollified pressure exceeds the local one: the bound is not F λ_N there
     edge = (smooth.contact.status != "open") & (smooth.contact.pressure < 0.3 * smooth.max_pressure)
     assert np.any(np.abs(smooth.contact.friction[edge]) > F * smooth.contact.pressure[edge] * 1.01)
+
+
+def test_friction_coefficient_varying_along_the_boundary():
+    """F(x) = 0.6 exp(3x): |λ_T| = F(x) λ_N where it slips, ≤ everywhere; the stick zone shifts off centre."""
+    law = Coulomb(friction="0.6*exp(3*x)")
+    result = cc.solve(frictional_punch(h=0.01, depth=0.02, element="Q1", law=law))
+    assert result.extra["picard"]["outcome"] == "converged"
+    c = result.contact
+    coefficient = 0.6 * np.exp(3 * c.coords[:, 0])
+    slip = np.char.startswith(c.status.astype(str), "slip")
+    tol = 1e-6 * result.max_pressure
+    assert np.all(np.abs(c.friction) <= coefficient * c.pressure + tol)
+    np.testing.assert_allclose(np.abs(c.friction[slip]), (coefficient * c.pressure)[slip], atol=tol)
+    stick = c.coordinate[c.status == "stick"]
+    assert stick.mean() > 0  # more friction on the right holds more of the right side
