@@ -31,10 +31,14 @@ def settings(tol: float = 1e-10, max_iter: int = 200, verbose: bool = False, **n
     """Clarabel settings with gap and feasibility tolerances set to ``tol``.
 
     Clarabel's defaults (1e-8) leave contact forces only ~1e-3 accurate on contact
-    problems (DESIGN.md, dependency facts), hence the tighter default.
+    problems (DESIGN.md, dependency facts), hence the tighter default. One thread by
+    default: on the project's 2-core machines Clarabel's threads made the Hertz demo
+    2–3.5× slower (6.5k DOFs: 1.48 s vs 0.42 s; 26k DOFs: 5.1 s vs 2.0 s, machine under
+    load); pass ``max_threads=0`` for Clarabel's own choice.
     """
     s = clarabel.DefaultSettings()
     s.verbose = verbose
+    s.max_threads = 1
     s.max_iter = max_iter
     s.tol_gap_abs = s.tol_gap_rel = s.tol_feas = tol
     s.tol_ktratio = min(s.tol_ktratio, tol)
