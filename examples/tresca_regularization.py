@@ -4,27 +4,20 @@
 """
 
 import argparse
-import dataclasses
 
 import numpy as np
 
 import convexcontact as cc
-from convexcontact.scene.library import hertz_punch
-from convexcontact.scene.model import Tresca
-
-
-def scene(nx: int, epsilon: float | None):
-    law = Tresca(slip_bound=0.005, regularization=epsilon)  # slip bound: a traction (number, formula or array)
-    punch = cc.Obstacle("parabolic", radius=1.0, depth=0.01)
-    return dataclasses.replace(hertz_punch(nx=nx, law=law), contact=cc.Contact("top", punch, law))
+from convexcontact.scene.library import tresca_punch
 
 
 def main(nx: int = 40, out: str = "out/tresca"):
-    exact = cc.solve(scene(nx, None))
+    # slip bound 0.005: a traction (a number, a formula in x and y, or nodal values)
+    exact = cc.solve(tresca_punch(nx, slip_bound=0.005))
     print(f"exact: stick {np.sum(exact.contact.status == 'stick')} nodes, certificate {exact.certificate.worst:.1e}")
     rows = []
     for epsilon in (1e-4, 1e-5, 1e-6, 1e-7):
-        regularized = cc.solve(scene(nx, epsilon))
+        regularized = cc.solve(tresca_punch(nx, slip_bound=0.005, regularization=epsilon))
         error = np.abs(regularized.displacement - exact.displacement).max() / np.abs(exact.displacement).max()
         rows.append((epsilon, error))
         print(f"ε = {epsilon:.0e}: relative displacement difference {error:.2e}")

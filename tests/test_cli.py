@@ -64,3 +64,11 @@ def test_compare_two_summaries(tmp_path, capsys):
     report = capsys.readouterr().out
     assert "pressure" in report
     assert main(["compare", str(exact), str(tmp_path / "missing.json")]) == 2
+
+
+def test_study_commands(tmp_path, capsys):
+    assert main(["study", "sweep", "penalty", "--nx", "8", "--out", str(tmp_path / "sweep.png")]) == 0
+    assert "fitted slope" in capsys.readouterr().out and (tmp_path / "sweep.png").exists()
+    assert main(["study", "work-precision", "hertz", "--size", "12", "--tol", "1e-8", "--solvers", "osqp",
+                 "--formulations", "primal", "--out", str(tmp_path / "wp")]) == 0
+    assert list((tmp_path / "wp").glob("*.csv")) and list((tmp_path / "wp").glob("*.png"))

@@ -9,7 +9,7 @@ from test_friction_hild import LENGTH, NU, E, matches_one_of, triangle_scene
 import convexcontact as cc
 from convexcontact.analytic import hild_one_triangle_solutions
 from convexcontact.fem.mollifier import mollifier
-from convexcontact.scene.library import frictional_punch, hertz_punch, punch_mesh
+from convexcontact.scene.library import frictional_punch, hertz_punch, punch_mesh, tresca_punch
 from convexcontact.scene.model import Coulomb, Tresca
 
 F = 0.6
@@ -80,10 +80,7 @@ def test_regularized_tresca_tends_to_exact_linearly():
     here); for ε ≳ slip the regularization smears the whole slip zone.
     """
     def tresca(epsilon):
-        law = Tresca(slip_bound=0.005, regularization=epsilon)
-        scene = dataclasses.replace(hertz_punch(nx=40, law=law),
-                                    contact=cc.Contact("top", cc.Obstacle("parabolic", radius=1.0, depth=0.01), law))
-        return cc.solve(scene, "clarabel", tol=1e-12)
+        return cc.solve(tresca_punch(nx=40, slip_bound=0.005, regularization=epsilon), "clarabel", tol=1e-12)
 
     exact = tresca(None)
     errors, energy_errors = [], []

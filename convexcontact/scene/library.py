@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import skfem as fe
 
@@ -78,3 +80,12 @@ def frictional_punch(h: float = 0.005, depth: float = 0.02, friction: float = 0.
         dirichlet=(Dirichlet("bottom", ux=0.0, uy=0.0),),
         contact=Contact("top", Obstacle("parabolic", radius=1.0, depth=depth), law),
     )
+
+
+def tresca_punch(nx: int = 40, slip_bound: float = 0.005, depth: float = 0.01, regularization: float | None = None):
+    """The Hertz block indented by depth (displacement control) with Tresca friction of a given bound."""
+    from .model import Tresca
+
+    law = Tresca(slip_bound=slip_bound, regularization=regularization)
+    contact = Contact("top", Obstacle("parabolic", radius=1.0, depth=depth), law)
+    return dataclasses.replace(hertz_punch(nx=nx, law=law), name="tresca_punch", contact=contact)

@@ -1,0 +1,166 @@
+"""Parameter sweeps of the approximate models against the exact answer, with fitted log-log slopes.
+
+- :func:`penalty_sweep` — normal compliance c_N against exact non-penetration: the pressure
+  error max|λ_N(c) − λ_N| / max λ_N decays like 1/c_N (expected slope −1) until it meets the
+  solver's accuracy. OSQP by default: Clarabel stops on stiff penalties (docs/friction.md).
+- :func:`regularization_sweep` — Hild's ε-regularized friction against the exact law: the
+  displacement error max|u_ε − u| / max|u| grows like ε (expected slope +1) once ε is small
+  against the slip itself. ::
+
+    sweep = penalty_sweep(scene); print(sweep.slope); plot_sweep(sweep, "penalty.png")
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..drivers.solve import prepare
+from ..results.result import ContactResult
+from ..scene.model import NormalCompliance, Scene, Signorini, has_friction
+from .work_precision import wall_time, with_law
+
+
+@dataclasses.dataclass
+class Sweep:
+    """Rows (parameter, error, status, time) of one sweep and the slope the theory expects."""
+
+    parameter: str
+    error: str
+    expected_slope: float
+    rows: list[dict]
+
+    @property
+    def slope(self) -> float:
+        """Least-squares slope of log(error) against log(parameter) over the solved rows (nan with < 2)."""
+        return fitted_slope(self.rows)
+
+
+def fitted_slope(rows: Sequence[dict]) -> float:
+    points = [(r["parameter"], r["error"]) for r in rows if r.get("error") is not None and r["error"] > 0]
+    if len(points) < 2:
+        return math.nan
+    x, y = np.log(np.array(points)).T
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def exact_law(law):
+    """The law without its approximation: no compliance, no regularization."""
+    if not has_friction(law):
+        return Signorini()
+    return dataclasses.replace(law, compliance=None, regularization=None)
+
+
+def row(parameter: float, result: ContactResult, error: float | None) -> dict:
+    return {"parameter": float(parameter), "error": error, "status": result.status, "time": wall_time(result),
+            "certificate": None if result.certificate is None else float(result.certificate.worst)}
+
+
+def exact_solve(scene: Scene, solver: str, **options) -> ContactResult:
+    result = prepare(with_law(scene, exact_law(scene.contact.law))).solve(solver, **options)
+    if not result.solved:
+        raise RuntimeError(f"exact solve: {result.status}: {result.message}")
+    return result
+
+
+def penalty_sweep(scene: Scene, stiffness: Sequence[float] = np.logspace(3, 6, 4), solver: str = "osqp",
+                  **options) -> Sweep:
+    """Pressure error of normal compliance c_N (user units, p = 1) against the exact law, per c_N."""
+    exact = exact_solve(scene, solver, **options)
+    law, rows = exact_law(scene.contact.law), []
+    for c in stiffness:
+        penalty = NormalCompliance(float(c))
+        result = prepare(with_law(scene, dataclasses.replace(law, compliance=penalty) if has_friction(law)
+                                  else penalty)).solve(solver, **options)
+        error = None
+        if result.solved:
+            error = float(np.abs(result.contact.pressure - exact.contact.pressure).max() / exact.max_pressure)
+        rows.append(row(c, result, error))
+    return Sweep("c_N", "max |λ_N(c) − λ_N| / max λ_N", -1.0, rows)
+
+
+def regularization_sweep(scene: Scene, epsilon: Sequence[float] = np.logspace(-5, -7, 3), solver: str = "clarabel",
+                         **options) -> Sweep:
+    """Displacement error of the ε-regularized friction law (ε a length, user units) against the exact law."""
+    law = scene.contact.law
+    if not has_friction(law):
+        raise ValueError("regularization_sweep: the scene's law has no friction; use Tresca or Coulomb")
+    exact = exact_solve(scene, solver, **options)
+    scale = np.abs(exact.displacement).max()
+    rows = []
+    for e in epsilon:
+        result = prepare(with_law(scene, dataclasses.replace(exact_law(law), regularization=float(e)))).solve(
+            solver, **options)
+        error = float(np.abs(result.displacement - exact.displacement).max() / scale) if result.solved else None
+        rows.append(row(e, result, error))
+    return Sweep("ε", "max |u_ε − u| / max |u|", 1.0, rows)
+
+
+def plot_sweep(sweep: Sweep | Sequence[dict], path, title: str | None = None, expected_slope: float = -1.0) -> Path:
+    """Log-log error against the parameter, the fitted slope in the legend and the expected slope as a dashed line.
+
+    ``sweep``: a :class:`Sweep`, or its rows (then ``expected_slope`` gives the reference line).
+    """
+    if not isinstance(sweep, Sweep):
+        sweep = Sweep("parameter", "error", expected_slope, list(sweep))
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    solved = [r for r in sweep.rows if r["error"] is not None and r["error"] > 0]
+    fig, ax = plt.subplots(figsize=(6.0, 4.2))
+    x = np.array([r["parameter"] for r in solved])
+    y = np.array([r["error"] for r in solved])
+    ax.loglog(x, y, "o-", label=f"measured (fitted slope {sweep.slope:+.2f})")
+    if len(x):
+        anchor = np.exp(np.mean(np.log(y)) - sweep.expected_slope * np.mean(np.log(x)))
+        ax.loglog(x, anchor * x**sweep.expected_slope, "k--", lw=1, label=f"slope {sweep.expected_slope:+g}")
+    ax.set_xlabel(sweep.parameter)
+    ax.set_ylabel(sweep.error)
+    ax.set_title(title or f"{sweep.parameter} sweep")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def table(sweep: Sweep) -> str:
+    lines = [f"{sweep.parameter:>10}  {'error':>10}  {'status':<12}{'time [s]':>9}"]
+    for r in sweep.rows:
+        error = "" if r["error"] is None else f"{r['error']:.2e}"
+        lines.append(f"{r['parameter']:>10.1e}  {error:>10}  {r['status']:<12}{r['time']:>9.3f}")
+    lines.append(f"fitted slope {sweep.slope:+.3f} (expected {sweep.expected_slope:+g})")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> Sweep:
+    """``convexcontact study sweep penalty|regularization``: errors, fitted slope, plot."""
+    import argparse
+
+    from ..scene.library import hertz_punch, tresca_punch
+
+    parser = argparse.ArgumentParser(prog="convexcontact study sweep", description=main.__doc__)
+    parser.add_argument("kind", choices=["penalty", "regularization"])
+    parser.add_argument("--nx", type=int, default=16, help="elements across the block")
+    parser.add_argument("--values", type=float, nargs="+", default=None, help="c_N or ε values (default: logspace)")
+    parser.add_argument("--solver", default=None)
+    parser.add_argument("--out", default="out/sweep.png")
+    args = parser.parse_args(argv)
+    if args.kind == "penalty":
+        values = args.values or np.logspace(3, 6, 4)
+        sweep = penalty_sweep(hertz_punch(nx=args.nx), values, args.solver or "osqp")
+    else:
+        values = args.values or np.logspace(-5, -7, 3)
+        sweep = regularization_sweep(tresca_punch(nx=args.nx), values, args.solver or "clarabel")
+    print(table(sweep))
+    print("wrote", plot_sweep(sweep, args.out, expected_slope=sweep.expected_slope))
+    return sweep
