@@ -95,8 +95,10 @@ def test_tresca_with_the_coulomb_bound_reproduces_the_solution(regime):
 def test_every_path_gives_the_unique_solution(formulation, solver):
     F1, F2 = LOADS["right slip"]
     (solution,) = hild_one_triangle_solutions(F1, F2, 1.0, E, NU, LENGTH)
-    tol = {"clarabel": 1e-12, "osqp": 1e-10, "cvxpy": 1e-12}[solver]
-    law = Coulomb(friction=1.0, tol=1e-8 if solver == "osqp" else 1e-9)  # OSQP's answers are ~1e-9 accurate
+    # OSQP at its default eps 1e-9: at 1e-10 its ADMM iterations are erratic here (400, 125, 1375,
+    # then the 100 000 limit in the fourth Picard step); its answers are ~1e-9 accurate
+    tol = {"clarabel": 1e-12, "osqp": 1e-9, "cvxpy": 1e-12}[solver]
+    law = Coulomb(friction=1.0, tol=1e-8 if solver == "osqp" else 1e-9)
     result = cc.solve(triangle_scene(F1, F2, law), solver, formulation=formulation, tol=tol)
     assert result.status == "solved", result.message
     close, distance = matches_one_of(result, [solution], tol=1e-6)

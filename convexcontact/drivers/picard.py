@@ -62,17 +62,21 @@ def initial_pressure(model: Model, solver: str, options: dict) -> np.ndarray:
 
 
 def outcome(changes: list[float], tol: float, states: list[np.ndarray]) -> str | None:
-    """converged / cycling (period p) / diverging, or None to go on.
+    """converged / cycling (period p) / diverging / stagnated, or None to go on.
 
-    Cycling: the state returns to itself after p steps while the step size does not
-    shrink (an alternating but converging sequence has shrinking steps).
+    Cycling: the state returns to itself after p steps while the step size stays large
+    (above sqrt(tol)) and does not shrink. Smaller steps that stop shrinking are the
+    inner solver's noise: the map has stagnated at the solver's accuracy.
     """
     if changes[-1] < tol:
         return "converged"
+    if len(changes) > 2 * WINDOW and min(changes[-WINDOW:]) > 0.5 * min(changes[:-WINDOW]):
+        return "stagnated"
     scale = max(np.abs(states[-1]).max(), 1e-300)
     for period in CYCLE_PERIODS:
         if (
             len(changes) > 2 * period
+            and changes[-1] > np.sqrt(tol)
             and np.abs(states[-1] - states[-1 - period]).max() < tol * scale
             and changes[-1] > 0.5 * changes[-1 - period]
         ):
@@ -84,9 +88,7 @@ def outcome(changes: list[float], tol: float, states: list[np.ndarray]) -> str |
 
 
 def unfinished(changes: list[float]) -> str:
-    """Why the iteration limit was reached: stagnation, or a slow but steady decrease."""
-    if len(changes) > 2 * WINDOW and min(changes[-WINDOW:]) > 0.5 * min(changes[:-WINDOW]):
-        return "stagnated"
+    """The iteration limit was reached while the change still decreased."""
     return "not converged (still decreasing: raise max_iterations)"
 
 
@@ -120,6 +122,7 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
                         "inner_iterations": solution.iterations, "inner_time": inner})
         if best is None or residual.worst <= best[0]:
             best = (residual.worst, k, solution, fields, target)
+        last = (residual.worst, k, solution, fields, target)
         if progress is not None:
             progress(k, change)
         changes.append(change)
@@ -131,10 +134,11 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
     else:
         status = unfinished(changes)
     extra = {"picard": {"outcome": status, "iterations": len(history), "relaxation": law.relaxation,
-                        "tol": law.tol, "best_iteration": None}, "history": history}
-    if best is None:
-        return model.result(solution, timings, None, extra=extra)
-    _, extra["picard"]["best_iteration"], solution, fields, target = best
+                        "tol": law.tol, "reported_iteration": None}, "history": history}
+    if best is None:  # the first inner solve failed: report it, judged against the bounds it was given
+        return model.result(solution, timings, s, extra=extra)
+    # converged: the last iterate is the answer; otherwise the one closest to the Coulomb law
+    _, extra["picard"]["reported_iteration"], solution, fields, target = last if status == "converged" else best
     with timed(timings, "postprocess"):
         result = model.result(solution, timings, target, fields=fields, extra=extra)
     if status != "converged":

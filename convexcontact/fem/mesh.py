@@ -37,6 +37,22 @@ def graded(start: float, length: float, cells: int, ratio: float, focus: float |
     return np.concatenate([x_left, x_right])
 
 
+def tensor_mesh(x: np.ndarray, y: np.ndarray, quads: bool) -> fe.Mesh:
+    """Tensor-product mesh on the nodes x × y with boundaries left, right, bottom, top.
+
+    The sides are found by their exact coordinates: scikit-fem's ``with_defaults`` uses a
+    tolerance of a hundredth of the smallest element, which tags every facet of a row of
+    elements of aspect ratio ≳ 50 as "top" or "bottom".
+    """
+    mesh = (fe.MeshQuad1 if quads else fe.MeshTri1).init_tensor(x, y)
+    return mesh.with_boundaries({
+        "left": lambda p: p[0] == x[0],
+        "right": lambda p: p[0] == x[-1],
+        "bottom": lambda p: p[1] == y[0],
+        "top": lambda p: p[1] == y[-1],
+    })
+
+
 def rectangle(geometry: Rectangle, quads: bool) -> fe.Mesh:
     """Structured rectangle with boundaries left, right, bottom, top."""
     x0, y0 = geometry.origin
@@ -44,8 +60,7 @@ def rectangle(geometry: Rectangle, quads: bool) -> fe.Mesh:
     focus_y = y0 + geometry.height if geometry.refine_y == "top" else y0
     x = graded(x0, geometry.width, geometry.nx, gx, geometry.refine_x)
     y = graded(y0, geometry.height, geometry.ny, gy, focus_y if gy > 1 else None)
-    mesh_type = fe.MeshQuad1 if quads else fe.MeshTri1
-    return mesh_type.init_tensor(x, y).with_defaults()
+    return tensor_mesh(x, y, quads)
 
 
 def load_mesh(geometry: MeshFile) -> fe.Mesh:

@@ -8,7 +8,7 @@ mesh and in any units:
 - ``pressure_sign``     max (−λ_N)_+ / p_ref
 - ``complementarity``   max |λ_N (u_N − g)| / (p_ref u_ref)
 - ``equilibrium``       ‖Ku − f + NᵀCλ_N − Rᵀλ_T‖∞ / f_ref
-- ``obstacle_balance``  |Σ contact force − P| / P, likewise Q  (force control only)
+- ``obstacle_balance``  |Σ contact force − P| / max(P, Q, 1), likewise Q  (force control only)
 - ``friction_bound``    max (|λ_T| − s)_+ / p_ref     (friction only)
 - ``slip_direction``    max |λ_T |v|_ε + s v| / (ω p_ref u_ref) (friction only), v = R u the
                         weighted slip at the friction points and |v|_ε = sqrt(v² + ε²ω²)
@@ -26,7 +26,8 @@ u_ref and p_ref are the largest displacement (or obstacle motion) and pressure o
 the solution, but at least the displacement and pressure scales of the data — both 1
 in the scaled units of :mod:`convexcontact.fem.scaling` — so that a solution that
 should be zero (stick, no contact) is not judged against its own round-off. f_ref is
-the largest nodal force of the data or the solution.
+the largest nodal force of the data or the solution, at least that of a unit pressure on
+the largest contact weight.
 """
 
 from __future__ import annotations
@@ -88,7 +89,8 @@ def certify(
 
     u_ref = max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_advance), abs(fields.obstacle_shift), 1.0)
     p_ref = max(np.abs(lam_N).max(initial=0.0), 1.0)
-    f_ref = max(np.abs(f).max(initial=0.0), np.abs(elastic_force).max(initial=0.0), TINY)
+    # at least the nodal force of a unit (data-scale) pressure, for unloaded bodies
+    f_ref = max(np.abs(f).max(initial=0.0), np.abs(elastic_force).max(initial=0.0), contact.weights.max())
     if compliance is None:
         residuals = {
             "non_penetration": np.maximum(weighted_gap, 0.0).max(initial=0.0) / u_ref,
@@ -101,13 +103,13 @@ def certify(
     residuals["pressure_sign"] = np.maximum(-lam_N, 0.0).max(initial=0.0) / p_ref
     residuals["equilibrium"] = np.abs(elastic_force - f + contact_force).max(initial=0.0) / f_ref
     balance = []
+    force_ref = max(contact.obstacle_force, abs(contact.obstacle_tangential_force), 1.0)  # 1: the data's force scale
     if contact.obstacle_coupling is not None:
         resultant = contact.obstacle_coupling @ (C @ lam_N)
-        balance.append(abs(resultant - contact.obstacle_force) / max(contact.obstacle_force, TINY))
+        balance.append(abs(resultant - contact.obstacle_force) / force_ref)
     if contact.tangential_coupling is not None:
         resultant = friction.coupling @ fields.friction
-        scale = max(abs(contact.obstacle_tangential_force), contact.obstacle_force, TINY)
-        balance.append(abs(resultant - contact.obstacle_tangential_force) / scale)
+        balance.append(abs(resultant - contact.obstacle_tangential_force) / force_ref)
     if balance:
         residuals["obstacle_balance"] = max(balance)
     if friction is not None:

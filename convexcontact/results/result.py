@@ -12,7 +12,9 @@ from ..formulations.fields import ContactFields
 from .certificate import Certificate, normal_gap
 
 CLOSED_PRESSURE = 1e-6
-"""A node is closed when its pressure exceeds this fraction of the largest pressure."""
+"""A node is closed when its pressure exceeds this fraction of the largest pressure, and of the
+data's pressure scale (the applied load's magnitude; E without load), so that round-off
+pressures of an unloaded body do not count as contact."""
 
 
 SLIP = 1e-7
@@ -176,8 +178,7 @@ def contact_nodes(
     """Contact-node fields in user units; open where the pressure is negligible."""
     contact, scaling = fem.contact, fem.scaling
     pressure = fields.pressure * scaling.pressure
-    largest = pressure.max(initial=0.0)
-    closed = (pressure > CLOSED_PRESSURE * largest) if largest > 0 else np.zeros(contact.m, bool)
+    closed = pressure > CLOSED_PRESSURE * max(pressure.max(initial=0.0), scaling.pressure)
     u_N = contact.N @ fields.u + contact.normal_offset
     gap = u_N - normal_gap(contact, fields)
     forces = -(C @ fields.pressure)[:, None] * contact.normals

@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import skfem as fe
 
+from ..fem.mesh import tensor_mesh
 from .model import Body, Contact, Dirichlet, Material, Obstacle, Rectangle, Scene, Signorini, Traction
 
 HERTZ_FORCE = 0.0086307
@@ -64,7 +65,7 @@ def punch_mesh(
     x_out = fine + growing(width / 2 - fine, 24)
     x = np.concatenate([-x_out[::-1], x_fine, x_out])
     y = -np.concatenate([np.arange(rows + 1) * h, rows * h + growing(depth - rows * h, 30)])[::-1]
-    return (fe.MeshQuad1 if quads else fe.MeshTri1).init_tensor(x, y).with_defaults()
+    return tensor_mesh(x, y, quads)
 
 
 def frictional_punch(h: float = 0.005, depth: float = 0.02, friction: float = 0.6, nu: float = 0.3,

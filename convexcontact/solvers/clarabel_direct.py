@@ -9,6 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..conic import ConicProgram, ConicSolution
+from .polish import polish
 
 _CONES = {
     "zero": clarabel.ZeroConeT,
@@ -52,13 +53,18 @@ def settings(tol: float = 1e-10, max_iter: int = 200, verbose: bool = False, **n
 class Session:
     """A Clarabel solver set up once; :meth:`update` changes q and b, keeping the setup.
 
+    ``polishing`` (default on) refines the answer of a program with linear cones on its
+    active set (:mod:`.polish`), as OSQP does.
+
     Clarabel has no warm start; an update saves the setup (symbolic work), not
     iterations. When presolve removed rows the data cannot be updated and the
     session sets the solver up again.
     """
 
-    def __init__(self, program: ConicProgram, tol: float = 1e-10, max_iter: int = 200, verbose: bool = False, **native):
+    def __init__(self, program: ConicProgram, tol: float = 1e-10, max_iter: int = 200, verbose: bool = False,
+                 polishing: bool = True, **native):
         self.program = program
+        self._polishing = polishing
         self._settings = settings(tol, max_iter, verbose, **native)
         self._solver = self._setup(program)
 
@@ -82,7 +88,7 @@ class Session:
     def solve(self) -> ConicSolution:
         result = self._solver.solve()
         word = str(result.status).split(".")[-1]
-        return ConicSolution(
+        solution = ConicSolution(
             x=np.asarray(result.x),
             z=np.asarray(result.z),
             s=np.asarray(result.s),
@@ -92,6 +98,7 @@ class Session:
             solve_time=float(result.solve_time),
             solver="clarabel",
         )
+        return polish(self.program, solution) if self._polishing else solution
 
 
 def solve(program: ConicProgram, **options) -> ConicSolution:

@@ -16,6 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..conic import ConicProgram, ConicSolution
+from .polish import polish
 
 _STATUS = {
     cp.OPTIMAL: "solved",
@@ -106,7 +107,7 @@ def _dual(constraint, kind: str, rows: slice) -> np.ndarray:
 def solve(
     program: ConicProgram,
     solver: str | None = None,
-    tol: float | None = None,
+    tol: float = 1e-10,
     verbose: bool = False,
     cvxpy_model: CvxpyModel | None = None,
     **native,
@@ -114,12 +115,13 @@ def solve(
     """Solve ``program`` (or a user's extension of its model) through cvxpy.
 
     ``tol`` is passed to Clarabel (cvxpy's default solver here) as its gap and
-    feasibility tolerances; other solvers take their own options in ``native``.
+    feasibility tolerances, as on the direct path; other solvers take their own options
+    in ``native``.
     """
     m = cvxpy_model if cvxpy_model is not None else model(program)
     options = dict(native)
     name = (solver or cp.CLARABEL).upper()
-    if tol is not None and name == cp.CLARABEL:
+    if name == cp.CLARABEL:
         options.update(tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, tol_ktratio=tol)
     start = time.perf_counter()
     m.problem.solve(solver=name, verbose=verbose, **options)
@@ -132,7 +134,7 @@ def solve(
         x = np.full(program.n_variables, np.nan)
         z = np.full(program.n_constraints, np.nan)
     stats = m.problem.solver_stats
-    return ConicSolution(
+    solution = ConicSolution(
         x=x,
         z=z,
         s=program.b - program.A @ x,
@@ -142,6 +144,7 @@ def solve(
         solve_time=elapsed,
         solver=f"cvxpy:{stats.solver_name if stats is not None else name}",
     )
+    return solution if cvxpy_model is not None else polish(program, solution)  # a user's model is not the program
 
 
 class Session:

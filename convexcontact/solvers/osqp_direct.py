@@ -13,6 +13,7 @@ import osqp
 import scipy.sparse as sp
 
 from ..conic import ConicProgram, ConicSolution
+from .polish import polish
 
 _STATUS = {
     "solved": "solved",
@@ -97,7 +98,7 @@ class Session:
         result = self._solver.solve()
         word = str(result.info.status)
         x = np.asarray(result.x, dtype=float)
-        return ConicSolution(
+        solution = ConicSolution(
             x=x,
             z=_duals(np.asarray(result.y, dtype=float), self._plan),
             s=self.program.b - self.program.A @ x,
@@ -108,6 +109,9 @@ class Session:
             solver="osqp",
             info={"polished": int(result.info.status_polish) == 1, "setup_time": float(result.info.setup_time)},
         )
+        # OSQP's own polish stops at its first active-set guess (and may skip rows it deems inactive);
+        # ours iterates on the guess, and returns the same answer when OSQP's was exact already
+        return polish(self.program, solution)
 
 
 def solve(program: ConicProgram, **options) -> ConicSolution:
