@@ -79,18 +79,18 @@ def main(argv=None) -> int:
         command.add_argument("--out", type=Path, default=Path("out") if name == "demo" else None,
                              help="folder for summary.json, solution.vtu, PNG plots")
         command.add_argument("--json", type=Path, default=None, help="also write the JSON summary here")
-    study = commands.add_parser("study", help="work-precision SCENE … | sweep penalty|regularization … (see --help)",
+    study = commands.add_parser("study", help="work-precision SCENE … | sweep penalty|regularization … | stability …",
                                 add_help=False)
-    study.add_argument("kind", choices=["work-precision", "sweep"])
+    study.add_argument("kind", choices=["work-precision", "sweep", "stability"])
     study.add_argument("arguments", nargs=argparse.REMAINDER)
     compare = commands.add_parser("compare", help="compare two summary.json files (contact-node fields)")
     compare.add_argument("reference", type=Path)
     compare.add_argument("other", type=Path)
     args = parser.parse_args(argv)
     if args.command == "study":
-        from .studies import sweeps, work_precision
+        from .studies import stability, sweeps, work_precision
 
-        (work_precision if args.kind == "work-precision" else sweeps).main(args.arguments)
+        {"work-precision": work_precision, "sweep": sweeps, "stability": stability}[args.kind].main(args.arguments)
         return 0
     if args.command == "compare":
         from .studies.compare import compare_files, format_report

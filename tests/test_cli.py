@@ -69,6 +69,10 @@ def test_compare_two_summaries(tmp_path, capsys):
 def test_study_commands(tmp_path, capsys):
     assert main(["study", "sweep", "penalty", "--nx", "8", "--out", str(tmp_path / "sweep.png")]) == 0
     assert "fitted slope" in capsys.readouterr().out and (tmp_path / "sweep.png").exists()
-    assert main(["study", "work-precision", "hertz", "--size", "12", "--tol", "1e-8", "--solvers", "osqp",
+    assert main(["study", "work-precision", "hertz", "--size", "8", "12", "--tol", "1e-8", "--solvers", "osqp",
                  "--formulations", "primal", "--out", str(tmp_path / "wp")]) == 0
-    assert list((tmp_path / "wp").glob("*.csv")) and list((tmp_path / "wp").glob("*.png"))
+    rows = (tmp_path / "wp" / "hertz.csv").read_text().splitlines()
+    assert len({line.split(",")[1] for line in rows[1:]}) == 2  # two meshes (ndof column)
+    assert list((tmp_path / "wp").glob("*.png"))
+    assert main(["study", "stability", "--quick", "--cases", "zero load", "--out", str(tmp_path / "s.md")]) == 0
+    assert "zero load" in (tmp_path / "s.md").read_text()

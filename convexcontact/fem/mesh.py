@@ -37,7 +37,7 @@ def graded(start: float, length: float, cells: int, ratio: float, focus: float |
     return np.concatenate([x_left, x_right])
 
 
-def tensor_mesh(x: np.ndarray, y: np.ndarray, quads: bool) -> fe.Mesh:
+def tensor_mesh(x: np.ndarray, y: np.ndarray, quads: bool = False) -> fe.Mesh:
     """Tensor-product mesh on the nodes x × y with boundaries left, right, bottom, top.
 
     The sides are found by their exact coordinates: scikit-fem's ``with_defaults`` uses a
@@ -45,11 +45,12 @@ def tensor_mesh(x: np.ndarray, y: np.ndarray, quads: bool) -> fe.Mesh:
     elements of aspect ratio ≳ 50 as "top" or "bottom".
     """
     mesh = (fe.MeshQuad1 if quads else fe.MeshTri1).init_tensor(x, y)
+    tol = 1e-9 * max(np.ptp(x), np.ptp(y))  # of the body size, not of the smallest element
     return mesh.with_boundaries({
-        "left": lambda p: p[0] == x[0],
-        "right": lambda p: p[0] == x[-1],
-        "bottom": lambda p: p[1] == y[0],
-        "top": lambda p: p[1] == y[-1],
+        "left": lambda p: np.abs(p[0] - x.min()) < tol,
+        "right": lambda p: np.abs(p[0] - x.max()) < tol,
+        "bottom": lambda p: np.abs(p[1] - y.min()) < tol,
+        "top": lambda p: np.abs(p[1] - y.max()) < tol,
     })
 
 

@@ -24,6 +24,7 @@ import math
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse.linalg as spla
@@ -32,7 +33,7 @@ from scipy.optimize import brentq
 
 import convexcontact as cc
 from convexcontact.analytic import hertz_plane_strain, hild_one_triangle_solutions
-from convexcontact.fem.mesh import graded
+from convexcontact.fem.mesh import graded, tensor_mesh
 from convexcontact.scene.library import HERTZ_FORCE, frictional_punch, punch_mesh
 from convexcontact.scene.model import Coulomb, SceneError
 
@@ -200,22 +201,6 @@ def uniform_compression(depth: float, layers: Iterable[tuple[float, float, float
         return nodewise(nodal_normal_force(result), exact_nodal_forces(result, lambda x: np.full(x.shape, p)))
 
     return Check(error, EXACT, f"uniform pressure {p:.3g} (uniaxial stress, exact on any mesh)")
-
-
-def tensor_mesh(x: np.ndarray, y: np.ndarray, quads: bool = False) -> fe.Mesh:
-    """Tensor mesh with boundaries left, right, bottom, top found by exact coordinates.
-
-    Not ``with_defaults()``: scikit-fem tags with a tolerance of 1/100 of the smallest element
-    diameter, so every facet of a row of elements of aspect ratio ≳ 50 lands on the boundary.
-    """
-    mesh = (fe.MeshQuad1 if quads else fe.MeshTri1).init_tensor(x, y)
-    tol = 1e-9 * max(np.ptp(x), np.ptp(y))
-    return mesh.with_boundaries({
-        "left": lambda p: np.abs(p[0] - x.min()) < tol,
-        "right": lambda p: np.abs(p[0] - x.max()) < tol,
-        "bottom": lambda p: np.abs(p[1] - y.min()) < tol,
-        "top": lambda p: np.abs(p[1] - y.max()) < tol,
-    })
 
 
 def ceiling(nx: int, gap: float, body_force=(0.0, 0.0), element: str = "P1") -> cc.Scene:
@@ -670,3 +655,20 @@ def table(rows: list[dict]) -> str:
                  _number(row["time"], ".2f"), row["verdict"], note.replace("|", "/"))
         lines.append("| " + " | ".join(str(c) for c in cells) + " |")
     return "\n".join(lines)
+
+
+def main(argv=None) -> list[dict]:
+    """``convexcontact study stability [--quick] [--cases ...] [--out FILE]``: the suite's table."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="convexcontact study stability", description=main.__doc__)
+    parser.add_argument("--quick", action="store_true", help="coarse meshes (about 10 s)")
+    parser.add_argument("--cases", nargs="+", default=None, help="case names as in docs/stability.md")
+    parser.add_argument("--out", default=None, help="also write the markdown table here")
+    args = parser.parse_args(argv)
+    rows = run(cases=args.cases, quick=args.quick)
+    text = table(rows)
+    print(text)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
+    return rows

@@ -357,16 +357,21 @@ def main(argv=None) -> list[dict]:
 
     parser = argparse.ArgumentParser(description="Work-precision study: error against wall time.")
     parser.add_argument("scene", choices=SCENES)
-    parser.add_argument("--size", type=float, default=None, help="hertz: nx (40); punch: h (0.02)")
+    parser.add_argument("--size", type=float, nargs="+", default=[None],
+                        help="mesh sizes, one study each against one reference — hertz: nx (40); punch: h (0.02)")
     parser.add_argument("--reference-size", type=float, default=None, help="finer mesh for the overkill reference")
     parser.add_argument("--tol", type=float, nargs="+", default=[1e-4, 1e-6, 1e-8, 1e-10])
     parser.add_argument("--solvers", nargs="+", default=list(SOLVERS))
     parser.add_argument("--formulations", nargs="+", default=list(FORMULATIONS))
     parser.add_argument("--out", default="out/work_precision", help="writes NAME.csv, NAME.png, NAME.txt here")
     args = parser.parse_args(argv)
-    scene = library_scene(args.scene, args.size)
-    meshes = None if args.reference_size is None else [library_scene(args.scene, args.reference_size)]
-    rows = run(scene, meshes, args.tol, print, formulations=args.formulations, solvers=args.solvers)
+    scenes = [library_scene(args.scene, size) for size in args.size]
+    finest = library_scene(args.scene, args.reference_size) if args.reference_size is not None else scenes[-1]
+    reference, label = (None, CLOSED_FORM) if has_closed_form(finest) else overkill(finest, finest.contact.law)
+    rows = []
+    for scene in scenes:  # the mesh axis: every combination on every mesh, against the one reference
+        found = run(scene, None, args.tol, print, reference, formulations=args.formulations, solvers=args.solvers)
+        rows += [{**row, "reference": label} for row in found]
     out = Path(args.out)
     write_csv(rows, out / f"{args.scene}.csv")
     plot(rows, out / f"{args.scene}.png")
