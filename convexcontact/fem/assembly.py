@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -36,11 +37,12 @@ class FEModel:
     contact: ContactTrace
     warnings: tuple[str, ...] = ()
 
-    @property
+    @cached_property
     def K(self) -> sp.csr_matrix:
+        """Stiffness on the free DOFs (sliced once: every solve and certificate uses it)."""
         return self.K_full[self.free][:, self.free]
 
-    @property
+    @cached_property
     def f(self) -> np.ndarray:
         """Load on the free DOFs, with the Dirichlet data moved to the right-hand side."""
         return (self.f_full - self.K_full @ self.prescribed)[self.free]
