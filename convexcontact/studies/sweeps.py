@@ -107,10 +107,7 @@ def plot_sweep(sweep: Sweep | Sequence[dict], path, title: str | None = None, ex
     """
     if not isinstance(sweep, Sweep):
         sweep = Sweep("parameter", "error", expected_slope, list(sweep))
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..results.plots import plt, save_figure
 
     solved = [r for r in sweep.rows if r["error"] is not None and r["error"] > 0]
     fig, ax = plt.subplots(figsize=(6.0, 4.2))
@@ -125,12 +122,7 @@ def plot_sweep(sweep: Sweep | Sequence[dict], path, title: str | None = None, ex
     ax.set_title(title or f"{sweep.parameter} sweep")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def table(sweep: Sweep) -> str:

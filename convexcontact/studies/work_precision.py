@@ -302,10 +302,7 @@ COLORS = {"clarabel": "tab:blue", "osqp": "tab:orange", "cvxpy": "tab:green"}
 
 def plot(rows: Sequence[dict], path, title: str | None = None) -> Path:
     """Log-log error against wall time: marker = method, colour = solver, hollow = dual; the Pareto front as a line."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..results.plots import plt, save_figure
 
     data = measured(rows)
     fig, ax = plt.subplots(figsize=(7.5, 5.0))
@@ -327,12 +324,7 @@ def plot(rows: Sequence[dict], path, title: str | None = None) -> Path:
     ax.set_title(title or (f"work-precision: {data[0]['scene']}, {data[0]['ndof']} dofs" if data else ""))
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 # --- command line -----------------------------------------------------------------------------
