@@ -634,11 +634,6 @@ def failures(rows: list[dict]) -> list[dict]:
     return [row for row in rows if row["verdict"].startswith("FAIL")]
 
 
-def wrong_answers(rows: list[dict]) -> list[dict]:
-    """Rows where a wrong answer was reported as solved."""
-    return [row for row in rows if row["verdict"] == "FAIL: wrong answer reported as solved"]
-
-
 def _number(value, spec: str) -> str:
     return "–" if value is None or (isinstance(value, float) and math.isnan(value)) else format(value, spec)
 
