@@ -1,0 +1,140 @@
+"""MKL PARDISO for SPD matrices through ctypes on the ``mkl_rt`` that pypardiso loads.
+
+pypardiso's ``PyPardisoSolver`` does not expose PARDISO's Schur complement (iparm[35]),
+and it copies the matrix and rebuilds 1-based indices at every solve; so only its
+library discovery is used. Importing this module does not load MKL: :func:`_library` does.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import os
+import weakref
+
+import numpy as np
+import scipy.sparse as sp
+
+BLOCK = 50
+"""Right-hand sides per PARDISO call: MKL adds its own n × nrhs workspace (docs/factorizations.md)."""
+
+_ERRORS = {
+    -1: "input inconsistent", -2: "not enough memory", -3: "reordering problem",
+    -4: "zero pivot: the matrix is not positive definite", -5: "unclassified internal error",
+    -6: "reordering failed", -7: "diagonal matrix is singular", -8: "32-bit integer overflow",
+}
+
+_i32, _ptr = ctypes.c_int32, ctypes.POINTER
+
+
+class PardisoError(RuntimeError):
+    """A PARDISO error code; ``singular`` for a zero pivot (the matrix is not positive definite)."""
+
+    def __init__(self, code: int, phase: int):
+        self.code = code
+        self.singular = code in (-4, -7)
+        super().__init__(f"MKL PARDISO error {code} ({_ERRORS.get(code, 'unknown')}) in phase {phase}")
+
+
+@functools.cache
+def _library() -> ctypes.CDLL:
+    # MKL's OpenMP threads otherwise spin for 200 ms after every PARDISO call and starve numpy's
+    # OpenBLAS threads: a 2028² Cholesky right after PARDISO took 0.7–2.8 s instead of 0.06 s
+    # on 2 cores. PARDISO itself did not get slower. An explicit user setting wins.
+    os.environ.setdefault("KMP_BLOCKTIME", "0")
+    from pypardiso import PyPardisoSolver  # finds mkl_rt in the environment (venv, conda, user site)
+
+    lib = PyPardisoSolver().libmkl
+    lib.pardiso.restype = None
+    lib.pardisoinit.restype = None
+    return lib
+
+
+def _call(handle: tuple, phase: int, b: np.ndarray, x: np.ndarray, nrhs: int) -> int:
+    pt, iparm, n, data, ia, ja, perm = handle
+    error = _i32(0)
+    _library().pardiso(
+        pt.ctypes.data_as(_ptr(ctypes.c_int64)), ctypes.byref(_i32(1)), ctypes.byref(_i32(1)),
+        ctypes.byref(_i32(2)), ctypes.byref(_i32(phase)), ctypes.byref(_i32(n)),
+        data.ctypes.data_as(_ptr(ctypes.c_double)), ia.ctypes.data_as(_ptr(_i32)), ja.ctypes.data_as(_ptr(_i32)),
+        perm.ctypes.data_as(_ptr(_i32)), ctypes.byref(_i32(nrhs)), iparm.ctypes.data_as(_ptr(_i32)),
+        ctypes.byref(_i32(0)), b.ctypes.data_as(_ptr(ctypes.c_double)), x.ctypes.data_as(_ptr(ctypes.c_double)),
+        ctypes.byref(error),
+    )
+    return error.value
+
+
+def _release(handle: tuple) -> None:
+    empty = np.zeros(1)
+    _call(handle, -1, empty, empty, 1)
+
+
+class Pardiso:
+    """PARDISO factors (mtype 2: real SPD, upper triangle, 0-based) of K.
+
+    Parameters
+    ----------
+    K : sparse symmetric positive definite matrix.
+    schur : indices C. If given, PARDISO orders C last, returns the dense Schur
+        complement of K onto C as :attr:`S` and keeps the interior factors
+        (iparm[35] = 2) for the forward and backward phases 331 and 333.
+
+    Raises
+    ------
+    PardisoError
+        ``singular`` for a zero pivot.
+    """
+
+    def __init__(self, K: sp.spmatrix, schur: np.ndarray | None = None):
+        U = sp.triu(K, format="csr")
+        U.sort_indices()
+        n = K.shape[0]
+        pt, iparm, perm = np.zeros(64, np.int64), np.zeros(64, np.int32), np.zeros(n, np.int32)
+        _library().pardisoinit(pt.ctypes.data_as(_ptr(ctypes.c_int64)), ctypes.byref(_i32(2)),
+                               iparm.ctypes.data_as(_ptr(_i32)))
+        iparm[7] = 0  # pardisoinit asks for 2 refinement steps per solve: 3× the cost, 100× for partial solves
+        iparm[34] = 1  # 0-based ia/ja
+        if schur is not None:
+            perm[schur] = 1
+            iparm[35] = 2
+        self.n = n
+        # PARDISO keeps pointers to these arrays, and the finalizer frees its memory (phase -1).
+        self._handle = (pt, iparm, n, np.ascontiguousarray(U.data, dtype=float), U.indptr.astype(np.int32),
+                        U.indices.astype(np.int32), perm)
+        weakref.finalize(self, _release, self._handle)
+        S = np.zeros((len(schur), len(schur))) if schur is not None else np.zeros(1)
+        self._run(12, np.zeros(1), S, 1)
+        self.S = S if schur is not None else None  # row-major, symmetric up to rounding
+
+    def _run(self, phase: int, b: np.ndarray, x: np.ndarray, nrhs: int) -> None:
+        code = _call(self._handle, phase, b, x, nrhs)
+        if code:
+            raise PardisoError(code, phase)
+
+    def _phase(self, phase: int, b: np.ndarray) -> np.ndarray:
+        """Run a solve phase on b of shape (n,) or (n, k), :data:`BLOCK` columns at a time."""
+        b = np.asarray(b, dtype=float)
+        if b.ndim == 1:
+            x = np.zeros(self.n)
+            self._run(phase, np.ascontiguousarray(b), x, 1)
+            return x
+        x = np.empty(b.shape, order="F")
+        for start in range(0, b.shape[1], BLOCK):
+            block = np.asfortranarray(b[:, start:start + BLOCK])
+            out = np.zeros(block.shape, order="F")
+            self._run(phase, block, out, block.shape[1])
+            x[:, start:start + BLOCK] = out
+        return x
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """K⁻¹ b (phase 33)."""
+        return self._phase(33, b)
+
+    def forward(self, b: np.ndarray) -> np.ndarray:
+        """With ``schur``, phase 331: y_I = L_II⁻¹ b_I and y_C = b_C − K_CI K_II⁻¹ b_I (the condensed load)."""
+        return self._phase(331, b)
+
+    def backward(self, y: np.ndarray) -> np.ndarray:
+        """With ``schur``, phase 333: x_C = y_C and x_I = L_IIᵀ⁻¹(y_I − L_CIᵀ y_C); from y = forward(f)
+        with u_C put on C, x_I = K_II⁻¹(f_I − K_IC u_C)."""
+        return self._phase(333, y)
