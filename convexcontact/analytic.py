@@ -1,6 +1,6 @@
 """Closed-form reference solutions the tests check the toolkit against.
 
-- Hertz contact in plane strain (DESIGN.md, verification case 2);
+- Hertz contact in plane strain (DESIGN.md, verification case 2) and of a sphere in 3-D;
 - Hild's one-triangle Coulomb example (seed 001, section 4; verification case 3).
 """
 
@@ -26,8 +26,20 @@ def hertz_plane_strain(force: float, radius: float, E: float, nu: float) -> tupl
     return float(a), float(2 * force / (np.pi * a))
 
 
+def hertz_sphere(force: float, radius: float, E: float, nu: float) -> tuple[float, float]:
+    """Contact radius ``a`` and peak pressure ``p0`` of 3-D Hertz contact.
+
+    A rigid sphere (or paraboloid) of radius R pressed with force P on an elastic
+    half-space: E* = E/(1 − ν²), a = (3PR/(4E*))^(1/3), p0 = 3P/(2πa²); the pressure
+    is p0 sqrt(1 − r²/a²) (:func:`hertz_pressure` of the radial distance r).
+    """
+    effective_modulus = E / (1 - nu**2)
+    a = (3 * force * radius / (4 * effective_modulus)) ** (1 / 3)
+    return float(a), float(3 * force / (2 * np.pi * a**2))
+
+
 def hertz_pressure(x: np.ndarray, a: float, p0: float) -> np.ndarray:
-    """Hertz pressure p0 sqrt(1 − x²/a²) for |x| < a, 0 outside."""
+    """Hertz pressure p0 sqrt(1 − x²/a²) for |x| < a, 0 outside (x: 2-D coordinate or 3-D radius)."""
     x = np.asarray(x, dtype=float)
     return p0 * np.sqrt(np.clip(1 - (x / a) ** 2, 0.0, None))
 

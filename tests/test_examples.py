@@ -49,3 +49,11 @@ def test_cattaneo_mindlin_stick_zone(tmp_path):
     assert result.certificate.passes(1e-6)
     assert result.tangential_force == pytest.approx(0.5 * 0.6 * result.normal_force, rel=1e-6)
     assert stick_ratio == pytest.approx(np.sqrt(0.5), rel=0.05)
+
+
+def test_hertz_sphere(tmp_path):
+    """3-D Hertz, 12³ graded cells: a and p₀ within 5%, the radial plot written, no 2-D mesh picture."""
+    _, rows = example("hertz_sphere").main(cells=(12,), out=tmp_path)
+    assert all(abs(error) < 0.05 for error in rows[0][2:6])
+    assert (tmp_path / "contact.png").exists() and (tmp_path / "solution.vtu").exists()
+    assert not (tmp_path / "deformed.png").exists()

@@ -209,7 +209,7 @@ BAD = [
     (edit("obstacle.radius", float("inf")), "obstacle.radius"),
     (edit("body.width", float("nan")), "body.width"),
     (edit("dirichlet.ux", float("nan")), "dirichlet[bottom].ux"),
-    (edit("obstacle.shape", "sphere"), "obstacle.shape"),
+    (edit("obstacle.shape", "cone"), "obstacle.shape"),
     (edit("body.element", "P3"), "body.element"),
     (edit("contact.non_penetration", "strong"), "contact.non_penetration"),
     # unknown law

@@ -1,4 +1,4 @@
-"""The contact trace: nodes of Γ_C, normals, tangents, weights, operators N and T, gap."""
+"""The contact trace: nodes of Γ_C, normals, tangents, weights, operators N and T, gap (2-D and 3-D)."""
 
 from __future__ import annotations
 
@@ -16,23 +16,27 @@ from .scaling import Scaling
 
 @dataclass
 class ContactTrace:
-    """Contact nodes i = 1..m of Γ_C in scaled units.
+    """Contact nodes i = 1..m of Γ_C in scaled units, in d = 2 or 3 dimensions.
 
-    ``N`` and ``T`` (m × free DOFs) give u_N = N u + normal_offset and
-    u_T = T u + tangent_offset, the offsets coming from Dirichlet data. Tangents
+    ``N`` (m × free DOFs) and ``T`` (m(d−1) × free DOFs) give u_N = N u + normal_offset
+    and u_T = T u + tangent_offset, the offsets coming from Dirichlet data. T stacks
+    its rows component-major: all nodes along the first tangents ``tangents``, then
+    (3-D) all along the second tangents ``bitangents`` = n × t. In 2-D the tangents
     point towards increasing ``coordinate`` (the position along Γ_C projected on
-    its mean tangent). ``weights`` are w_i = ∫ψ_i ds, ``mass`` the consistent
-    boundary mass M of the trace space. ``obstacle_coupling`` (force control only)
-    is how much a unit advance of the obstacle closes the gap at each node;
-    ``tangential_coupling`` (tangential force only) is the tangential motion of each
-    node's obstacle point for a unit tangential translation of the obstacle.
+    its mean tangent); in 3-D the first tangent is the global axis most orthogonal
+    to the mean normal, projected on each node's tangent plane, and ``coordinate``
+    is the position along the mean first tangent. ``weights`` are w_i = ∫ψ_i ds,
+    ``mass`` the consistent boundary mass M of the trace space. ``obstacle_coupling``
+    (force control only) is how much a unit advance of the obstacle closes the gap at
+    each node; ``tangential_coupling`` (tangential force only, 2-D) is the tangential
+    motion of each node's obstacle point for a unit tangential translation of the obstacle.
     """
 
     facets: np.ndarray
-    dofs: np.ndarray  # (m, 2) full DOF indices (x, y components)
-    coords: np.ndarray  # (m, 2)
-    normals: np.ndarray  # (m, 2)
-    tangents: np.ndarray  # (m, 2)
+    dofs: np.ndarray  # (m, d) full DOF indices (x, y[, z] components)
+    coords: np.ndarray  # (m, d)
+    normals: np.ndarray  # (m, d)
+    tangents: np.ndarray  # (m, d)
     coordinate: np.ndarray  # (m,)
     weights: np.ndarray
     mass: sp.csr_matrix
@@ -45,16 +49,64 @@ class ContactTrace:
     obstacle_force: float
     tangential_coupling: np.ndarray | None = None
     obstacle_tangential_force: float = 0.0
+    bitangents: np.ndarray | None = None  # (m, 3) in 3-D
 
     @property
     def m(self) -> int:
         return self.coords.shape[0]
 
+    @property
+    def dim(self) -> int:
+        return self.coords.shape[1]
+
+    @property
+    def frame(self) -> list[np.ndarray]:
+        """The d − 1 tangent fields, in the order of T's row blocks."""
+        return [self.tangents] if self.bitangents is None else [self.tangents, self.bitangents]
+
 
 def _rows(vectors: np.ndarray, dofs: np.ndarray, ndofs: int) -> sp.csr_matrix:
     """m × ndofs matrix whose row i takes the dot product of vectors[i] with node i's displacement."""
-    m = dofs.shape[0]
-    return sp.csr_matrix((vectors.ravel(), (np.repeat(np.arange(m), 2), dofs.ravel())), shape=(m, ndofs))
+    m, dim = dofs.shape
+    return sp.csr_matrix((vectors.ravel(), (np.repeat(np.arange(m), dim), dofs.ravel())), shape=(m, ndofs))
+
+
+def tangent_frame(normals: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Unit tangents (and in 3-D bitangents n × t) at each node, and the mean first tangent.
+
+    2-D: t = (n_y, −n_x), oriented so that the mean tangent's largest component is
+    positive. 3-D: the global axis most orthogonal to the mean normal, projected on each
+    node's tangent plane (x before y before z on ties) — one smooth choice for a plane or
+    gently curved Γ_C, so the friction cone's components mean the same direction at
+    neighbouring nodes.
+    """
+    mean_normal = weights @ normals
+    mean_normal /= np.linalg.norm(mean_normal)
+    if normals.shape[1] == 2:
+        tangents = np.column_stack([normals[:, 1], -normals[:, 0]])
+        mean = weights @ tangents
+        sign = 1.0 if mean[np.argmax(np.abs(mean))] >= 0 else -1.0
+        return sign * tangents, None, sign * mean / np.linalg.norm(mean)
+    alignment = np.abs(mean_normal)  # ties (a plane Γ_C normal to an axis) go to the first axis: x before y
+    reference = np.eye(3)[np.flatnonzero(alignment <= alignment.min() + 1e-9)[0]]
+    tangents = reference - (normals @ reference)[:, None] * normals
+    norm = np.linalg.norm(tangents, axis=1, keepdims=True)
+    if norm.min() < 1e-3:
+        raise SceneError("contact.boundary", "Γ_C turns by about 90° (its normal meets every tangent axis)",
+                         "split it into contact boundaries that are each roughly flat or gently curved")
+    tangents /= norm
+    mean = reference - (mean_normal @ reference) * mean_normal
+    return tangents, np.cross(normals, tangents), mean / np.linalg.norm(mean)
+
+
+def axis_distance(obstacle, coords: np.ndarray, coordinate: np.ndarray, mean_normal: np.ndarray) -> np.ndarray:
+    """r of the shaped obstacles: the coordinate along Γ_C minus the centre in 2-D, the distance from
+    the punch axis (through ``obstacle.center`` along the mean normal) in 3-D (user units)."""
+    if coords.shape[1] == 2:
+        obstacle.axis(2)
+        return coordinate - obstacle.center
+    offset = coords - obstacle.axis(3)
+    return np.linalg.norm(offset - np.outer(offset @ mean_normal, mean_normal), axis=1)
 
 
 def contact_trace(
@@ -62,8 +114,9 @@ def contact_trace(
 ) -> ContactTrace:
     """Build the trace of Γ_C from the named boundary and the obstacle."""
     facets = check_boundary(mesh, contact.boundary, "contact.boundary")
+    dim = mesh.dim()
     view = basis.get_dofs(facets)
-    dofs = np.column_stack([view.all("u^1"), view.all("u^2")])
+    dofs = np.column_stack([view.all(f"u^{i + 1}") for i in range(dim)])
     if dofs.shape[0] == 0:
         raise SceneError("contact.boundary", f"{contact.boundary!r} carries no nodes")
     coords = basis.doflocs[:, dofs[:, 0]].T
@@ -76,24 +129,25 @@ def contact_trace(
     mass = fe.asm(fe.BilinearForm(lambda u, v, w: u[0] * v[0]), facet_basis).tocsr()[dofs[:, 0]][:, dofs[:, 0]]
     weights = np.asarray(mass.sum(axis=1)).ravel()  # partition of unity: Σ_j ∫ψ_iψ_j = ∫ψ_i
 
-    tangents = np.column_stack([normals[:, 1], -normals[:, 0]])
-    mean_tangent = weights @ tangents
-    mean_tangent /= np.linalg.norm(mean_tangent)
-    if mean_tangent[np.argmax(np.abs(mean_tangent))] < 0:
-        tangents, mean_tangent = -tangents, -mean_tangent
+    tangents, bitangents, mean_tangent = tangent_frame(normals, weights)
     coordinate = coords @ mean_tangent
-
+    frame = [tangents] if bitangents is None else [tangents, bitangents]
     N_full = _rows(normals, dofs, basis.N)
-    T_full = _rows(tangents, dofs, basis.N)
+    T_full = sp.vstack([_rows(t, dofs, basis.N) for t in frame]).tocsr()
 
     obstacle = contact.obstacle
+    mean_normal = (weights @ normals) / np.linalg.norm(weights @ normals)
     user_coords = coords * scaling.length
-    gap = obstacle.shape_gap(user_coords[:, 0], user_coords[:, 1], coordinate * scaling.length)
+    r = axis_distance(obstacle, user_coords, coordinate * scaling.length, mean_normal)
+    gap = obstacle.shape_gap(user_coords, r)
     gap = (gap - (obstacle.depth or 0.0)) / scaling.displacement
-    mean_normal = weights @ normals
-    mean_normal /= np.linalg.norm(mean_normal)
     coupling = normals @ mean_normal if obstacle.force_controlled else None
-    tangential = tangents @ mean_tangent if obstacle.tangential_force is not None else None
+    tangential = None
+    if obstacle.tangential_force is not None:
+        if dim == 3:
+            raise SceneError("obstacle.tangential_force", "a tangential obstacle force is 2-D only",
+                             "drop it (a 3-D tangential force needs a 2-vector of obstacle shifts, not implemented)")
+        tangential = tangents @ mean_tangent
 
     return ContactTrace(
         facets=facets,
@@ -113,4 +167,5 @@ def contact_trace(
         obstacle_force=(obstacle.force or 0.0) / scaling.force,
         tangential_coupling=tangential,
         obstacle_tangential_force=(obstacle.tangential_force or 0.0) / scaling.force,
+        bitangents=bitangents,
     )

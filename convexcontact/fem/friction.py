@@ -6,8 +6,11 @@
   interpolates nodal values to the points (u_T at a point is linear in nodal values,
   so the quadrature is exact for the discrete field).
 
-The multiplier λ_T,k of row k is the friction traction on the body along the
-tangent; |λ_T,k| ≤ s_k.
+In 3-D the slip at a point has two components (along the two tangents of
+:class:`~convexcontact.fem.contact.ContactTrace`); R stacks its rows component-major
+(all points along t1, then all along t2), as T does, so that 2-D is the case d − 1 = 1.
+The multiplier λ_T,k (d − 1 components) is the friction traction on the body at point
+k; ‖λ_T,k‖ ≤ s_k — the exact isotropic cone.
 """
 
 from __future__ import annotations
@@ -25,8 +28,9 @@ from .contact import ContactTrace
 class FrictionPoints:
     """Rows of the friction term, in scaled units.
 
-    ``R`` (points × free DOFs) and ``offset`` give the weighted slip R u + offset;
-    ``weights`` ω_k are the lengths the points stand for; ``interpolation`` G
+    ``R`` (points·(d−1) × free DOFs, component-major) and ``offset`` give the weighted
+    slip R u + offset; ``dim`` = d − 1 is the number of tangential components;
+    ``weights`` ω_k are the lengths (areas) the points stand for; ``interpolation`` G
     (points × contact nodes) maps nodal values (pressures, coefficients) to the
     points; ``coords`` locate the points; ``coupling`` is R applied to a unit
     tangential translation of the obstacle (None without a tangential force).
@@ -38,29 +42,37 @@ class FrictionPoints:
     interpolation: sp.csr_matrix
     coords: np.ndarray
     coupling: np.ndarray | None
+    dim: int = 1
 
     @property
     def count(self) -> int:
         return self.weights.size
+
+    def components(self, values: np.ndarray) -> np.ndarray:
+        """A component-major stacked vector (points·(d−1)) as a (points, d−1) array."""
+        return values.reshape(self.dim, -1).T
 
     def slip(self, u: np.ndarray) -> np.ndarray:
         """Weighted slip R u + offset at the points (divide by ``weights`` for a length)."""
         return self.R @ u + self.offset
 
     def nodal_traction(self, contact: ContactTrace, traction: np.ndarray) -> np.ndarray:
-        """Friction traction at the contact nodes carrying the same nodal forces (lumped)."""
-        if self.interpolation.shape[0] == contact.m and self.weights is contact.weights:
-            return traction
-        return (self.interpolation.T @ (self.weights * traction)) / contact.weights
+        """Friction traction at the contact nodes carrying the same nodal forces (lumped); (m,) in
+        2-D, (m, 2) in 3-D."""
+        per_point = self.components(traction)
+        if not (self.interpolation.shape[0] == contact.m and self.weights is contact.weights):
+            per_point = (self.interpolation.T @ (self.weights[:, None] * per_point)) / contact.weights[:, None]
+        return per_point[:, 0] if self.dim == 1 else per_point
 
 
 def gauss_interpolation(mesh: fe.Mesh, basis: fe.Basis, contact: ContactTrace):
     """G (points × contact nodes), weights ω_q and coordinates of Gauss points on Γ_C."""
     scalar = fe.FacetBasis(mesh, basis.elem.elem, facets=contact.facets)
-    # scalar DOF j carries vector DOFs 2j, 2j + 1 (scikit-fem interleaves components)
+    # scalar DOF j carries vector DOFs dj, …, dj + d − 1 (scikit-fem interleaves components)
+    dim = contact.dim
     node_of_dof = np.full(scalar.N, -1)
-    node_of_dof[contact.dofs[:, 0] // 2] = np.arange(contact.m)
-    assert np.allclose(scalar.doflocs[:, contact.dofs[:, 0] // 2], basis.doflocs[:, contact.dofs[:, 0]])
+    node_of_dof[contact.dofs[:, 0] // dim] = np.arange(contact.m)
+    assert np.allclose(scalar.doflocs[:, contact.dofs[:, 0] // dim], basis.doflocs[:, contact.dofs[:, 0]])
     nfacets, nqp = scalar.dx.shape
     rows = np.arange(nfacets * nqp).reshape(nfacets, nqp)
     entries = [
@@ -72,7 +84,7 @@ def gauss_interpolation(mesh: fe.Mesh, basis: fe.Basis, contact: ContactTrace):
     assert np.allclose(values[~on_facet], 0.0)
     values, i, k = values[on_facet], i[on_facet], k[on_facet]
     G = sp.csr_matrix((values, (i, k)), shape=(nfacets * nqp, contact.m))  # duplicates are summed
-    coords = scalar.global_coordinates().value.reshape(2, -1).T
+    coords = scalar.global_coordinates().value.reshape(dim, -1).T
     return G, scalar.dx.ravel(), coords
 
 
@@ -87,6 +99,8 @@ def friction_points(
         G, weights, coords = sp.identity(contact.m, format="csr"), contact.weights, contact.coords
         weighting = contact.mass if non_penetration == "weak" else sp.diags(weights)
     coupling = None if contact.tangential_coupling is None else weighting @ contact.tangential_coupling
+    components = contact.dim - 1
+    weighting = sp.block_diag([weighting] * components, format="csr")  # the same weights for each tangent
     return FrictionPoints(
         R=sp.csr_matrix(weighting @ contact.T),
         offset=weighting @ contact.tangent_offset,
@@ -94,4 +108,5 @@ def friction_points(
         interpolation=sp.csr_matrix(G),
         coords=coords,
         coupling=coupling,
+        dim=components,
     )

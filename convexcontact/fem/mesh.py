@@ -5,13 +5,28 @@ from __future__ import annotations
 import numpy as np
 import skfem as fe
 
-from ..scene.model import Body, MeshFile, Rectangle, SceneError
+from ..scene.model import Body, Box, MeshFile, Rectangle, SceneError
 
-_ELEMENTS = {
-    "P1": (fe.ElementTriP1, (fe.MeshTri1,)),
-    "P2": (fe.ElementTriP2, (fe.MeshTri1, fe.MeshTri2)),
-    "Q1": (fe.ElementQuad1, (fe.MeshQuad1,)),
-    "Q2": (fe.ElementQuad2, (fe.MeshQuad1, fe.MeshQuad2)),
+_ELEMENTS = {  # (element name, dimension) → (element, meshes it fits, quadrature order)
+    ("P1", 2): (fe.ElementTriP1, (fe.MeshTri1,), 1),
+    ("P2", 2): (fe.ElementTriP2, (fe.MeshTri1, fe.MeshTri2), 2),
+    ("Q1", 2): (fe.ElementQuad1, (fe.MeshQuad1,), 2),
+    ("Q2", 2): (fe.ElementQuad2, (fe.MeshQuad1, fe.MeshQuad2), 4),
+    ("P1", 3): (fe.ElementTetP1, (fe.MeshTet1,), 1),
+    ("P2", 3): (fe.ElementTetP2, (fe.MeshTet1, fe.MeshTet2), 2),
+    ("Q1", 3): (fe.ElementHex1, (fe.MeshHex1,), 2),
+    ("Q2", 3): (fe.ElementHex2, (fe.MeshHex1, fe.MeshHex2), 4),
+}
+"""The quadrature order (degree integrated exactly) is chosen on purpose rather than scikit-fem's
+default 2·maxdeg: the stiffness integrand ∇φ·∇ψ has degree 2(p−1) on simplices and, on
+parallelepipeds, 2p per variable with ∂ lowering one of them — Gauss with p+1 points per
+direction (order 2p) is exact; loads ∫b·v need degree p. So P1: 1 point, P2: order 2,
+Q1: 2×2(×2), Q2: 3×3(×3) points — the default spends 64 points on a Q1 hex, 343 on Q2.
+On distorted quadrilaterals/hexahedra no rule is exact; these are the standard ones."""
+
+BOUNDARY_NAMES = {  # per dimension: the (low, high) sides of each axis
+    2: (("left", "right"), ("bottom", "top")),
+    3: (("left", "right"), ("front", "back"), ("bottom", "top")),
 }
 
 
@@ -37,21 +52,23 @@ def graded(start: float, length: float, cells: int, ratio: float, focus: float |
     return np.concatenate([x_left, x_right])
 
 
-def tensor_mesh(x: np.ndarray, y: np.ndarray, quads: bool = False) -> fe.Mesh:
-    """Tensor-product mesh on the nodes x × y with boundaries left, right, bottom, top.
+def tensor_mesh(*axes: np.ndarray, quads: bool = False) -> fe.Mesh:
+    """Tensor-product mesh on the nodes x × y [× z], named sides (see :data:`BOUNDARY_NAMES`).
 
-    The sides are found by their exact coordinates: scikit-fem's ``with_defaults`` uses a
-    tolerance of a hundredth of the smallest element, which tags every facet of a row of
-    elements of aspect ratio ≳ 50 as "top" or "bottom".
+    Triangles/tetrahedra, or with ``quads`` quadrilaterals/hexahedra. The sides are
+    found by their exact coordinates: scikit-fem's ``with_defaults`` uses a tolerance of a
+    hundredth of the smallest element, which tags every facet of a row of elements of
+    aspect ratio ≳ 50 as "top" or "bottom".
     """
-    mesh = (fe.MeshQuad1 if quads else fe.MeshTri1).init_tensor(x, y)
-    tol = 1e-9 * max(np.ptp(x), np.ptp(y))  # of the body size, not of the smallest element
-    return mesh.with_boundaries({
-        "left": lambda p: np.abs(p[0] - x.min()) < tol,
-        "right": lambda p: np.abs(p[0] - x.max()) < tol,
-        "bottom": lambda p: np.abs(p[1] - y.min()) < tol,
-        "top": lambda p: np.abs(p[1] - y.max()) < tol,
-    })
+    dim = len(axes)
+    kind = {(2, False): fe.MeshTri1, (2, True): fe.MeshQuad1, (3, False): fe.MeshTet1, (3, True): fe.MeshHex1}
+    mesh = kind[dim, bool(quads)].init_tensor(*axes)
+    tol = 1e-9 * max(np.ptp(axis) for axis in axes)  # of the body size, not of the smallest element
+    sides = {}
+    for i, (axis, names) in enumerate(zip(axes, BOUNDARY_NAMES[dim])):
+        for name, value in zip(names, (axis.min(), axis.max())):
+            sides[name] = lambda p, i=i, value=value: np.abs(p[i] - value) < tol
+    return mesh.with_boundaries(sides)
 
 
 def rectangle(geometry: Rectangle, quads: bool) -> fe.Mesh:
@@ -61,7 +78,14 @@ def rectangle(geometry: Rectangle, quads: bool) -> fe.Mesh:
     focus_y = y0 + geometry.height if geometry.refine_y == "top" else y0
     x = graded(x0, geometry.width, geometry.nx, gx, geometry.refine_x)
     y = graded(y0, geometry.height, geometry.ny, gy, focus_y if gy > 1 else None)
-    return tensor_mesh(x, y, quads)
+    return tensor_mesh(x, y, quads=quads)
+
+
+def box(geometry: Box, hexes: bool) -> fe.Mesh:
+    """Structured box with boundaries left/right (x), front/back (y), bottom/top (z)."""
+    axes = [graded(*args) for args in zip(geometry.origin, geometry.size, geometry.cells, geometry.grading,
+                                          geometry.refine)]
+    return tensor_mesh(*axes, quads=hexes)
 
 
 def load_mesh(geometry: MeshFile) -> fe.Mesh:
@@ -77,6 +101,8 @@ def build_mesh(body: Body) -> fe.Mesh:
     geometry = body.geometry
     if isinstance(geometry, Rectangle):
         return rectangle(geometry, quads=body.element in ("Q1", "Q2"))
+    if isinstance(geometry, Box):
+        return box(geometry, hexes=body.element in ("Q1", "Q2"))
     if isinstance(geometry, MeshFile):
         return load_mesh(geometry)
     if isinstance(geometry, fe.Mesh):
@@ -84,16 +110,20 @@ def build_mesh(body: Body) -> fe.Mesh:
     raise SceneError("body.mesh", f"unsupported geometry {type(geometry).__name__}")
 
 
-def vector_basis(mesh: fe.Mesh, element: str) -> fe.Basis:
-    """Vector-valued basis of ``element`` on ``mesh``; refuses mismatched cell types."""
-    element_type, mesh_types = _ELEMENTS[element]
+def vector_basis(mesh: fe.Mesh, element: str, intorder: int | None = None) -> fe.Basis:
+    """Vector-valued basis of ``element`` on ``mesh`` with the quadrature of :data:`_ELEMENTS`
+    (``intorder`` overrides it); refuses mismatched cell types."""
+    dim = mesh.dim()
+    if (element, dim) not in _ELEMENTS:
+        raise SceneError("body.element", f"{element} has no {dim}-D version")
+    element_type, mesh_types, order = _ELEMENTS[element, dim]
     if not isinstance(mesh, mesh_types):
         raise SceneError(
             "body.element",
             f"{element} does not fit a {type(mesh).__name__} mesh",
-            "use P1/P2 on triangles and Q1/Q2 on quadrilaterals",
+            "use P1/P2 on triangles or tetrahedra and Q1/Q2 on quadrilaterals or hexahedra",
         )
-    return fe.Basis(mesh, fe.ElementVector(element_type()))
+    return fe.Basis(mesh, fe.ElementVector(element_type()), intorder=order if intorder is None else intorder)
 
 
 def check_boundary(mesh: fe.Mesh, name: str, field_name: str) -> np.ndarray:

@@ -17,6 +17,7 @@ class Scaling:
     length: float
     stress: float
     displacement: float
+    dim: int = 2  # forces and energies are per unit thickness in 2-D
 
     @property
     def pressure(self) -> float:
@@ -25,10 +26,10 @@ class Scaling:
 
     @property
     def force(self) -> float:
-        """Forces per unit thickness (resultants)."""
-        return self.pressure * self.length
+        """Forces (resultants; per unit thickness in 2-D)."""
+        return self.pressure * self.length ** (self.dim - 1)
 
     @property
     def energy(self) -> float:
-        """Energies per unit thickness."""
-        return self.stress * self.displacement**2
+        """Energies (per unit thickness in 2-D)."""
+        return self.stress * self.displacement**2 * self.length ** (self.dim - 2)

@@ -4,7 +4,7 @@ With r = (λ_N, λ_T) and B = [C N; −R] (C, R as in :mod:`.primal`), eliminati
 from the Lagrangian ½uᵀKu − fᵀu + rᵀ(B u + c) with one factorization of K gives
 
     min ½ rᵀ W r − rᵀ h,   W = B K⁻¹ Bᵀ,   h = B K⁻¹ f + c,
-    s.t. λ_N ≥ 0,  (s_k, λ_T,k) ∈ SOC  (|λ_T,k| ≤ s_k),
+    s.t. λ_N ≥ 0,  (s_k, λ_T,k) ∈ SOC  (‖λ_T,k‖ ≤ s_k; λ_T,k ∈ R^(d−1), component-major),
 
 and u = K⁻¹(f − Bᵀ r). With C = M and R = M T this is Hild's mixed method with
 continuous P1 multipliers; with C = diag(w) its node-wise (lumped) counterpart. The
@@ -20,7 +20,7 @@ import scipy.sparse as sp
 
 from ..conic import ConicProgram, ConicSolution, nonnegative, soc, zero
 from ..fem.contact import ContactTrace
-from ..fem.factorization import StiffnessFactorization
+from ..fem.factorization import Factorization, factorize
 from ..fem.friction import FrictionPoints
 from ..scene.model import SceneError
 from .fields import ContactFields
@@ -36,19 +36,20 @@ def dual(
     slip_bound: np.ndarray | None = None,
     epsilon: float | None = None,
     compliance: tuple[float, float] | None = None,
-    factorization: StiffnessFactorization | None = None,
+    factorization: Factorization | None = None,
 ):
     """The dual program, its recovery map and ``bound_update(s) -> {"b": ...}``."""
     if compliance is not None:
         raise SceneError("formulation", "normal compliance is formulated in the primal only", "use formulation='primal'")
-    factorization = factorization or StiffnessFactorization(K)
+    factorization = factorization or factorize(K)
     m = contact.m
     count = friction.count if friction is not None else 0
+    tangential = count * friction.dim if friction is not None else 0  # λ_T unknowns
     extra = count if epsilon is not None else 0
     B = sp.vstack([C @ contact.N] + ([-friction.R] if friction is not None else [])).tocsr()
     c = np.concatenate([C @ (contact.normal_offset - contact.gap)] + ([-friction.offset] if count else []))
     Kf = factorization.solve(f)
-    size = m + count + extra
+    size = m + tangential + extra
     P = sp.block_diag([sp.csc_matrix(factorization.schur(B)), sp.csc_matrix((extra, extra))], format="csc")
     q = np.concatenate([-(B @ Kf + c), -epsilon * friction.weights if extra else np.zeros(0)])
 
@@ -65,19 +66,20 @@ def dual(
     rows.append(-sp.eye(m, size, format="csr"))
     b.append(np.zeros(m))
     cones.append(nonnegative(m))
+    dim = 1 + friction.dim + (epsilon is not None) if count else 0
     if count:
-        dim = 2 if epsilon is None else 3
+        # cone k: (s_k, λ_T,k components, [μ_k]); the unknowns after λ_N are blocks of count
         pick = [sp.csr_matrix((count, size))] + [-sp.eye(count, size, m + j * count) for j in range(dim - 1)]
         order = np.arange(dim * count).reshape(dim, count).T.ravel()
         rows.append(sp.vstack(pick).tocsr()[order])
         b.append(np.concatenate([slip_bound, np.zeros((dim - 1) * count)])[order])
         cones += [soc(dim)] * count
     program = ConicProgram(P, q, sp.vstack(rows).tocsc(), np.concatenate(b), tuple(cones))
-    bound_rows = equalities + m + np.arange(count) * (2 if epsilon is None else 3)
+    bound_rows = equalities + m + np.arange(count) * dim
     carries = carrying(B)
 
     def recover(solution: ConicSolution) -> ContactFields:
-        r = np.where(carries, solution.x[: m + count], 0.0)
+        r = np.where(carries, solution.x[: m + tangential], 0.0)
         motion = iter(-solution.z[:equalities])
         return ContactFields(
             u=factorization.solve(f - B.T @ r),

@@ -4,7 +4,8 @@
 
 C = diag(w) (node-wise u_N ≤ g) or the boundary mass M (Hild's weak form); R the
 friction rows of :mod:`convexcontact.fem.friction`. The friction term enters through
-epigraph variables, (t_k, (R u)_k) ∈ SOC with cost s_k t_k — no smoothing. With
+epigraph variables, (t_k, (R u)_k) ∈ SOC with cost s_k t_k — no smoothing; in 3-D
+(R u)_k has two components and the cone is the exact isotropic SOC(3). With
 ``epsilon`` the cone is (t_k, (R u)_k, ε ω_k): the regularized sqrt(u_T² + ε²).
 Under force control the obstacle's normal advance δ_N (work −P δ_N) and tangential
 shift δ_T (work −Q δ_T) are unknowns too. A frictionless scene has no t, no R.
@@ -25,12 +26,18 @@ import scipy.sparse as sp
 from ..conic import ConicProgram, ConicSolution, nonnegative, power, soc
 from ..fem.contact import ContactTrace
 from ..fem.friction import FrictionPoints
+from ..scene.model import SceneError
 from .fields import ContactFields
 
 
 def contact_weights(contact: ContactTrace, non_penetration: str) -> sp.csr_matrix:
     """C: diag(w) for node-wise non-penetration, the boundary mass M for the weak form."""
     if non_penetration == "nodal":
+        if contact.weights.min() <= 1e-9 * contact.weights.max():
+            # P2 tetrahedra: the vertex shape functions of a P2 triangle integrate to 0
+            raise SceneError("contact.non_penetration", "node-wise contact cannot weigh the nodes whose shape "
+                             "functions integrate to zero on Γ_C (vertices of P2 tetrahedra)",
+                             "use non_penetration = 'weak' (the boundary mass), or P1 / Q1 / Q2 elements")
         return sp.diags(contact.weights, format="csr")
     return contact.mass
 
@@ -105,20 +112,26 @@ def compliance_energy(layout: Layout, weights: np.ndarray, compliance):
     return P_diag, q, rows, b, cones
 
 
+def cone_dim(friction: FrictionPoints, epsilon: float | None) -> int:
+    """Dimension of a friction cone: (t_k, the d − 1 slip components [, ε ω_k])."""
+    return 1 + friction.dim + (epsilon is not None)
+
+
 def friction_rows(friction: FrictionPoints, layout: Layout, epsilon: float | None):
     """Rows (A, b) of the cones (t_k, (R u + offset − coupling δ_T)_k [, ε ω_k]), interleaved."""
-    count, dim = friction.count, 2 if epsilon is None else 3
+    count, dim = friction.count, cone_dim(friction, epsilon)
     epigraph = sp.csr_matrix(
         (-np.ones(count), (np.arange(count), layout.epigraph.start + np.arange(count))), shape=(count, layout.size)
     )
-    slip = sp.hstack([friction.R, sp.csr_matrix((count, layout.size - layout.n))]).tocsr()
+    slip = sp.hstack([friction.R, sp.csr_matrix((friction.R.shape[0], layout.size - layout.n))]).tocsr()
     if layout.shift is not None:
         slip = slip - layout.column(layout.shift, friction.coupling)
     blocks, offsets = [epigraph, -slip], [np.zeros(count), friction.offset]
     if epsilon is not None:
         blocks.append(sp.csr_matrix((count, layout.size)))
         offsets.append(epsilon * friction.weights)
-    order = np.arange(dim * count).reshape(dim, count).T.ravel()  # block k = rows k, count + k, ...
+    # R is component-major, so the stacked rows are dim blocks of count: cone k = rows k, count + k, ...
+    order = np.arange(dim * count).reshape(dim, count).T.ravel()
     return sp.vstack(blocks).tocsr()[order], np.concatenate(offsets)[order], [soc(dim)] * count
 
 
@@ -156,7 +169,7 @@ def primal(
         rows, offsets, cones = rows + [A_T], offsets + [b_T], cones + cones_T
     P = sp.block_diag([K, sp.diags(extra_diag)], format="csc")
     program = ConicProgram(P, q, sp.vstack(rows).tocsc(), np.concatenate(offsets), tuple(cones))
-    dim = 2 if epsilon is None else 3
+    dim = cone_dim(friction, epsilon) if friction is not None else 0
     friction_start = program.n_constraints - (friction.count * dim if friction is not None else 0)  # the last rows
     normal_carries = carrying(C @ contact.N)
     friction_carries = carrying(friction.R) if friction is not None else None
@@ -164,7 +177,10 @@ def primal(
     def recover(solution: ConicSolution) -> ContactFields:
         z = solution.z
         pressure = np.where(normal_carries, z[: contact.m], 0.0)
-        traction = np.where(friction_carries, z[friction_start + 1 :: dim], 0.0) if friction is not None else None
+        traction = None
+        if friction is not None:  # the slip components of each cone, back to component-major order
+            cones_z = z[friction_start:].reshape(friction.count, dim)[:, 1 : 1 + friction.dim]
+            traction = np.where(friction_carries, cones_z.T.ravel(), 0.0)
         return ContactFields(pressure=pressure, friction=traction, **layout.unpack(solution.x))
 
     def bound_update(s: np.ndarray) -> dict:

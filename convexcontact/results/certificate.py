@@ -9,9 +9,10 @@ mesh and in any units:
 - ``complementarity``   max |λ_N (u_N − g)| / (p_ref u_ref)
 - ``equilibrium``       ‖Ku − f + NᵀCλ_N − Rᵀλ_T‖∞ / f_ref
 - ``obstacle_balance``  |Σ contact force − P| / max(P, Q, 1), likewise Q  (force control only)
-- ``friction_bound``    max (|λ_T| − s)_+ / p_ref     (friction only)
-- ``slip_direction``    max |λ_T |v|_ε + s v| / (ω p_ref u_ref) (friction only), v = R u the
-                        weighted slip at the friction points and |v|_ε = sqrt(v² + ε²ω²)
+- ``friction_bound``    max (‖λ_T‖ − s)_+ / p_ref     (friction only)
+- ``slip_direction``    max ‖λ_T |v|_ε + s v‖ / (ω p_ref u_ref) (friction only), v = R u the
+                        weighted slip at the friction points (d − 1 components) and
+                        |v|_ε = sqrt(‖v‖² + ε²ω²)
                         (|v| for the exact law): λ_T = −s v/|v|_ε, written as a product so
                         that it vanishes in the stick zone and is not amplified where the
                         slip is below ε
@@ -61,6 +62,16 @@ class Certificate:
         return {**self.residuals, "worst": self.worst}
 
 
+def lumped(contact: ContactTrace, C: sp.spmatrix) -> np.ndarray:
+    """Weights that turn C(u_N − g) back into a gap: w_i, or Σ_j |C_ij| where ∫ψ_i vanishes
+    (vertices of P2 triangles on the facets of P2 tetrahedra)."""
+    weights = contact.weights
+    vanishing = weights <= 1e-9 * weights.max()
+    if not vanishing.any():
+        return weights
+    return np.where(vanishing, np.asarray(abs(C).sum(axis=1)).ravel(), weights)
+
+
 def normal_gap(contact: ContactTrace, fields: ContactFields) -> np.ndarray:
     """u_N − g at the contact nodes, the obstacle's advance included (≤ 0 is admissible)."""
     advance = 0.0 if contact.obstacle_coupling is None else contact.obstacle_coupling * fields.obstacle_advance
@@ -81,7 +92,7 @@ def certify(
     """Residuals of the Signorini or normal compliance (and, with ``friction``, Tresca) conditions."""
     lam_N = fields.pressure
     gap = normal_gap(contact, fields)
-    weighted_gap = (C @ gap) / contact.weights  # u_N − g for nodal contact, its P1 projection for weak
+    weighted_gap = (C @ gap) / lumped(contact, C)  # u_N − g for nodal contact, its projection for weak
     contact_force = contact.N.T @ (C @ lam_N)
     if friction is not None:
         contact_force = contact_force - friction.R.T @ fields.friction
@@ -124,12 +135,13 @@ def weighted_slip(friction: FrictionPoints, fields: ContactFields) -> np.ndarray
 
 
 def friction_residuals(friction, fields, slip_bound, p_ref, u_ref, epsilon=None) -> dict[str, float]:
-    """|λ_T| ≤ s, and λ_T |v|_ε + s v = 0 (λ_T = −s v/|v|_ε where the point slips)."""
-    lam_T = fields.friction
-    v = weighted_slip(friction, fields)
-    magnitude = np.hypot(v, (epsilon or 0.0) * friction.weights)
-    direction = np.abs(lam_T * magnitude + slip_bound * v) / (friction.weights * u_ref)
+    """‖λ_T‖ ≤ s, and λ_T |v|_ε + s v = 0 (λ_T = −s v/|v|_ε where the point slips); vectors of
+    d − 1 components per point in 3-D."""
+    lam_T = friction.components(fields.friction)
+    v = friction.components(weighted_slip(friction, fields))
+    magnitude = np.sqrt((v**2).sum(axis=1) + ((epsilon or 0.0) * friction.weights) ** 2)
+    direction = np.linalg.norm(lam_T * magnitude[:, None] + slip_bound[:, None] * v, axis=1) / (friction.weights * u_ref)
     return {
-        "friction_bound": np.maximum(np.abs(lam_T) - slip_bound, 0.0).max(initial=0.0) / p_ref,
+        "friction_bound": np.maximum(np.linalg.norm(lam_T, axis=1) - slip_bound, 0.0).max(initial=0.0) / p_ref,
         "slip_direction": direction.max(initial=0.0) / p_ref,
     }

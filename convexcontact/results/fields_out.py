@@ -9,29 +9,35 @@ from ..fem.assembly import stress
 
 
 def element_stress(result) -> dict[str, np.ndarray]:
-    """Element averages of σ_xx, σ_yy, σ_xy and the in-plane von Mises stress."""
+    """Element averages of the stress components (σ_xx, σ_yy, σ_xy [, σ_zz, σ_xz, σ_yz]) and von Mises
+    (in-plane in 2-D)."""
     fem = result.fem
     basis = fem.basis
     strain = sym_grad(basis.interpolate(result.displacement / fem.scaling.displacement))
     lam, mu = (p[:, None] for p in fem.lame)
     sigma = stress(lam, mu)(strain) * fem.scaling.pressure
     dx = basis.dx
-    mean = {name: (sigma[i, j] * dx).sum(axis=1) / dx.sum(axis=1) for name, (i, j) in
-            {"sigma_xx": (0, 0), "sigma_yy": (1, 1), "sigma_xy": (0, 1)}.items()}
+    components = {"sigma_xx": (0, 0), "sigma_yy": (1, 1), "sigma_xy": (0, 1)}
+    if fem.dim == 3:
+        components.update(sigma_zz=(2, 2), sigma_xz=(0, 2), sigma_yz=(1, 2))
+    mean = {name: (sigma[i, j] * dx).sum(axis=1) / dx.sum(axis=1) for name, (i, j) in components.items()}
     sxx, syy, sxy = mean["sigma_xx"], mean["sigma_yy"], mean["sigma_xy"]
-    mean["von_mises"] = np.sqrt(sxx**2 - sxx * syy + syy**2 + 3 * sxy**2)
+    szz, sxz, syz = (mean.get(name, 0.0) for name in ("sigma_zz", "sigma_xz", "sigma_yz"))
+    mean["von_mises"] = np.sqrt(0.5 * ((sxx - syy) ** 2 + (syy - szz) ** 2 + (szz - sxx) ** 2)
+                                + 3 * (sxy**2 + sxz**2 + syz**2))
     return mean
 
 
 def vertex_displacement(result) -> np.ndarray:
-    """(nverts, 2) displacement at the mesh vertices."""
+    """(nverts, d) displacement at the mesh vertices."""
     return result.displacement[result.fem.basis.nodal_dofs].T
 
 
 def vertex_contact(result, values: np.ndarray) -> np.ndarray:
-    """A contact-node field spread onto all mesh vertices (zero off Γ_C and at mid-side nodes)."""
+    """A contact-node field (scalar or per-node vectors) spread onto all mesh vertices (zero off Γ_C
+    and at mid-side nodes)."""
     fem = result.fem
-    out = np.zeros(fem.mesh.p.shape[1])
+    out = np.zeros((fem.mesh.p.shape[1],) + values.shape[1:])
     vertex_of_dof = np.full(fem.basis.N, -1)
     vertex_of_dof[fem.basis.nodal_dofs[0]] = np.arange(fem.mesh.p.shape[1])
     vertices = vertex_of_dof[fem.contact.dofs[:, 0]]

@@ -28,7 +28,8 @@ def write_vtk(result, path: Path):
         point_data["friction_traction"] = vertex_contact(result, result.contact.friction)
     cell_data = {name: [values] for name, values in element_stress(result).items()}
     mesh = to_meshio(fem.mesh.scaled(fem.scaling.length), point_data=point_data, cell_data=cell_data)
-    mesh.points = np.column_stack([mesh.points, np.zeros(len(mesh.points))])  # VTU wants 3-D points
+    if mesh.points.shape[1] == 2:
+        mesh.points = np.column_stack([mesh.points, np.zeros(len(mesh.points))])  # VTU wants 3-D points
     mesh.write(str(path))
 
 
@@ -49,8 +50,10 @@ def save(result, directory, formats=FORMATS) -> list[Path]:
     if result.solved and "png" in formats:
         from . import plots
 
-        paths += [directory / "deformed.png", directory / "contact.png"]
-        plots.deformed_mesh(result, paths[-2])
+        if result.fem.dim == 2:  # a 3-D deformed mesh is no picture: see solution.vtu
+            paths.append(directory / "deformed.png")
+            plots.deformed_mesh(result, paths[-1])
+        paths.append(directory / "contact.png")
         plots.contact_tractions(result, paths[-1])
         if "history" in result.extra:
             paths.append(directory / "picard.png")

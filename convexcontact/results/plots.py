@@ -1,4 +1,4 @@
-"""Plots of a result: deformed mesh, and tractions along Γ_C (against Hertz where it applies)."""
+"""Plots of a result: deformed mesh (2-D), and tractions along Γ_C or against the radius (3-D), with Hertz."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import PolyCollection
 
-from ..analytic import hertz_plane_strain, hertz_pressure
+from ..analytic import hertz_plane_strain, hertz_pressure, hertz_sphere
 from ..scene.model import Coulomb, Material, Tresca, evaluate_field
 from .fields_out import element_stress, vertex_displacement
 
@@ -47,58 +47,74 @@ def deformed_mesh(result, path, magnification: float | None = None):
 
 
 def hertz_reference(result):
-    """(a, p0) of plane-strain Hertz for a punch scene with one material, else None."""
+    """(a, p0) of Hertz (plane strain in 2-D, the sphere in 3-D) for a punch scene with one material,
+    else None. A 3-D model of a quarter (half) of the contact carries a quarter (half) of the force."""
     scene = result.scene
     obstacle = scene.contact.obstacle
-    if obstacle.shape not in ("parabolic", "cylinder") or not isinstance(scene.materials, Material):
+    if obstacle.shape not in ("parabolic", "cylinder", "sphere") or not isinstance(scene.materials, Material):
         return None
     E, nu = scene.materials.E, scene.materials.nu
+    if result.fem.dim == 3:
+        return hertz_sphere(result.normal_force * symmetry_factor(result), obstacle.radius, E, nu)
     if scene.body.plane == "stress":  # plane stress: E* = E
         nu = 0.0
     return hertz_plane_strain(result.normal_force, obstacle.radius, E, nu)
 
 
+def symmetry_factor(result) -> int:
+    """2 per tangent direction in which Γ_C lies on one side only of the punch axis (a symmetry plane)."""
+    contact = result.fem.contact
+    offset = contact.coords * result.fem.scaling.length - result.scene.contact.obstacle.axis(3)
+    sides = [offset @ t.mean(axis=0) for t in contact.frame]
+    return 2 ** sum(int(side.min() >= -1e-12 or side.max() <= 1e-12) for side in sides)
+
+
 def friction_bound(result) -> tuple[np.ndarray, str] | None:
     """The nodal slip bound to draw against λ_T: s for Tresca, F λ_N for Coulomb."""
     law, contact = result.scene.contact.law, result.contact
-    x, y = contact.coords.T
     if isinstance(law, Tresca):
-        return evaluate_field(law.slip_bound, "contact.slip_bound", x, y), "±s (slip bound)"
+        return evaluate_field(law.slip_bound, "contact.slip_bound", contact.coords), "±s (slip bound)"
     if isinstance(law, Coulomb):
-        return evaluate_field(law.friction, "contact.friction", x, y) * contact.pressure, "±F λ_N"
+        return evaluate_field(law.friction, "contact.friction", contact.coords) * contact.pressure, "±F λ_N"
     return None
 
 
 def contact_tractions(result, path):
-    """Contact pressure and friction traction along Γ_C: Hertz curve for punches, slip bounds and
-    stick (blue) / slip (orange) zones with friction."""
+    """Contact pressure and friction traction along Γ_C (2-D) or against the distance from the punch
+    axis (3-D, friction as ‖λ_T‖): Hertz curve for punches, slip bounds and stick (blue) / slip
+    (orange) zones with friction."""
     contact = result.contact
-    order = np.argsort(contact.coordinate)
-    s = contact.coordinate[order]
+    radial = result.fem.dim == 3
+    coordinate = contact.radius if radial else contact.coordinate
+    order = np.argsort(coordinate)
+    s = coordinate[order]
+    style = "o" if radial else "o-"  # 3-D nodes at one radius are not a curve
     fig, ax = plt.subplots(figsize=(7, 4))
-    ax.plot(s, contact.pressure[order], "o-", ms=3, label="λ_N (pressure)")
+    ax.plot(s, contact.pressure[order], style, ms=3, label="λ_N (pressure)")
     bound = friction_bound(result)
     if bound is not None:
         values, label = bound
-        ax.plot(s, contact.friction[order], "s-", ms=3, label="λ_T (friction traction)")
-        ax.plot(s, values[order], "k:", lw=1, label=label)
-        ax.plot(s, -values[order], "k:", lw=1)
-        status = contact.status[order]
-        for name, color in (("stick", "tab:blue"), ("slip", "tab:orange")):
-            inside = np.char.startswith(status.astype(str), name)
-            ax.fill_between(s, 0, 1, where=inside, color=color, alpha=0.12, transform=ax.get_xaxis_transform(),
-                            label=f"{name} zone")
+        friction = contact.friction_magnitude if radial else contact.friction
+        ax.plot(s, friction[order], "s" if radial else "s-", ms=3, label="‖λ_T‖" if radial else "λ_T (friction traction)")
+        ax.plot(s, values[order], "k.", ms=2) if radial else ax.plot(s, values[order], "k:", lw=1, label=label)
+        if not radial:
+            ax.plot(s, -values[order], "k:", lw=1)
+            status = contact.status[order]
+            for name, color in (("stick", "tab:blue"), ("slip", "tab:orange")):
+                inside = np.char.startswith(status.astype(str), name)
+                ax.fill_between(s, 0, 1, where=inside, color=color, alpha=0.12, transform=ax.get_xaxis_transform(),
+                                label=f"{name} zone")
     reference = hertz_reference(result)
     if reference is not None:
         a, p0 = reference
-        center = result.scene.contact.obstacle.center
-        x = np.linspace(center - 1.5 * a, center + 1.5 * a, 400)
+        center = 0.0 if radial else result.scene.contact.obstacle.center
+        x = np.linspace(0.0 if radial else center - 1.5 * a, center + 1.5 * a, 400)
         ax.plot(x, hertz_pressure(x - center, a, p0), "k--", lw=1, label=f"Hertz (a = {a:.4g}, p₀ = {p0:.4g})")
     closed = s[contact.status[order] != "open"]
     if closed.size:
         span = 1.5 * max(closed.max() - closed.min(), 1e-12) / 2 + 0.2 * np.ptp(closed)
-        ax.set_xlim(closed.mean() - span, closed.mean() + span)
-    ax.set_xlabel("coordinate along Γ_C")
+        ax.set_xlim(0.0 if radial else closed.mean() - span, (1.5 * closed.max()) if radial else closed.mean() + span)
+    ax.set_xlabel("distance from the punch axis" if radial else "coordinate along Γ_C")
     ax.set_ylabel("traction")
     ax.axhline(0, color="0.7", lw=0.5)
     ax.legend(fontsize=8)

@@ -27,10 +27,11 @@ class ContactNodes:
     """Fields at the contact nodes (user units).
 
     ``status`` is open / closed without friction, open / stick / slip+ / slip− with
-    friction (slip± = slipping towards increasing / decreasing coordinate).
-    ``forces`` (m × 2) are the nodal contact forces on the body; ``friction`` the
-    friction traction along the tangent, ``slip`` the tangential slip u_T relative
-    to the obstacle.
+    friction in 2-D (slip± = slipping towards increasing / decreasing coordinate),
+    open / stick / slip in 3-D. ``forces`` (m × d) are the nodal contact forces on the
+    body; ``friction`` the friction traction along the tangent, ``slip`` the tangential
+    slip u_T relative to the obstacle — (m,) in 2-D, (m, 2) in 3-D (components along
+    ``tangents`` and ``bitangents``).
     """
 
     coords: np.ndarray
@@ -44,6 +45,14 @@ class ContactNodes:
     forces: np.ndarray
     friction: np.ndarray | None = None
     slip: np.ndarray | None = None
+    radius: np.ndarray | None = None  # distance from the punch axis (see radius_from_axis)
+    bitangents: np.ndarray | None = None
+
+    @property
+    def friction_magnitude(self) -> np.ndarray | None:
+        """‖λ_T‖ at each node (|λ_T| in 2-D)."""
+        return None if self.friction is None else np.abs(self.friction) if self.friction.ndim == 1 \
+            else np.linalg.norm(self.friction, axis=1)
 
 
 @dataclass
@@ -104,7 +113,11 @@ class ContactResult:
 
     @property
     def contact_half_width(self) -> float:
-        """Half the extent of the closed zone along Γ_C (0 when nothing touches)."""
+        """Half the extent of the closed zone along Γ_C (2-D), the largest distance of a closed node
+        from the punch axis (3-D: the contact radius); 0 when nothing touches."""
+        if self.fem.dim == 3:
+            r = self.contact.radius[self.closed]
+            return float(r.max()) if r.size else 0.0
         s = self.contact.coordinate[self.closed]
         return float((s.max() - s.min()) / 2) if s.size else 0.0
 
@@ -125,6 +138,7 @@ class ContactResult:
             "solver_status": self.solver_status,
             "law": type(self.scene.contact.law).__name__.lower(),
             "formulation": self.formulation,
+            "formulation_reason": self.extra.get("formulation_reason", ""),
             "iterations": self.iterations,
             "timings": self.timings,
             "message": self.message,
@@ -142,8 +156,7 @@ class ContactResult:
             certificate=self.certificate.as_dict(),
             n_closed=int(self.closed.sum()),
             contact_nodes={
-                "x": c.coords[:, 0].tolist(),
-                "y": c.coords[:, 1].tolist(),
+                **{axis: c.coords[:, i].tolist() for i, axis in enumerate("xyz"[: c.coords.shape[1]])},
                 "s": c.coordinate.tolist(),
                 "gap": c.gap.tolist(),
                 "u_N": c.normal_displacement.tolist(),
@@ -160,7 +173,10 @@ class ContactResult:
             out["n_stick"] = int((c.status == "stick").sum())
             out["n_slip"] = int(np.char.startswith(c.status.astype(str), "slip").sum())
             out["contact_nodes"].update(lambda_T=c.friction.tolist(), u_T=c.slip.tolist())
-        out.update({k: v for k, v in self.extra.items() if k != "history"})
+            if c.bitangents is not None:
+                out["contact_nodes"].update(tangent=c.tangents.tolist(), bitangent=c.bitangents.tolist())
+            out["contact_nodes"].update(lambda_T=c.friction.tolist(), u_T=c.slip.tolist())
+        out.update({k: v for k, v in self.extra.items() if k not in ("history", "formulation_reason")})
         if "history" in self.extra:
             out["picard_history"] = self.extra["history"]
         return out
@@ -186,12 +202,15 @@ def contact_nodes(
     traction = slip = None
     if friction is not None:
         shift = 0.0 if contact.tangential_coupling is None else contact.tangential_coupling * fields.obstacle_shift
-        slip = contact.T @ fields.u + contact.tangent_offset - shift
-        forces = forces + (contact.T @ (friction.R.T @ fields.friction))[:, None] * contact.tangents
+        slip = friction.components(contact.T @ fields.u + contact.tangent_offset - shift)  # (m, d − 1)
+        tangential = friction.components(contact.T @ (friction.R.T @ fields.friction))
+        forces = forces + sum(tangential[:, [j]] * t for j, t in enumerate(contact.frame))
         traction = friction.nodal_traction(contact, fields.friction) * scaling.pressure
-        moving = np.abs(slip) > SLIP * max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_shift), 1.0)
-        status = np.where(~closed, "open", np.where(~moving, "stick", np.where(slip > 0, "slip+", "slip-")))
-        slip = slip * scaling.displacement
+        size = np.linalg.norm(slip, axis=1)
+        moving = size > SLIP * max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_shift), 1.0)
+        sliding = np.where(slip[:, 0] > 0, "slip+", "slip-") if friction.dim == 1 else "slip"
+        status = np.where(~closed, "open", np.where(~moving, "stick", sliding))
+        slip = (slip[:, 0] if friction.dim == 1 else slip) * scaling.displacement
     return ContactNodes(
         coords=contact.coords * scaling.length,
         coordinate=contact.coordinate * scaling.length,
@@ -204,4 +223,24 @@ def contact_nodes(
         forces=forces * scaling.force,
         friction=traction,
         slip=slip,
+        bitangents=contact.bitangents,
+        radius=radius_from_axis(fem) * scaling.length,
     )
+
+
+def radius_from_axis(fem: FEModel) -> np.ndarray:
+    """Scaled distance of each contact node from the punch axis (3-D; |coordinate − centre| in 2-D):
+    the obstacle's ``center`` when it has one, else the weighted centroid of Γ_C."""
+    contact, obstacle = fem.contact, fem.scene.contact.obstacle
+    if contact.dim == 2:
+        center = obstacle.center / fem.scaling.length if obstacle.shape in ("parabolic", "cylinder", "sphere") \
+            else contact.weights @ contact.coordinate / contact.weights.sum()
+        return np.abs(contact.coordinate - center)
+    if obstacle.shape in ("parabolic", "sphere"):
+        center = obstacle.axis(3) / fem.scaling.length
+    else:
+        center = contact.weights @ contact.coords / contact.weights.sum()
+    normal = contact.weights @ contact.normals
+    normal /= np.linalg.norm(normal)
+    offset = contact.coords - center
+    return np.linalg.norm(offset - np.outer(offset @ normal, normal), axis=1)

@@ -8,10 +8,13 @@ import numpy as np
 import skfem as fe
 
 from ..fem.mesh import tensor_mesh
-from .model import Body, Contact, Dirichlet, Material, Obstacle, Rectangle, Scene, Signorini, Traction
+from .model import Body, Box, Contact, Dirichlet, Material, Obstacle, Rectangle, Scene, Signorini, Traction
 
 HERTZ_FORCE = 0.0086307
 """Force per unit thickness giving a = 0.1, p₀ = 0.054945 for R = 1, E = 1, ν = 0.3."""
+
+HERTZ_SPHERE_FORCE = 4 * 0.1**3 / (3 * (1 - 0.3**2))
+"""Force on the whole sphere giving a = 0.1, p₀ = 0.069956 for R = 1, E = 1, ν = 0.3 (3-D Hertz)."""
 
 
 def hertz_punch(nx: int = 80, element: str = "P1", force: float = HERTZ_FORCE, law=None) -> Scene:
@@ -65,7 +68,7 @@ def punch_mesh(
     x_out = fine + growing(width / 2 - fine, 24)
     x = np.concatenate([-x_out[::-1], x_fine, x_out])
     y = -np.concatenate([np.arange(rows + 1) * h, rows * h + growing(depth - rows * h, 30)])[::-1]
-    return tensor_mesh(x, y, quads)
+    return tensor_mesh(x, y, quads=quads)
 
 
 def frictional_punch(h: float = 0.005, depth: float = 0.02, friction: float = 0.6, nu: float = 0.3,
@@ -90,3 +93,47 @@ def tresca_punch(nx: int = 40, slip_bound: float = 0.005, depth: float = 0.01, r
     law = Tresca(slip_bound=slip_bound, regularization=regularization)
     contact = Contact("top", Obstacle("parabolic", radius=1.0, depth=depth), law)
     return dataclasses.replace(hertz_punch(nx=nx, law=law), name="tresca_punch", contact=contact)
+
+
+def quarter_box(cells: int, element: str, grading: float, obstacle: Obstacle, law, name: str,
+                size: float = 1.0) -> Scene:
+    """The quarter [0, size]² × [−size, 0] of a body indented on its top at the z axis.
+
+    Symmetry rollers on the planes x = 0 (``left``) and y = 0 (``front``), clamped
+    ``bottom``; cells graded ``grading``:1 towards the origin. Hexahedra (Q1, Q2) keep
+    the model's diagonal symmetry x ↔ y, which the tetrahedra of a cube split break.
+    """
+    box = Box(size=(size, size, size), cells=(cells,) * 3, origin=(0.0, 0.0, -size), grading=(grading,) * 3,
+              refine=(0.0, 0.0, 0.0))
+    return Scene(
+        name=name,
+        body=Body(box, element=element),
+        materials=Material(E=1.0, nu=0.3),
+        dirichlet=(Dirichlet("left", ux=0.0), Dirichlet("front", uy=0.0), Dirichlet("bottom", ux=0.0, uy=0.0, uz=0.0)),
+        contact=Contact("top", obstacle, law or Signorini()),
+    )
+
+
+def hertz_sphere(cells: int = 16, element: str = "P1", force: float = HERTZ_SPHERE_FORCE, grading: float = 12.0,
+                 law=None) -> Scene:
+    """3-D Hertz: a rigid sphere (R = 1; its paraboloid, as in Hertz theory) pressed with ``force``, quarter model.
+
+    The quarter carries ``force``/4 (the obstacle force of the scene); with the default
+    force a = 0.1 and p₀ = 0.069956 (:func:`convexcontact.analytic.hertz_sphere`), the body
+    is 10a wide and deep.
+    """
+    obstacle = Obstacle("parabolic", radius=1.0, center=(0.0, 0.0, 0.0), force=force / 4)
+    return quarter_box(cells, element, grading, obstacle, law, "hertz_sphere")
+
+
+def punch_3d(cells: int = 12, law=None, element: str = "Q1", depth: float = 0.01, radius: float | None = 1.0,
+             grading: float = 8.0) -> Scene:
+    """A rigid punch indents the top of a box by ``depth`` at the z axis, quarter model (any law).
+
+    ``radius``: a rounded (paraboloidal) punch, contact radius about sqrt(R·depth); None: a flat
+    rigid plane pressed on the whole top (the uniform indentation of a clamped block).
+    Sizes for benchmarks: 3(cells + 1)³ DOFs with Q1.
+    """
+    obstacle = (Obstacle("parabolic", radius=radius, center=(0.0, 0.0, 0.0), depth=depth) if radius is not None
+                else Obstacle("flat", depth=depth))
+    return quarter_box(cells, element, grading, obstacle, law, "punch_3d")

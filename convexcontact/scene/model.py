@@ -39,11 +39,20 @@ def finite(value, field_name: str) -> float:
     return number
 
 
-def finite_vector(value, field_name: str, length: int = 2) -> tuple[float, ...]:
-    """Return ``value`` as a tuple of ``length`` finite floats."""
-    if np.ndim(value) != 1 or len(value) != length:
-        raise SceneError(field_name, f"expected {length} numbers, got {value!r}")
+def finite_vector(value, field_name: str, length: int | tuple[int, ...] = 2) -> tuple[float, ...]:
+    """Return ``value`` as a tuple of ``length`` finite floats (``length`` may list the lengths allowed)."""
+    lengths = (length,) if isinstance(length, int) else length
+    if np.ndim(value) != 1 or len(value) not in lengths:
+        expected = " or ".join(str(n) for n in lengths)
+        raise SceneError(field_name, f"expected {expected} numbers, got {value!r}")
     return tuple(finite(v, f"{field_name}[{i}]") for i, v in enumerate(value))
+
+
+def positive_integer(value, field_name: str) -> int:
+    """Return ``value`` if it is an integer ≥ 1 (booleans refused)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise SceneError(field_name, f"expected a positive integer, got {value!r}")
+    return int(value)
 
 
 @dataclass(frozen=True)
@@ -95,9 +104,7 @@ class Rectangle:
                 raise SceneError(f"body.{name}", "must be positive")
             object.__setattr__(self, name, value)
         for name in ("nx", "ny"):
-            value = getattr(self, name)
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise SceneError(f"body.{name}", f"expected a positive integer, got {value!r}")
+            positive_integer(getattr(self, name), f"body.{name}")
         object.__setattr__(self, "origin", finite_vector(self.origin, "body.origin"))
         grading = finite_vector(self.grading, "body.grading")
         if min(grading) < 1:
@@ -107,6 +114,40 @@ class Rectangle:
         object.__setattr__(self, "refine_x", refine_x)
         if self.refine_y not in ("top", "bottom"):
             raise SceneError("body.refine_y", f"expected 'top' or 'bottom', got {self.refine_y!r}")
+
+
+@dataclass(frozen=True)
+class Box:
+    """Built-in box [x0, x0+Lx] × [y0, y0+Ly] × [z0, z0+Lz] of tetrahedra (P1, P2) or hexahedra (Q1, Q2).
+
+    Boundaries: ``left``/``right`` (x = x0, x0+Lx), ``front``/``back`` (y = y0, y0+Ly),
+    ``bottom``/``top`` (z = z0, z0+Lz). ``grading`` (≥ 1 per axis) is the ratio of the
+    largest to the smallest cell size; cells are finest at the point ``refine``
+    (default: the middle of the top face), on both sides of it inside the box.
+    """
+
+    size: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    cells: tuple[int, int, int] = (8, 8, 8)
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    grading: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    refine: tuple[float, float, float] | None = None
+
+    def __post_init__(self):
+        size = finite_vector(self.size, "body.size", 3)
+        if min(size) <= 0:
+            raise SceneError("body.size", f"side lengths must be positive, got {size}")
+        if np.ndim(self.cells) != 1 or len(self.cells) != 3:
+            raise SceneError("body.cells", f"expected 3 integers [nx, ny, nz], got {self.cells!r}")
+        cells = tuple(positive_integer(n, f"body.cells[{i}]") for i, n in enumerate(self.cells))
+        origin = finite_vector(self.origin, "body.origin", 3)
+        grading = finite_vector(self.grading, "body.grading", 3)
+        if min(grading) < 1:
+            raise SceneError("body.grading", f"ratios must be ≥ 1, got {grading}")
+        top_middle = (origin[0] + size[0] / 2, origin[1] + size[1] / 2, origin[2] + size[2])
+        refine = top_middle if self.refine is None else finite_vector(self.refine, "body.refine", 3)
+        for name, value in (("size", size), ("cells", cells), ("origin", origin), ("grading", grading),
+                            ("refine", refine)):
+            object.__setattr__(self, name, value)
 
 
 @dataclass(frozen=True)
@@ -124,9 +165,13 @@ class MeshFile:
 
 @dataclass(frozen=True)
 class Body:
-    """Geometry, element and 2-D hypothesis of the elastic body."""
+    """Geometry, element and 2-D hypothesis of the elastic body.
 
-    geometry: Rectangle | MeshFile
+    ``plane`` (strain or stress) is a 2-D hypothesis: a 3-D body ignores the default
+    ``"strain"`` and refuses ``"stress"``.
+    """
+
+    geometry: Rectangle | Box | MeshFile
     element: str = "P1"
     plane: str = "strain"
 
@@ -135,20 +180,32 @@ class Body:
             raise SceneError("body.element", f"unknown element {self.element!r}", f"use one of {ELEMENTS}")
         if self.plane not in PLANES:
             raise SceneError("body.plane", f"unknown hypothesis {self.plane!r}", f"use one of {PLANES}")
+        if isinstance(self.geometry, Box):
+            check_plane(self.plane, 3)
+
+
+def check_plane(plane: str, dim: int) -> None:
+    """Plane stress has no meaning for a 3-D body."""
+    if dim == 3 and plane == "stress":
+        raise SceneError("body.plane", "plane stress is a 2-D hypothesis; this body is 3-D",
+                         "drop body.plane (3-D bodies use the full 3-D law)")
 
 
 @dataclass(frozen=True)
 class Dirichlet:
-    """Prescribed displacement components on a named boundary (None = free)."""
+    """Prescribed displacement components on a named boundary (None = free; ``uz`` 3-D only)."""
 
     boundary: str
     ux: float | None = None
     uy: float | None = None
+    uz: float | None = None
+
+    COMPONENTS = ("ux", "uy", "uz")
 
     def __post_init__(self):
-        if self.ux is None and self.uy is None:
-            raise SceneError(f"dirichlet[{self.boundary}]", "no component prescribed", "give ux and/or uy")
-        for name in ("ux", "uy"):
+        if self.ux is None and self.uy is None and self.uz is None:
+            raise SceneError(f"dirichlet[{self.boundary}]", "no component prescribed", "give ux, uy and/or uz")
+        for name in self.COMPONENTS:
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, finite(value, f"dirichlet[{self.boundary}].{name}"))
@@ -169,49 +226,56 @@ class Traction:
         if self.pressure is not None:
             object.__setattr__(self, "pressure", finite(self.pressure, f"{where}.pressure"))
         else:
-            object.__setattr__(self, "vector", finite_vector(self.vector, f"{where}.vector"))
+            object.__setattr__(self, "vector", finite_vector(self.vector, f"{where}.vector", (2, 3)))
 
 
-GapFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
+GapFunction = Callable[..., np.ndarray]
 
 
 @dataclass(frozen=True)
 class Obstacle:
     """Rigid obstacle, described by the initial gap g along the outward normal of Γ_C.
 
-    ``shape``:
+    ``shape`` (r = distance from the punch axis: in 2-D the coordinate along Γ_C minus
+    ``center``; in 3-D the distance, in the mean tangent plane of Γ_C, from the axis
+    through the point ``center`` along the mean normal):
       - ``"flat"``: g = ``gap`` everywhere;
-      - ``"parabolic"``: g = s²/(2R) − d, s the coordinate along Γ_C from ``center``;
-      - ``"cylinder"``: g = R − sqrt(R² − s²) − d (exact circle);
-      - ``"expression"``: g = ``expression``(x, y), a formula string or a callable.
+      - ``"parabolic"``: g = r²/(2R) − d (a paraboloid of revolution in 3-D);
+      - ``"cylinder"`` (2-D) / ``"sphere"`` (3-D; in 2-D the same circle):
+        g = R − sqrt(R² − r²) − d, exact;
+      - ``"expression"``: g = ``expression``(x, y[, z]), a formula string or a callable.
 
+    ``center``: a number in 2-D, a point (x, y, z) in 3-D (the default 0 is the origin).
     Exactly one of ``depth`` (indentation d, displacement control) and ``force``
-    (resultant P per unit thickness pressing the obstacle on the body, force
+    (resultant P, per unit thickness in 2-D, pressing the obstacle on the body; force
     control: d becomes an unknown) may be given for the shaped obstacles; a flat
     obstacle or an expression uses ``depth`` = 0 unless told otherwise.
-    ``tangential_force`` Q (friction laws only) pulls the obstacle along the mean
+    ``tangential_force`` Q (friction laws, 2-D only) pulls the obstacle along the mean
     tangent of Γ_C; its tangential translation becomes an unknown.
     """
 
     shape: str = "flat"
     gap: float = 0.0
     radius: float | None = None
-    center: float = 0.0
+    center: float | tuple[float, float, float] = 0.0
     depth: float | None = None
     force: float | None = None
     expression: str | GapFunction | None = None
     tangential_force: float | None = None
 
-    SHAPES = ("flat", "parabolic", "cylinder", "expression")
+    SHAPES = ("flat", "parabolic", "cylinder", "sphere", "expression")
 
     def __post_init__(self):
         if self.shape not in self.SHAPES:
             raise SceneError("obstacle.shape", f"unknown shape {self.shape!r}", f"use one of {self.SHAPES}")
-        for name in ("gap", "center", "radius", "depth", "force", "tangential_force"):
+        for name in ("gap", "radius", "depth", "force", "tangential_force"):
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, finite(value, f"obstacle.{name}"))
-        if self.shape in ("parabolic", "cylinder") and (self.radius is None or self.radius <= 0):
+        center = finite(self.center, "obstacle.center") if np.ndim(self.center) == 0 else \
+            finite_vector(self.center, "obstacle.center", 3)
+        object.__setattr__(self, "center", center)
+        if self.shape in ("parabolic", "cylinder", "sphere") and (self.radius is None or self.radius <= 0):
             raise SceneError("obstacle.radius", "a punch needs a positive radius")
         if self.shape == "expression":
             if self.expression is None:
@@ -229,31 +293,35 @@ class Obstacle:
     def force_controlled(self) -> bool:
         return self.force is not None
 
-    def shape_gap(self, x: np.ndarray, y: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def axis(self, dim: int) -> np.ndarray:
+        """The punch axis point in 3-D (``center``); refuses a 2-D/3-D mismatch."""
+        if dim == 3 and np.ndim(self.center) == 0 and self.center != 0.0:
+            raise SceneError("obstacle.center", f"a number ({self.center}) in a 3-D scene",
+                             "give the point [x, y, z] the punch axis passes through")
+        if dim == 2 and np.ndim(self.center) == 1:
+            raise SceneError("obstacle.center", "a point in a 2-D scene", "give the coordinate along Γ_C")
+        return np.zeros(3) if np.ndim(self.center) == 0 else np.array(self.center)
+
+    def shape_gap(self, points: np.ndarray, r: np.ndarray) -> np.ndarray:
         """Initial gap in user units before indentation (``depth`` not subtracted).
 
-        ``x, y`` are the node coordinates, ``s`` their coordinate along Γ_C.
+        ``points`` (m × d) are the node coordinates, ``r`` their distance from the punch axis.
         """
+        dim = points.shape[1]
         if self.shape == "flat":
-            return np.full(x.shape, self.gap)
+            return np.full(r.shape, self.gap)
         if self.shape == "expression":
-            if callable(self.expression):
-                values = np.broadcast_to(np.asarray(self.expression(x, y), dtype=float), x.shape)
-                if not np.isfinite(values).all():
-                    raise SceneError("obstacle.expression", "the gap function returned NaN or infinity")
-                return np.array(values)
-            from .expressions import compile_expression
-
-            return compile_expression(self.expression, "obstacle.expression")(x=x, y=y)
-        r = s - self.center
+            return evaluate_field(self.expression, "obstacle.expression", points, minimum=-np.inf)
+        if dim == 3 and self.shape == "cylinder":
+            raise SceneError("obstacle.shape", "a cylinder is a 2-D punch", "use 'sphere' or 'parabolic' in 3-D")
         if self.shape == "parabolic":
             return r**2 / (2.0 * self.radius)
         outside = np.abs(r) >= self.radius
         if outside.any():
             raise SceneError(
                 "obstacle.radius",
-                f"the cylinder (radius {self.radius}) does not cover the contact boundary",
-                "use a larger radius, the parabolic shape, or a shorter contact boundary",
+                f"the {self.shape} (radius {self.radius}) does not cover the contact boundary",
+                "use a larger radius, the parabolic shape, or a smaller contact boundary",
             )
         return self.radius - np.sqrt(self.radius**2 - r**2)
 
@@ -298,7 +366,7 @@ class NormalCompliance:
 
 
 NodalValues = float | str | np.ndarray | Callable
-"""A field on Γ_C: a constant, a formula in x and y, a callable f(x, y), or nodal values."""
+"""A field on Γ_C: a constant, a formula in x, y (and z), a callable f(x, y[, z]), or nodal values."""
 
 
 def check_field(value, field_name: str, minimum: float = 0.0):
@@ -321,23 +389,26 @@ def check_field(value, field_name: str, minimum: float = 0.0):
     return array
 
 
-def evaluate_field(value, field_name: str, x: np.ndarray, y: np.ndarray, minimum: float = 0.0) -> np.ndarray:
-    """Values of a :data:`NodalValues` field at the points (x, y)."""
+def evaluate_field(value, field_name: str, points: np.ndarray, minimum: float = 0.0) -> np.ndarray:
+    """Values of a :data:`NodalValues` field at ``points`` (m × d: x, y[, z] columns)."""
+    coordinates = dict(zip("xyz", np.asarray(points, dtype=float).T))
+    shape = (len(points),)
     if isinstance(value, str):
         from .expressions import compile_expression
 
-        values = compile_expression(value, field_name)(x=x, y=y)
+        values = compile_expression(value, field_name)(**coordinates)
     elif callable(value):
-        values = np.broadcast_to(np.asarray(value(x, y), dtype=float), x.shape).copy()
+        values = np.broadcast_to(np.asarray(value(*coordinates.values()), dtype=float), shape).copy()
     elif np.ndim(value) == 0:
-        values = np.full(x.shape, float(value))
+        values = np.full(shape, float(value))
     else:
-        if value.size != x.size:
-            raise SceneError(field_name, f"{value.size} nodal values for {x.size} contact nodes",
+        if value.size != shape[0]:
+            raise SceneError(field_name, f"{value.size} nodal values for {shape[0]} contact nodes",
                              "give one value per contact node, ordered as result.contact.coords")
         values = np.array(value)
     if not np.isfinite(values).all() or (values < minimum).any():
-        raise SceneError(field_name, f"values must be finite and ≥ {minimum}")
+        raise SceneError(field_name, f"values must be finite and ≥ {minimum}" if minimum > -np.inf
+                         else "the function returned NaN or infinity")
     return values
 
 
@@ -446,7 +517,7 @@ class Contact:
 
 @dataclass(frozen=True)
 class Scene:
-    """A complete contact problem of 2-D linear elastostatics."""
+    """A complete contact problem of 2-D or 3-D linear elastostatics (the mesh decides)."""
 
     body: Body
     materials: Material | dict[str, Material]
@@ -459,12 +530,29 @@ class Scene:
     def __post_init__(self):
         object.__setattr__(self, "dirichlet", tuple(self.dirichlet))
         object.__setattr__(self, "tractions", tuple(self.tractions))
-        object.__setattr__(self, "body_force", finite_vector(self.body_force, "body_force"))
+        object.__setattr__(self, "body_force", finite_vector(self.body_force, "body_force", (2, 3)))
         if not self.dirichlet:
             raise SceneError(
                 "dirichlet",
                 "no Dirichlet boundary: the body can move rigidly",
                 "fix at least one boundary, e.g. [[dirichlet]] boundary = 'bottom', ux = 0, uy = 0",
             )
+        self._check_dimension()
         if isinstance(self.materials, dict) and not self.materials:
             raise SceneError("materials", "empty", "give [material] E and nu")
+
+    def _check_dimension(self):
+        """Components a built-in body cannot have (mesh files are checked when assembled)."""
+        dim = {Rectangle: 2, Box: 3}.get(type(self.body.geometry))
+        if dim != 2:
+            return
+        for condition in self.dirichlet:
+            if condition.uz is not None:
+                raise SceneError(f"dirichlet[{condition.boundary}].uz", "a 2-D body has no component 3",
+                                 "prescribe only ux and uy")
+        for traction in self.tractions:
+            if traction.vector is not None and len(traction.vector) != 2:
+                raise SceneError(f"traction[{traction.boundary}].vector", "3 components for a 2-D body",
+                                 "give 2 numbers")
+        if len(self.body_force) != 2 and any(self.body_force):
+            raise SceneError("body_force", "3 components for a 2-D body", "give 2 numbers")

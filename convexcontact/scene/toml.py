@@ -18,6 +18,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 from .model import (
     Body,
+    Box,
     Contact,
     Coulomb,
     Dirichlet,
@@ -34,11 +35,13 @@ from .model import (
 )
 
 NUMBER, INTEGER, TEXT, PAIR = "a number", "an integer", "a string", "two numbers [a, b]"
+TRIPLE, INTEGERS3 = "three numbers [a, b, c]", "three integers [nx, ny, nz]"
+VECTOR, POINT = "two or three numbers (2-D or 3-D)", "a number (2-D) or a point [x, y, z] (3-D)"
 FIELD = "a number or a formula in x and y"
 TABLE, TABLES = "a table [name]", "an array of tables [[name]]"
 
 TOP = {
-    "name": TEXT, "body_force": PAIR, "body": TABLE, "material": TABLE, "materials": TABLE,
+    "name": TEXT, "body_force": VECTOR, "body": TABLE, "material": TABLE, "materials": TABLE,
     "dirichlet": TABLES, "traction": TABLES, "contact": TABLE, "obstacle": TABLE,
 }
 BODY = {"mesh": TEXT, "element": TEXT, "plane": TEXT}
@@ -46,16 +49,18 @@ RECTANGLE = {
     **BODY, "width": NUMBER, "height": NUMBER, "origin": PAIR, "nx": INTEGER, "ny": INTEGER,
     "grading": PAIR, "refine_x": NUMBER, "refine_y": TEXT,
 }
+BOX = {**BODY, "size": TRIPLE, "cells": INTEGERS3, "origin": TRIPLE, "grading": TRIPLE, "refine": TRIPLE}
 MATERIAL = {"E": NUMBER, "nu": NUMBER}
-DIRICHLET = {"boundary": TEXT, "ux": NUMBER, "uy": NUMBER}
-TRACTION = {"boundary": TEXT, "pressure": NUMBER, "vector": PAIR}
+DIRICHLET = {"boundary": TEXT, "ux": NUMBER, "uy": NUMBER, "uz": NUMBER}
+TRACTION = {"boundary": TEXT, "pressure": NUMBER, "vector": VECTOR}
 CONTACT = {"boundary": TEXT, "law": TEXT}
 MOTION = {"depth": NUMBER, "force": NUMBER, "tangential_force": NUMBER}
-PUNCH = {"shape": TEXT, "radius": NUMBER, "center": NUMBER, **MOTION}
+PUNCH = {"shape": TEXT, "radius": NUMBER, "center": POINT, **MOTION}
 OBSTACLES = {
     "flat": {"shape": TEXT, "gap": NUMBER, **MOTION},
     "parabolic": PUNCH,
     "cylinder": PUNCH,
+    "sphere": PUNCH,
     "expression": {"shape": TEXT, "expression": TEXT, **MOTION},
 }
 
@@ -75,7 +80,8 @@ LAWS = {
 
 EXAMPLES = {
     "body": '[body]\nmesh = "rectangle"\nwidth = 1.0\nheight = 1.0\nnx = 16\nny = 16',
-    "body.mesh": 'mesh = "rectangle" (built-in, boundaries left/right/bottom/top) or mesh = "part.msh"',
+    "body.mesh": 'mesh = "rectangle" (built-in, boundaries left/right/bottom/top), mesh = "box" (3-D, '
+                 'left/right/front/back/bottom/top) or mesh = "part.msh"',
     "material": "[material]\nE = 1.0\nnu = 0.3\n(or one [materials.NAME] table per mesh subdomain)",
     "E": "E = 1.0",
     "nu": "nu = 0.3",
@@ -127,13 +133,14 @@ def scene_from_dict(data: dict, base_dir: Path | str = ".") -> Scene:
 def _body(table, base_dir: Path) -> Body:
     mesh = _table(table, "body", None, required=("mesh",))["mesh"]
     _check_type(mesh, TEXT, "body.mesh")
-    if mesh == "rectangle":
-        keys = _table(table, "body", RECTANGLE, context=' with mesh = "rectangle"')
+    built_in = {"rectangle": (Rectangle, RECTANGLE), "box": (Box, BOX)}
+    if mesh in built_in:
+        keys = _table(table, "body", built_in[mesh][1], context=f' with mesh = "{mesh}"')
     else:
         keys = _table(table, "body", BODY, context=" with a mesh file")
     del keys["mesh"]
     options = {key: keys.pop(key) for key in ("element", "plane") if key in keys}
-    geometry = Rectangle(**keys) if mesh == "rectangle" else MeshFile(base_dir / mesh)
+    geometry = built_in[mesh][0](**keys) if mesh in built_in else MeshFile(base_dir / mesh)
     return Body(geometry, **options)
 
 
@@ -210,6 +217,11 @@ def _check_type(value, kind: str, path: str) -> None:
         INTEGER: isinstance(value, int) and not isinstance(value, bool),
         TEXT: isinstance(value, str),
         PAIR: isinstance(value, list) and len(value) == 2 and all(number(x) for x in value),
+        TRIPLE: isinstance(value, list) and len(value) == 3 and all(number(x) for x in value),
+        INTEGERS3: isinstance(value, list) and len(value) == 3
+        and all(isinstance(x, int) and not isinstance(x, bool) for x in value),
+        VECTOR: isinstance(value, list) and len(value) in (2, 3) and all(number(x) for x in value),
+        POINT: number(value) or (isinstance(value, list) and len(value) == 3 and all(number(x) for x in value)),
         FIELD: number(value) or isinstance(value, str),
         TABLE: isinstance(value, dict),
         TABLES: isinstance(value, list) and all(isinstance(x, dict) for x in value),

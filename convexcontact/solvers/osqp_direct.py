@@ -42,10 +42,15 @@ def _linear_rows(program: ConicProgram):
             blocks.append(sp.vstack([A[0] - A[1], A[0] + A[1]]))
             plan.append(("soc2", rows))
         else:
-            name = "a power cone" if cone.kind == "power" else f"a second-order cone of dimension {cone.dim}"
+            name = {
+                "power": "a power cone (normal compliance with exponent p > 1)",
+                3: "a second-order cone of dimension 3 (the exact 3-D friction cone ‖λ_T‖ ≤ s, or 2-D "
+                   "ε-regularized friction)",
+                4: "a second-order cone of dimension 4 (ε-regularized 3-D friction)",
+            }.get("power" if cone.kind == "power" else cone.dim, f"a second-order cone of dimension {cone.dim}")
             raise ConeNotSupported(
-                f"OSQP takes linear cones only; got {name}. Use solver='clarabel' or 'cvxpy' for 3-D friction, "
-                "ε-regularized friction or normal compliance with exponent p > 1."
+                f"OSQP takes linear cones only; got {name}. It is not approximated by a polygon: use "
+                "solver='clarabel' or 'cvxpy' (3-D Signorini without friction is a QP and works with OSQP)."
             )
     return sp.vstack(blocks, format="csc"), plan
 

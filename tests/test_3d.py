@@ -1,0 +1,212 @@
+"""3-D bodies: patch test, Hertz sphere, frictional punch with the exact isotropic cone, inputs, quadrature."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import skfem as fe
+
+import convexcontact as cc
+from convexcontact.analytic import hertz_sphere
+from convexcontact.fem.assembly import stiffness
+from convexcontact.fem.mesh import tensor_mesh, vector_basis
+from convexcontact.scene.library import HERTZ_SPHERE_FORCE, punch_3d
+from convexcontact.scene.library import hertz_sphere as hertz_scene
+from convexcontact.scene.model import Box
+from convexcontact.solvers import ConeNotSupported
+
+
+def patch(element: str, cells=(3, 3, 3), pressure: float = 0.1, body=None) -> cc.Scene:
+    """Box on a flat rigid foundation, uniform pressure on top, rollers on two sides."""
+    return cc.Scene(
+        name="patch3d",
+        body=body or cc.Body(Box(size=(1.0, 2.0, 1.0), cells=cells), element=element),
+        materials=cc.Material(E=1.0, nu=0.3),
+        dirichlet=(cc.Dirichlet("left", ux=0.0), cc.Dirichlet("front", uy=0.0)),
+        tractions=(cc.Traction("top", pressure=pressure),),
+        contact=cc.Contact("bottom", cc.Obstacle("flat")),
+    )
+
+
+def perturbed(hexes: bool) -> cc.Body:
+    """A box whose nodes move randomly, each coordinate only where the node is off the faces normal to
+    that axis: the faces stay plane, the contact face is meshed irregularly."""
+    upper = np.array([[1.0], [2.0], [1.0]])
+    mesh = tensor_mesh(*(np.linspace(0.0, top, 4) for top in upper.ravel()), quads=hexes)
+    p = mesh.p.copy()
+    movable = (p > 1e-9) & (p < upper - 1e-9)
+    p += movable * np.random.default_rng(0).uniform(-0.08, 0.08, p.shape)
+    return cc.Body(dataclasses.replace(mesh, doflocs=p), element="Q1" if hexes else "P1")
+
+
+@pytest.mark.parametrize("element, body", [("P1", None), ("Q1", None), ("P1", "perturbed"), ("Q1", "perturbed")])
+def test_uniform_pressure_patch(element, body):
+    """Case 1 in 3-D: the contact pressure is p at every node, on any mesh."""
+    scene = patch(element, body=perturbed(element == "Q1") if body else None)
+    result = cc.solve(scene, "clarabel")
+    assert result.status == "solved" and result.fem.dim == 3
+    assert np.abs(result.contact.pressure - 0.1).max() < 1e-7
+    assert result.normal_force == pytest.approx(0.1 * 2.0, rel=1e-9)  # p × area (a force, not per thickness)
+
+
+def test_p2_tetrahedra_need_the_weak_form():
+    """∫ψ = 0 for the vertices of P2 triangles: nodal contact is refused, the weak form is exact."""
+    with pytest.raises(cc.SceneError, match="weak") as error:
+        cc.prepare(patch("P2", cells=(1, 1, 1)))
+    assert error.value.field == "contact.non_penetration"
+    weak = dataclasses.replace(patch("P2", cells=(2, 2, 1)), contact=cc.Contact("bottom", law=cc.Signorini("weak")))
+    result = cc.solve(weak, "clarabel")
+    assert np.abs(result.contact.pressure - 0.1).max() < 1e-7
+
+
+def test_hertz_sphere():
+    """3-D Hertz (quarter model, 12³ graded P1 cells, 5.8k DOFs): a and p₀ within 5%.
+
+    Measured (docs/scenes.md): p_max +4.0 / +3.6 / +3.3 %, fitted a −1.6 / −0.6 / +0.1 % at
+    12 / 16 / 20 cells; examples/hertz_sphere.py runs the finer meshes.
+    """
+    result = cc.solve(hertz_scene(12), "clarabel")
+    a, p0 = hertz_sphere(HERTZ_SPHERE_FORCE, 1.0, 1.0, 0.3)
+    assert result.certificate.passes(1e-8)
+    assert 4 * result.normal_force == pytest.approx(HERTZ_SPHERE_FORCE, rel=1e-8)  # force control
+    assert result.max_pressure == pytest.approx(p0, rel=0.05)
+    assert result.contact_half_width == pytest.approx(a, rel=0.05)
+    fitted_p0, fitted_a = fit_hertz(result)
+    assert fitted_p0 == pytest.approx(p0, rel=0.05) and fitted_a == pytest.approx(a, rel=0.05)
+
+
+def fit_hertz(result) -> tuple[float, float]:
+    """p0, a of p² = p0²(1 − r²/a²) fitted to the nodes carrying more than 30% of the peak."""
+    p, r = result.contact.pressure, result.contact.radius
+    inside = p > 0.3 * p.max()
+    (c0, c1), *_ = np.linalg.lstsq(np.column_stack([np.ones(inside.sum()), r[inside] ** 2]), p[inside] ** 2, rcond=None)
+    return float(np.sqrt(c0)), float(np.sqrt(-c0 / c1))
+
+
+def swapped(contact) -> np.ndarray:
+    """Index of each contact node's mirror image under x ↔ y."""
+    key = {tuple(np.round(xyz, 9)): i for i, xyz in enumerate(contact.coords)}
+    return np.array([key[tuple(np.round(xyz[[1, 0, 2]], 9))] for xyz in contact.coords])
+
+
+@pytest.fixture(scope="module")
+def coulomb_punch():
+    """Rounded punch, Coulomb F = 0.3, quarter model of Q1 hexes (symmetric under x ↔ y): primal and dual."""
+    scene = punch_3d(10, law=cc.Coulomb(friction=0.3, tol=1e-7))
+    return cc.prepare(scene, "primal").solve("cvxpy"), cc.prepare(scene, "dual").solve("clarabel")
+
+
+def test_coulomb_punch_stick_zone(coulomb_punch):
+    """Stick in the middle, slip at the edge, ‖λ_T‖ = Fλ_N in slip, ≤ everywhere, symmetric under x ↔ y."""
+    result = coulomb_punch[0]
+    assert result.status == "solved" and result.certificate.passes(1e-6)
+    c = result.contact
+    stick, slip = c.status == "stick", c.status == "slip"
+    assert stick.sum() >= 3 and slip.sum() >= 3
+    assert c.radius[stick].max() < c.radius[slip].min()  # a central stick zone, a slip ring
+    assert stick[np.argmin(c.radius)]  # the node on the axis sticks
+    p_max = c.pressure.max()
+    magnitude = c.friction_magnitude
+    assert c.friction.shape == (result.fem.contact.m, 2)
+    assert np.abs(magnitude[slip] - 0.3 * c.pressure[slip]).max() < 1e-6 * p_max
+    assert (magnitude <= 0.3 * c.pressure + 1e-8 * p_max).all()
+    mirror = swapped(c)
+    assert (c.status[mirror] == c.status).all()
+    assert np.abs(c.friction[mirror][:, ::-1] - c.friction).max() < 1e-5 * p_max  # t1 = x, t2 = y swap too
+    # the shear points along the radius (axisymmetric problem): no circumferential component
+    radial = c.coords[:, :2] / np.maximum(c.radius, 1e-300)[:, None]
+    circumferential = radial[:, 0] * c.friction[:, 1] - radial[:, 1] * c.friction[:, 0]
+    assert np.abs(circumferential).max() < 0.05 * magnitude.max()
+
+
+def test_coulomb_punch_primal_and_dual_agree(coulomb_punch):
+    primal, dual = coulomb_punch
+    assert dual.certificate.worst < 1e-6
+    p_max = primal.contact.pressure.max()
+    assert np.abs(primal.contact.pressure - dual.contact.pressure).max() < 1e-5 * p_max
+    assert np.abs(primal.contact.friction - dual.contact.friction).max() < 1e-5 * p_max
+    assert (primal.contact.status == dual.contact.status).all()
+
+
+def test_tresca_clarabel_and_cvxpy_agree():
+    """The exact SOC(3) friction cone through both paths: ‖λ_T‖ = s where the point slips."""
+    model = cc.prepare(punch_3d(6, law=cc.Tresca(slip_bound=0.004)), "primal")
+    assert {cone.dim for cone in model.program.cones if cone.kind == "soc"} == {3}
+    native, modelled = model.solve("clarabel"), model.solve("cvxpy")
+    for result in (native, modelled):
+        assert result.certificate.passes(1e-6)
+    slip = native.contact.status == "slip"
+    assert slip.any() and (native.contact.status == "stick").any()
+    assert np.abs(native.contact.friction_magnitude[slip] - 0.004).max() < 1e-6 * native.max_pressure
+    assert np.abs(native.contact.friction - modelled.contact.friction).max() < 1e-5 * native.max_pressure
+    assert np.abs(native.contact.pressure - modelled.contact.pressure).max() < 1e-5 * native.max_pressure
+
+
+def test_osqp_refuses_the_3d_friction_cone_and_solves_3d_signorini():
+    with pytest.raises(ConeNotSupported, match="3-D friction cone"):
+        cc.solve(punch_3d(2, law=cc.Tresca(slip_bound=0.01)), "osqp", formulation="primal")
+    result = cc.solve(patch("Q1", cells=(2, 2, 2)), "osqp")
+    assert result.status == "solved" and np.abs(result.contact.pressure - 0.1).max() < 1e-7
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda s: dataclasses.replace(s, dirichlet=(cc.Dirichlet("left", ux=0.0, uz=0.1),)), None),
+    (lambda s: dataclasses.replace(s, tractions=(cc.Traction("top", vector=(0.0, -0.1)),)), "traction[top].vector"),
+    (lambda s: dataclasses.replace(s, body_force=(0.0, 1.0)), "body_force"),
+    (lambda s: dataclasses.replace(s, body=cc.Body(s.body.geometry, plane="stress")), "body.plane"),
+    (lambda s: dataclasses.replace(s, contact=cc.Contact("bottom", cc.Obstacle("parabolic", radius=1.0, center=0.5))),
+     "obstacle.center"),
+    (lambda s: dataclasses.replace(s, contact=cc.Contact("bottom", cc.Obstacle("cylinder", radius=9.0))),
+     "obstacle.shape"),
+])
+def test_bad_3d_input_names_the_field(change, field):
+    if field is None:  # a valid 3-D scene: uz is accepted
+        assert cc.prepare(change(patch("P1", cells=(1, 1, 1)))).fem.dim == 3
+        return
+    with pytest.raises(cc.SceneError) as error:
+        cc.prepare(change(patch("P1", cells=(1, 1, 1))))
+    assert error.value.field == field
+
+
+def test_bad_component_input_names_the_field():
+    with pytest.raises(cc.SceneError) as error:
+        cc.prepare(dataclasses.replace(cc.library.pressure_patch(nx=2), dirichlet=(cc.Dirichlet("left", uz=0.0),)))
+    assert error.value.field == "dirichlet[left].uz"
+    for bad, field in (((1, 2, 3, 4), "traction[top].vector"), ((1.0,), "traction[top].vector")):
+        with pytest.raises(cc.SceneError) as error:
+            cc.Traction("top", vector=bad)
+        assert error.value.field == field
+    with pytest.raises(cc.SceneError) as error:
+        Box(cells=(2, 2))
+    assert error.value.field == "body.cells"
+
+
+@pytest.mark.parametrize("mesh_type, element", [
+    (fe.MeshTet1, "P1"), (fe.MeshTet1, "P2"), (fe.MeshHex1, "Q1"), (fe.MeshHex1, "Q2"),
+    (fe.MeshTri1, "P1"), (fe.MeshTri1, "P2"), (fe.MeshQuad1, "Q1"), (fe.MeshQuad1, "Q2"),
+])
+def test_chosen_quadrature_gives_the_default_stiffness(mesh_type, element):
+    """K with the chosen intorder equals scikit-fem's default (2·maxdeg) to round-off."""
+    solid = mesh_type in (fe.MeshTet1, fe.MeshHex1)
+    axes = [np.array([0.0, 0.3, 1.0]), np.array([0.0, 0.7, 2.0]) if solid else np.array([0.0, 0.5, 0.7, 2.0]),
+            np.array([0.0, 1.5])]
+    mesh = mesh_type.init_tensor(*axes[: 3 if solid else 2])
+    lame = (np.full(mesh.t.shape[1], 0.6), np.full(mesh.t.shape[1], 0.4))
+    chosen = vector_basis(mesh, element)
+    default = vector_basis(mesh, element, intorder=2 * chosen.elem.elem.maxdeg)
+    assert chosen.X.shape[-1] < default.X.shape[-1] or (element == "P1" and not solid)  # no 1-point rule on triangles
+    K, K_default = stiffness(chosen, lame), stiffness(default, lame)
+    assert abs(K - K_default).max() < 1e-12 * abs(K_default).max()
+
+
+def test_toml_box_scene_is_the_library_scene():
+    from pathlib import Path
+
+    from convexcontact.scene import load_scene
+
+    loaded = load_scene(Path(__file__).resolve().parents[1] / "examples" / "scenes" / "hertz_sphere.toml")
+    built = hertz_scene(12)
+    assert loaded.body == built.body and loaded.dirichlet == built.dirichlet
+    assert loaded.contact.obstacle.force == pytest.approx(built.contact.obstacle.force, rel=1e-12)
+    assert dataclasses.replace(loaded.contact.obstacle, force=None) == dataclasses.replace(built.contact.obstacle,
+                                                                                           force=None)
