@@ -1,4 +1,4 @@
-"""Command line: ``convexcontact demo`` and ``convexcontact run SCENE.toml``."""
+"""Command line: ``convexcontact demo``, ``run SCENE.toml``, ``compare``, ``study …`` and ``bench``."""
 
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ def table(result) -> str:
         ("scene", s["scene"]),
         ("free DOFs", s["ndof"]),
         ("contact nodes", s["n_contact_nodes"]),
+        ("formulation", f'{s["formulation"]} ({s["formulation_reason"]})'),
         ("solver", f'{s["solver"]} ({s["solver_status"]}, {s["iterations"]} iterations)'),
         ("status", s["status"]),
     ]
@@ -74,7 +75,8 @@ def main(argv=None) -> int:
         else:
             command.add_argument("--nx", type=int, default=80, help="elements across the block (default 80)")
         command.add_argument("--solver", default="clarabel", help="clarabel | osqp | cvxpy[:NAME]")
-        command.add_argument("--formulation", default="primal", help="primal | dual (Delassus, condensed on Γ_C)")
+        command.add_argument("--formulation", default="auto",
+                             help="auto (default: chosen from the problem's shape) | primal | dual (condensed on Γ_C)")
         command.add_argument("--tol", type=float, default=None, help="solver tolerance (default: the adapter's)")
         command.add_argument("--out", type=Path, default=Path("out") if name == "demo" else None,
                              help="folder for summary.json, solution.vtu, PNG plots")
@@ -83,6 +85,9 @@ def main(argv=None) -> int:
                                 add_help=False)
     study.add_argument("kind", choices=["work-precision", "sweep", "stability"])
     study.add_argument("arguments", nargs=argparse.REMAINDER)
+    bench = commands.add_parser("bench", help="contact solve ÷ one linear solve per size (--dim 2|3 --sizes …)",
+                                add_help=False)
+    bench.add_argument("arguments", nargs=argparse.REMAINDER)
     compare = commands.add_parser("compare", help="compare two summary.json files (contact-node fields)")
     compare.add_argument("reference", type=Path)
     compare.add_argument("other", type=Path)
@@ -91,6 +96,11 @@ def main(argv=None) -> int:
         from .studies import stability, sweeps, work_precision
 
         {"work-precision": work_precision, "sweep": sweeps, "stability": stability}[args.kind].main(args.arguments)
+        return 0
+    if args.command == "bench":
+        from .studies import bench
+
+        bench.main(args.arguments)
         return 0
     if args.command == "compare":
         from .studies.compare import compare_files, format_report

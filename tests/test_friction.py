@@ -48,18 +48,18 @@ def test_frictional_punch_sticks_in_the_middle_and_slips_at_the_edges(punches):
 def test_no_shear_as_the_body_becomes_incompressible(punches):
     """ν → 0.5 decouples normal and tangential response: negligible shear against the pressure.
 
-    ν = 0.49999 with Q2 on a large block on rollers (a clamped base couples the two, see
-    docs/friction.md). The Picard map itself is erratic there (edge nodes flip while the
-    inner solves of a body with λ/μ ≈ 1e5 are ill-conditioned): it converges with ω = ½ in
-    17 steps, and with ω = 1 it is reported stagnated — either way the reported iterate is
-    certified to the accuracy Clarabel reaches on this system (equilibrium ~1e-6, its
-    statuses AlmostSolved), and the shear is what this test is about.
+    ν = 0.4999 with Q2 on a large block on rollers (a clamped base couples the two, see
+    docs/friction.md). Closer to ½ the test is a coin toss: at ν = 0.49999 (λ/μ ≈ 1e5)
+    Clarabel's inner solves end AlmostSolved with equilibrium residuals of 1e-3 at most
+    Picard steps, and whether one iterate passes depends on round-off (it moved with an
+    equivalent rewriting of the stiffness form). At λ/μ ≈ 5e3 every inner solve is
+    accurate to ~1e-5 and the shear is as small (measured 0.034 p_max against 0.038).
     """
     compressible = punches[0.02]
     assert np.abs(compressible.contact.friction).max() > 0.3 * compressible.max_pressure
     law = Coulomb(friction=F, tol=1e-6, max_iterations=20)
     scene = dataclasses.replace(
-        frictional_punch(depth=0.02, nu=0.49999, element="Q2", law=law),
+        frictional_punch(depth=0.02, nu=0.4999, element="Q2", law=law),
         body=cc.Body(punch_mesh(0.02, width=16.0, depth=8.0, quads=True), "Q2"),
         dirichlet=(cc.Dirichlet("bottom", uy=0.0), cc.Dirichlet("left", ux=0.0), cc.Dirichlet("right", ux=0.0)),
     )

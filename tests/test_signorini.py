@@ -124,6 +124,7 @@ def test_certificate_detects_a_perturbed_solution(hertz_model, hertz_reference):
 
 def test_cvxpy_model_can_be_extended(hertz_model, hertz_reference):
     """A user constraint added to the cvxpy Problem is honoured and changes the answer."""
+    hertz_model = cc.prepare(hertz_model.fem.scene, "primal")  # the constraint is on the primal's unknowns
     cvx = hertz_model.cvxpy()
     advance = cvx.x[-1]  # force control: the obstacle's advance is the last unknown
     limit = 0.5 * hertz_reference.obstacle_advance / hertz_model.fem.scaling.displacement

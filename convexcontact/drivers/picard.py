@@ -14,17 +14,19 @@ residuals and the whole history — never an exception and never a silent succes
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import time
 from dataclasses import replace
 
 import numpy as np
+import scipy.sparse as sp
 
 from .. import solvers
 from ..fem.mollifier import mollifier
 from ..results.certificate import certify
 from ..scene.model import Coulomb, evaluate_field
-from .solve import Model, field_at_points, timed
+from .solve import CERTIFIED, Model, field_at_points, timed
 
 CYCLE_PERIODS = (2, 3, 4)
 WINDOW = 8
@@ -53,12 +55,28 @@ def initial_pressure(model: Model, solver: str, options: dict) -> np.ndarray:
     law: Coulomb = model.law
     fem = model.fem
     if law.initial_pressure is not None:
-        x, y = fem.contact.coords.T * fem.scaling.length
-        return evaluate_field(law.initial_pressure, "contact.initial_pressure", x, y) / fem.scaling.pressure
-    # frictionless first step: the obstacle is not pulled tangentially yet
-    frictionless = replace(fem.contact, tangential_coupling=None)
-    program, recover, _ = model.build(None, None, None, frictionless)
-    return recover(solvers.solve(program, solver, **options)).pressure
+        points = fem.contact.coords * fem.scaling.length
+        return evaluate_field(law.initial_pressure, "contact.initial_pressure", points) / fem.scaling.pressure
+    # frictionless first step: the obstacle is not pulled tangentially yet; the same for every
+    # friction coefficient, so a sweep (Model.with_law) solves it once per solver and options
+    key = ("frictionless", solver, repr(sorted(options.items())))
+    if key not in model.cache:
+        frictionless = replace(fem.contact, tangential_coupling=None)
+        program, recover, _ = model.build(None, None, None, frictionless)
+        model.cache[key] = recover(solvers.solve(program, solver, **options)).pressure
+    return model.cache[key]
+
+
+def reused_session(model: Model, solver: str, options: dict):
+    """One solver session per program structure, shared by the models of a sweep (Model.with_law):
+    only q or b differ between their programs, and the last answer warm-starts the next run."""
+    program = model.program
+    A = sp.csr_matrix(program.A)
+    key = ("session", solver, repr(sorted(options.items())), program.q.size, program.cones,
+           hashlib.sha1(A.indptr.tobytes() + A.indices.tobytes() + A.data.tobytes()).hexdigest())
+    if key not in model.cache:
+        model.cache[key] = solvers.session(program, solver, **options)
+    return model.cache[key]
 
 
 def outcome(changes: list[float], tol: float, states: list[np.ndarray]) -> str | None:
@@ -100,7 +118,7 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
     with timed(timings, "initial"):
         bound, unit_bound = pressure_map(model)
         s = bound(initial_pressure(model, solver, options))
-    session = solvers.session(model.program, solver, **options)
+    session = reused_session(model, solver, options)
     history, states, changes = [], [s], []
     best = None
     status = None
@@ -137,8 +155,10 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
                         "tol": law.tol, "reported_iteration": None}, "history": history}
     if best is None:  # the first inner solve failed: report it, judged against the bounds it was given
         return model.result(solution, timings, s, extra=extra)
-    # converged: the last iterate is the answer; otherwise the one closest to the Coulomb law
-    _, extra["picard"]["reported_iteration"], solution, fields, target = last if status == "converged" else best
+    # converged: the last iterate (the fixed point) if it passes the certificate; otherwise, or when an
+    # ill-conditioned inner solve left it failing, the iterate closest to the Coulomb law
+    chosen = last if status == "converged" and last[0] <= CERTIFIED else best
+    _, extra["picard"]["reported_iteration"], solution, fields, target = chosen
     with timed(timings, "postprocess"):
         result = model.result(solution, timings, target, fields=fields, extra=extra)
     if status != "converged":

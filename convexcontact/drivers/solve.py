@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -13,7 +13,7 @@ import scipy.sparse as sp
 from .. import solvers
 from ..conic import ConicProgram, ConicSolution, Recovery
 from ..fem.assembly import FEModel, assemble
-from ..fem.factorization import StiffnessFactorization
+from ..fem.factorization import Factorization, condense, factorize
 from ..fem.friction import FrictionPoints, friction_points
 from ..formulations import FORMULATIONS, contact_weights
 from ..results.certificate import certify
@@ -31,10 +31,8 @@ def timed(timings: dict, stage: str):
 def field_at_points(value, name: str, fem: FEModel, friction: FrictionPoints) -> np.ndarray:
     """A law's field (constant, formula, callable or nodal array) at the friction points, user units."""
     if isinstance(value, np.ndarray):
-        nodal = evaluate_field(value, name, fem.contact.coords[:, 0], fem.contact.coords[:, 1])
-        return friction.interpolation @ nodal
-    x, y = (friction.coords * fem.scaling.length).T
-    return evaluate_field(value, name, x, y)
+        return friction.interpolation @ evaluate_field(value, name, fem.contact.coords)
+    return evaluate_field(value, name, friction.coords * fem.scaling.length)  # x, y[, z] columns
 
 
 @dataclass
@@ -58,10 +56,23 @@ class Model:
     epsilon: float | None = None  # regularization of the friction term (scaled), None = exact
     compliance: tuple[float, float] | None = None  # (c_N, p) scaled, None = non-penetration
     timings: dict = field(default_factory=dict)
+    reason: str = "chosen by the user"  # why this formulation runs (see choose_formulation)
+    condensation: Reused | None = None  # K condensed onto Γ_C (dual), kept for with_law
+    cache: dict = field(default_factory=dict)  # results that do not depend on the law's coefficients
 
     @property
     def law(self):
         return self.fem.scene.contact.law
+
+    def with_law(self, law) -> Model:
+        """This model under another contact law, for sweeps (F, slip bounds, ε): the assembly,
+        the contact trace and K's condensation are reused; only the program is rebuilt."""
+        scene = replace(self.fem.scene, contact=replace(self.fem.scene.contact, law=law))
+        fem = replace(self.fem, scene=scene)
+        fem.__dict__.update({k: self.fem.__dict__[k] for k in ("K", "f") if k in self.fem.__dict__})  # cached slices
+        model = formulate(fem, self.formulation, {}, self.condensation, self.reason)
+        model.cache = self.cache  # shared: the frictionless first Picard step is the same for every law
+        return model
 
     def cvxpy(self) -> solvers.cvxpy_model.CvxpyModel:
         """The cvxpy Problem of this model, to inspect or extend before :meth:`solve`."""
@@ -94,6 +105,9 @@ class Model:
         the scene's own contact conditions) may rightly fail; the status is left as is.
         """
         fem = self.fem
+        if self.formulation == "dual":  # by weak duality an unbounded dual is an infeasible primal, and back
+            swapped = {"unbounded": "infeasible", "infeasible": "unbounded"}
+            solution = replace(solution, status=swapped.get(solution.status, solution.status))
         common = {
             "fem": fem,
             "solver": solution.solver,
@@ -101,7 +115,7 @@ class Model:
             "iterations": solution.iterations,
             "timings": timings,
             "formulation": self.formulation,
-            "extra": extra or {},
+            "extra": {"formulation_reason": self.reason, **(extra or {})},
         }
         usable = solution.solved or (solution.status == "failed" and np.isfinite(solution.x).all()
                                      and np.isfinite(solution.z).all())
@@ -166,15 +180,63 @@ def failure_message(solution: ConicSolution) -> str:
     return f"{solution.solver} returned {solution.solver_status}: {hint}"
 
 
-def prepare(scene: Scene, formulation: str = "primal") -> Model:
-    """Assemble and formulate ``scene``; ``formulation`` is "primal" or "dual" (Delassus)."""
-    if formulation not in FORMULATIONS:
-        raise SceneError("formulation", f"unknown {formulation!r}", f"use one of {sorted(FORMULATIONS)}")
+INCOMPRESSIBLE = 1000.0
+"""λ/μ (ν ≈ 0.4995) from which "auto" keeps the primal: on the Cattaneo–Mindlin scene the
+dual's certificate was 1e-9 at ν = 0.499 (λ/μ = 499), 9e-5 at 0.4999 and 3e-2 at 0.49999."""
+
+DENSE_LIMIT = 3000
+"""Most contact unknowns (rows of B) the condensed program takes: its W is dense, so
+memory grows as m² (72 MB here) and each interior-point iteration factors it (~m³/3)."""
+
+
+def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
+    """The formulation "auto" runs, and why (before knowing whether K is singular)."""
+    if compliance_of(law) is not None:
+        return "primal", "normal compliance is posed in the primal only"
+    lam, mu = fem.lame
+    if np.max(lam / mu) >= INCOMPRESSIBLE:
+        return "primal", (f"near-incompressible (λ/μ up to {np.max(lam / mu):.0f}): the condensed program loses "
+                          "accuracy with the conditioning of W, the primal does not")
+    columns = contact_columns(fem).size
+    if columns == 0:
+        return "primal", "no contact node has a free DOF: nothing to condense onto"
+    if unknowns > DENSE_LIMIT:
+        return "primal", (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}: the dense condensed program would "
+                          "cost more than the sparse one")
+    if 4 * columns > fem.n_free:
+        return "primal", f"the contact nodes carry {columns} of the {fem.n_free} DOFs: too many to gain by condensing"
+    reuse = " and is reused by every Picard step" if isinstance(law, Coulomb) else ""
+    return "dual", (f"{unknowns} contact unknowns beside {fem.n_free} DOFs: K is condensed onto Γ_C once "
+                    f"(Delassus operator W){reuse}, then the program is small and dense")
+
+
+def contact_columns(fem: FEModel) -> np.ndarray:
+    """Free DOFs of the contact nodes: the columns of N, T and R, where K is condensed to."""
+    position = np.full(fem.K_full.shape[0], -1)
+    position[fem.free] = np.arange(fem.n_free)
+    columns = position[fem.contact.dofs.ravel()]
+    return np.unique(columns[columns >= 0])
+
+
+def prepare(scene: Scene, formulation: str = "auto") -> Model:
+    """Assemble and formulate ``scene``.
+
+    ``formulation``: "primal" (the sparse program over all DOFs), "dual" (condensed onto
+    the contact multipliers with the Delassus operator) or "auto", which picks one from
+    the problem's shape and records why in ``Model.reason``.
+    """
+    if formulation not in (*FORMULATIONS, "auto"):
+        raise SceneError("formulation", f"unknown {formulation!r}", f"use one of {sorted(FORMULATIONS)} or 'auto'")
     timings: dict = {}
     with timed(timings, "assembly"):
         fem = assemble(scene)
+    return formulate(fem, formulation, timings)
+
+
+def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, reason: str = "chosen by the user"):
+    """The Model of an assembled scene (``condensation``: K's, when already built)."""
     with timed(timings, "formulation"):
-        law = scene.contact.law
+        law = fem.scene.contact.law
         C = contact_weights(fem.contact, law.non_penetration)
         friction = slip_bound = epsilon = None
         if has_friction(law):
@@ -188,7 +250,21 @@ def prepare(scene: Scene, formulation: str = "primal") -> Model:
         if compliance_of(law) is not None:
             c_N, p = compliance_of(law).stiffness, compliance_of(law).exponent
             compliance = (c_N * fem.scaling.displacement**p / fem.scaling.pressure, p)
-        options = {"factorization": StiffnessFactorization(fem.K)} if formulation == "dual" else {}
+    if formulation == "auto":
+        unknowns = fem.contact.m + (friction.R.shape[0] if friction is not None else 0)
+        formulation, reason = choose_formulation(fem, law, unknowns)
+        if formulation == "dual":
+            try:
+                condensation = condensation or condensed(fem, timings)
+            except SceneError as error:
+                if error.field != "dirichlet":
+                    raise
+                formulation, reason = "primal", "K is singular (the contact holds a rigid motion): nothing to condense"
+    elif formulation == "dual":
+        condensation = condensation or condensed(fem, timings)
+    options = {"factorization": condensation if isinstance(condensation, Reused) else Reused(condensation)
+               } if formulation == "dual" else {}
+    with timed(timings, "formulation"):
 
         def build(friction, slip_bound, epsilon, contact=fem.contact):
             return FORMULATIONS[formulation](fem.K, fem.f, contact, C, friction, slip_bound, epsilon, compliance,
@@ -196,10 +272,38 @@ def prepare(scene: Scene, formulation: str = "primal") -> Model:
 
         program, recover, bound_update = build(friction, slip_bound, epsilon)
     return Model(fem, formulation, C, friction, slip_bound, program, recover, bound_update, build, epsilon,
-                 compliance, timings)
+                 compliance, timings, reason, options.get("factorization"))
 
 
-def solve(scene: Scene, solver: str = "clarabel", formulation: str = "primal", **options) -> ContactResult:
+class Reused:
+    """K's factorization or condensation, keeping the last W = B K⁻¹ Bᵀ: a sweep over the law's
+    coefficients rebuilds the dual program with the same B, and W is then not recomputed."""
+
+    def __init__(self, factorization: Factorization):
+        self.factorization = factorization
+        self._key, self._W = None, None
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        return self.factorization.solve(b)
+
+    def schur(self, B: sp.spmatrix) -> np.ndarray:
+        B = sp.csr_matrix(B)
+        key = (B.shape, B.indptr.tobytes(), B.indices.tobytes(), B.data.tobytes())
+        if key != self._key:
+            self._key, self._W = key, self.factorization.schur(B)
+        return self._W
+
+
+def condensed(fem: FEModel, timings: dict):
+    """K condensed onto the contact DOFs (one sparse factorization; see :func:`~convexcontact.fem.factorization.condense`)."""
+    columns = contact_columns(fem)
+    with timed(timings, "condensation"):
+        if 0 < columns.size < fem.n_free:
+            return condense(fem.K, columns, dim=fem.dim)
+        return factorize(fem.K, dim=fem.dim)  # nothing to condense from or onto: W from K's factors
+
+
+def solve(scene: Scene, solver: str = "clarabel", formulation: str = "auto", **options) -> ContactResult:
     """Solve ``scene`` exactly with ``solver``; see :meth:`Model.solve`."""
     solvers.check_name(solver)
     return prepare(scene, formulation).solve(solver, **options)

@@ -1,4 +1,4 @@
-"""Active-set polish of an interior-point answer, for programs with linear cones only.
+"""Active-set polish of an interior-point answer, for programs with polyhedral cones.
 
 An interior-point solver stops at a tolerance relative to the whole problem, so rows
 whose forces are small beside the largest (soft subdomains, tiny elements, zero load)
@@ -8,6 +8,9 @@ OSQP's polishing. Rows the interior point left unresolved (z and s both tiny) ca
 the first guess wrong, so a few primal-dual active-set rounds follow: violated rows
 join, rows with negative multipliers leave. The answer is kept only if it is primal and
 dual feasible.
+
+A 2-D second-order cone |s₁| ≤ s₀ (2-D friction) is the pair of half-planes s₀ − s₁ ≥ 0,
+s₀ + s₁ ≥ 0, so such programs are polished as the equivalent linear program.
 """
 
 from __future__ import annotations
@@ -15,10 +18,11 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..conic import ConicProgram, ConicSolution
+from ..conic import ConicProgram, ConicSolution, nonnegative
 
 FEASIBLE = 1e-10
 """Largest violation (relative to the answer's scale) a polished answer may have."""
@@ -26,10 +30,87 @@ ROUNDS = 10
 """Active-set rounds before polishing gives up (and the interior-point answer stands)."""
 
 
+def kkt_solve(P: sp.spmatrix, q: np.ndarray, A: sp.csr_matrix, b: np.ndarray):
+    """(x, z) of P x + Aᵀ z = −q, A x = b, or None when singular or solved too inaccurately.
+
+    When every row of A fixes one variable (bounds: the dual's multipliers), the variables
+    left free solve P_FF x_F = −q_F − P_FX x_X alone: on a dense P (a condensed program) a
+    Cholesky factorization of P_FF is far cheaper than a sparse LU of the whole KKT matrix.
+    """
+    n = P.shape[0]
+    fixed = A.indices
+    if (np.diff(A.indptr) == 1).all() and np.unique(fixed).size == fixed.size and dense(P):
+        x = np.zeros(n)
+        x[fixed] = b / A.data
+        free = np.setdiff1d(np.arange(n), fixed)
+        P_dense = P.toarray()
+        try:
+            factor = sla.cho_factor(P_dense[np.ix_(free, free)])
+        except sla.LinAlgError:
+            return None
+        x[free] = sla.cho_solve(factor, -q[free] - P_dense[np.ix_(free, fixed)] @ x[fixed])
+        z = -(P_dense[fixed] @ x + q[fixed]) / A.data
+        return (x, z) if np.isfinite(x).all() and np.isfinite(z).all() else None
+    kkt = sp.bmat([[P, A.T], [A, None]], format="csc")
+    rhs = np.concatenate([-q, b])
+    try:
+        lu = spla.splu(kkt)
+    except RuntimeError:  # singular: dependent active rows or an unheld rigid motion
+        return None
+    answer = lu.solve(rhs)
+    answer += lu.solve(rhs - kkt @ answer)  # one step of refinement for ill-conditioned K (ν → ½)
+    residual = np.abs(rhs - kkt @ answer).max(initial=0.0)
+    if not np.isfinite(answer).all() or residual > FEASIBLE * max(np.abs(rhs).max(initial=0.0), 1.0):
+        return None  # the KKT system is solved too inaccurately to trust
+    return answer[:n], answer[n:]
+
+
+def dense(P: sp.spmatrix) -> bool:
+    """Whether P is a dense block (a condensed program) rather than a sparse FE matrix."""
+    n = P.shape[0]
+    return n >= 100 and P.nnz >= 0.25 * n * n
+
+
+def half_planes(program: ConicProgram) -> sp.csr_matrix | None:
+    """Row map H taking the slacks of a program with zero, nonnegative and 2-D SOC cones to
+    those of its linear equivalent (each SOC pair (s₀, s₁) ↦ (s₀ − s₁, s₀ + s₁)); None if
+    a cone is not polyhedral. H Hᵀ = 2 on SOC rows, so H⁻¹ = ½Hᵀ there."""
+    diagonal = np.ones(program.n_constraints)
+    pairs = []
+    for cone, rows in program.blocks():
+        if cone.kind == "soc" and cone.dim == 2:
+            pairs.append(rows.start)
+        elif cone.kind not in ("zero", "nonnegative"):
+            return None
+    first = np.array(pairs, dtype=int)
+    H = sp.lil_matrix(sp.diags(diagonal))
+    H[first, first + 1] = -1.0
+    H[first + 1, first] = 1.0
+    return H.tocsr()
+
+
 def polish(program: ConicProgram, solution: ConicSolution) -> ConicSolution:
     """The polished solution, or ``solution`` unchanged when polishing does not apply or fails."""
-    if not program.is_linear or not solution.solved or not np.isfinite(solution.z).all():
+    H = half_planes(program)
+    if H is None or not solution.solved or not np.isfinite(solution.z).all():
         return solution
+    if program.is_linear:
+        return _polish_linear(program, solution)
+    # the linear equivalent: slacks H s, multipliers H⁻ᵀ z (= ½ H z on pairs, z elsewhere)
+    soc_rows = np.asarray(abs(H).sum(axis=1)).ravel() > 1
+    half = np.where(soc_rows, 0.5, 1.0)
+    cones = tuple(nonnegative(c.dim) if c.kind == "soc" else c for c in program.cones)
+    linear = replace(program, A=sp.csr_matrix(H @ program.A), b=H @ program.b, cones=cones)
+    pairs = np.flatnonzero(soc_rows & (np.asarray(H.sum(axis=1)).ravel() == 0))  # first rows: s₀ − s₁
+    polished = _polish_linear(linear, replace(solution, z=half * (H @ solution.z), s=H @ solution.s), pairs)
+    if not polished.info.get("polished"):
+        return solution
+    return replace(polished, z=H.T @ polished.z, s=half * (H.T @ polished.s))
+
+
+def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.ndarray = ()) -> ConicSolution:
+    """Polish a linear program; ``pairs``: first rows of the half-plane pairs of a 2-D cone, of
+    which at most one is active (both active pin s₀ = s₁ = 0 twice: a singular KKT system)."""
     equality = np.zeros(program.n_constraints, bool)
     for cone, rows in program.blocks():
         equality[rows] = cone.kind == "zero"
@@ -38,17 +119,15 @@ def polish(program: ConicProgram, solution: ConicSolution) -> ConicSolution:
     active = touches & (equality | (solution.z > solution.s))
     scale_s = max(np.abs(program.b).max(initial=0.0), np.abs(solution.x).max(initial=0.0), 1.0)
     scale_z = max(np.abs(solution.z).max(initial=0.0), 1.0)
-    n = program.n_variables
+    pairs, z = np.asarray(pairs, dtype=int), solution.z
     for _ in range(ROUNDS):
-        kkt = sp.bmat([[program.P, A[active].T], [A[active], None]], format="csc")
-        try:
-            answer = spla.splu(kkt).solve(np.concatenate([-program.q, program.b[active]]))
-        except RuntimeError:  # singular: dependent active rows or an unheld rigid motion
+        both = pairs[active[pairs] & active[pairs + 1]]
+        active[np.where(z[both] < z[both + 1], both, both + 1)] = False
+        answer = kkt_solve(program.P, program.q, A[active], program.b[active])
+        if answer is None:
             return solution
-        if not np.isfinite(answer).all():
-            return solution
-        x, z = answer[:n], np.zeros(program.n_constraints)
-        z[active] = answer[n:]
+        x, z = answer[0], np.zeros(program.n_constraints)
+        z[active] = answer[1]
         s = np.where(equality, 0.0, program.b - A @ x)
         violated = touches & ~equality & (s < -FEASIBLE * scale_s)
         negative = active & ~equality & (z < -FEASIBLE * scale_z)

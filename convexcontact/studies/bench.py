@@ -1,0 +1,248 @@
+"""``convexcontact bench``: a contact solve against one linear elastic solve, per mesh size.
+
+For each size and law (Signorini, Tresca, Coulomb) on the punch scene, one fresh
+process assembles the scene, then times (a) one linear elastic solve, K's sparse
+factorization plus u = K⁻¹f, and (b) the contact solve on the same assembly: the
+condensation (if the formulation condenses), the formulation, the solver (the whole
+Picard loop for Coulomb) and the certificate. The ratio (b) ÷ (a), measured in one run,
+is what DESIGN.md calls "fast"; absolute times on shared machines are not stable.
+
+Peak memory is the growth of the process's peak resident set over the assembled model,
+for (a) and (b) separately: the kernel's peak counter is reset (``/proc/self/clear_refs``)
+after the assembly and after (a), so neither includes the other nor the assembly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+LAWS = ("signorini", "tresca", "coulomb")
+SIZES = {2: (1e4, 1e5, 1e6), 3: (1e4, 1e5, 3e5)}
+COLUMNS = ("dim", "law", "dofs", "contact_nodes", "unknowns", "formulation", "solver", "status", "iterations",
+           "assembly", "linear", "condensation", "contact_solve", "contact_total", "ratio", "memory_linear_mb",
+           "memory_contact_mb", "memory_ratio", "certificate")
+
+
+ENVIRONMENT = {"OPENBLAS_NUM_THREADS": "1", **os.environ}
+"""The cases' environment: numpy's OpenBLAS on one thread unless the user says otherwise. With two
+threads on the shared 2-vCPU machines the dense Cholesky of a 2028² S took 0.7–2.8 s against 0.1 s
+(MKL PARDISO keeps its own threads)."""
+
+
+def law_of(name: str):
+    from ..scene.model import Coulomb, Signorini, Tresca
+
+    return {"signorini": Signorini(), "tresca": Tresca(slip_bound=0.002), "coulomb": Coulomb(friction=0.3)}[name]
+
+
+def punch_scene(dim: int, law: str, dofs: float):
+    """The benchmark's punch: a rigid paraboloid (R = 1) indents a clamped block's top by 0.01.
+
+    2-D: the block [−2, 2] × [−2, 0] with nx × nx/2 P1 triangles graded 4:1 towards the
+    punch; 3-D: the quarter model of :func:`~convexcontact.scene.library.punch_3d`, Q1.
+    ``dofs`` sets the mesh: about 2(nx + 1)(nx/2 + 1) or 3(cells + 1)³ DOFs.
+    """
+    import dataclasses
+
+    from ..scene.library import hertz_punch, punch_3d
+    from ..scene.model import Contact, Obstacle
+
+    if dim == 3:
+        return punch_3d(cells=max(2, round((dofs / 3) ** (1 / 3)) - 1), law=law_of(law), element="Q1")
+    nx = max(4, 2 * round(np.sqrt(dofs) / 2))
+    scene = hertz_punch(nx=nx, law=law_of(law))
+    contact = Contact("top", Obstacle("parabolic", radius=1.0, depth=0.01), law_of(law))
+    return dataclasses.replace(scene, name="punch", contact=contact)
+
+
+def _reset_peak() -> bool:
+    """Reset the kernel's peak-RSS counter (VmHWM); False where the kernel does not allow it."""
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+        return True
+    except OSError:
+        return False
+
+
+def _rss_mb(key: str) -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(key + ":"):
+            return float(line.split()[1]) / 1024
+    return float("nan")
+
+
+def measure(dim: int, law: str, dofs: float, formulation: str, solver: str) -> dict:
+    """One benchmark case in this process (call it in a fresh one: see :func:`run`)."""
+    from ..drivers.solve import formulate
+    from ..fem.assembly import assemble
+    from ..fem.factorization import condense, factorize
+
+    scene = punch_scene(dim, law, dofs)
+    start = time.perf_counter()
+    fem = assemble(scene)
+    K, f = fem.K, fem.f
+    assembly = time.perf_counter() - start
+    # load the sparse solver's libraries and thread pools before any timing (MKL: ~0.1–0.5 s once)
+    small = np.arange(min(fem.n_free, 300))
+    condense(K[small][:, small], small[-10:], dim=fem.dim).solve(f[small])
+
+    base = _rss_mb("VmRSS")
+    resettable = _reset_peak()
+    start = time.perf_counter()
+    u = factorize(K, dim=fem.dim).solve(f)
+    linear = time.perf_counter() - start
+    memory_linear = _rss_mb("VmHWM") - base
+    del u
+
+    base = _rss_mb("VmRSS")
+    _reset_peak()
+    timings: dict = {}
+    start = time.perf_counter()
+    model = formulate(fem, formulation, timings)
+    result = model.solve(solver)
+    total = time.perf_counter() - start
+    memory_contact = _rss_mb("VmHWM") - base
+    unknowns = fem.contact.m + (model.friction.R.shape[0] if model.friction is not None else 0)
+    return {
+        "dim": dim, "law": law, "dofs": fem.n_free, "contact_nodes": fem.contact.m, "unknowns": unknowns,
+        "formulation": model.formulation, "solver": solver, "status": result.status,
+        "iterations": result.extra.get("picard", {}).get("iterations", result.iterations),
+        "assembly": assembly, "linear": linear, "condensation": timings.get("condensation", 0.0),
+        "contact_solve": result.timings.get("solve", 0.0), "contact_total": total, "ratio": total / linear,
+        "memory_linear_mb": memory_linear if resettable else float("nan"),
+        "memory_contact_mb": memory_contact if resettable else float("nan"),
+        "memory_ratio": memory_contact / max(memory_linear, 1.0) if resettable else float("nan"),
+        "certificate": result.certificate.worst if result.certificate is not None else float("nan"),
+        "reason": model.reason, "timings": result.timings,
+    }
+
+
+def run(dim: int, sizes, laws=LAWS, formulation: str = "auto", solver: str = "clarabel", progress=print) -> list:
+    """All cases, each in a fresh Python process (clean caches, thread pools and peak memory)."""
+    rows = []
+    for dofs in sizes:
+        for law in laws:
+            case = json.dumps([dim, law, dofs, formulation, solver])
+            done = subprocess.run([sys.executable, "-m", "convexcontact.studies.bench", "--case", case],
+                                  check=False, capture_output=True, text=True, env=ENVIRONMENT)
+            if done.returncode != 0:
+                progress(f"{dim}-D {law} {dofs:.0e}: failed\n{done.stderr.strip()[-2000:]}")
+                continue
+            rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
+            progress(format_row(rows[-1]))
+    return rows
+
+
+def friction_sweep(dim: int, dofs: float, coefficients, solver: str = "clarabel", progress=print) -> dict:
+    """Coulomb solves for many friction coefficients: independent solves against one model reused
+    through :meth:`~convexcontact.drivers.solve.Model.with_law` (assembly, trace, condensation kept)."""
+    from ..drivers.solve import prepare
+    from ..scene.model import Coulomb
+
+    scene = punch_scene(dim, "coulomb", dofs)
+    start = time.perf_counter()
+    independent = [prepare(dataclass_replace_law(scene, Coulomb(friction=F))).solve(solver) for F in coefficients]
+    alone = time.perf_counter() - start
+    start = time.perf_counter()
+    model = prepare(scene)
+    reused = [model.with_law(Coulomb(friction=F)).solve(solver) for F in coefficients]
+    shared = time.perf_counter() - start
+    difference = max(float(np.abs(a.contact.pressure - b.contact.pressure).max() / a.max_pressure)
+                     for a, b in zip(independent, reused, strict=True))
+    row = {"dim": dim, "dofs": model.fem.n_free, "count": len(coefficients), "formulation": model.formulation,
+           "independent": alone, "reused": shared, "speedup": alone / shared, "max_pressure_difference": difference}
+    progress(f"{dim}-D sweep of {len(coefficients)} friction coefficients, {row['dofs']} DOFs ({row['formulation']}): "
+             f"independent {alone:.2f} s, one model {shared:.2f} s, {row['speedup']:.1f}× faster; "
+             f"pressures agree to {difference:.1e} p_max")
+    return row
+
+
+def dataclass_replace_law(scene, law):
+    import dataclasses
+
+    return dataclasses.replace(scene, contact=dataclasses.replace(scene.contact, law=law))
+
+
+def format_row(row: dict) -> str:
+    return (f"{row['dim']}-D {row['law']:>9} {row['dofs']:>8d} DOFs {row['unknowns']:>5d} unknowns "
+            f"{row['formulation']:>6}/{row['solver']:<8} {row['status']:>10} it {row['iterations']:>3}  "
+            f"assembly {row['assembly']:6.2f} s  linear {row['linear']:6.2f} s  contact {row['contact_total']:6.2f} s "
+            f"(condensation {row['condensation']:.2f}, solve {row['contact_solve']:.2f})  ratio {row['ratio']:5.2f}  "
+            f"memory {row['memory_contact_mb']:.0f}/{row['memory_linear_mb']:.0f} MB = {row['memory_ratio']:.2f}  "
+            f"certificate {row['certificate']:.1e}")
+
+
+def write_csv(rows: list, path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as out:
+        writer = csv.DictWriter(out, fieldnames=COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+    return path
+
+
+def plot(rows: list, path) -> Path:
+    """The ratio contact ÷ linear solve against DOFs, one line per (dimension, law)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..results.plots import save_figure
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for dim, law in sorted({(r["dim"], r["law"]) for r in rows}):
+        mine = sorted((r for r in rows if (r["dim"], r["law"]) == (dim, law)), key=lambda r: r["dofs"])
+        ax.plot([r["dofs"] for r in mine], [r["ratio"] for r in mine], "o-" if dim == 2 else "s--",
+                label=f"{dim}-D {law}")
+    for target, dim in ((2, 2), (3, 2), (5, 3), (8, 3)):
+        ax.axhline(target, color="0.7", lw=0.8, ls=":" if dim == 2 else "-.")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("free DOFs")
+    ax.set_ylabel("contact solve ÷ one linear solve")
+    ax.set_title("cost of contact against one linear elastic solve (grey: targets)")
+    ax.legend(fontsize=8)
+    return save_figure(fig, path)
+
+
+def main(argv=None) -> list:
+    """``convexcontact bench [--dim 2|3] [--sizes N …]``: contact against linear solve, per size."""
+    parser = argparse.ArgumentParser(prog="convexcontact bench", description=main.__doc__)
+    parser.add_argument("--dim", type=int, choices=(2, 3), default=2)
+    parser.add_argument("--sizes", type=float, nargs="+", default=None, help="target free DOFs (default: 1e4 … 1e6 "
+                        "in 2-D, 1e4 … 3e5 in 3-D)")
+    parser.add_argument("--laws", nargs="+", choices=LAWS, default=list(LAWS))
+    parser.add_argument("--formulation", default="auto", help="auto | primal | dual")
+    parser.add_argument("--solver", default="clarabel")
+    parser.add_argument("--out", default="out/bench", help="folder for bench_<dim>d.csv and .png")
+    parser.add_argument("--sweep", type=int, default=0, metavar="COUNT",
+                        help="instead: COUNT Coulomb coefficients in [0.1, 0.5] at the first size, independent "
+                        "solves against one reused model")
+    parser.add_argument("--case", help=argparse.SUPPRESS)  # internal: one case, in this process
+    args = parser.parse_args(argv)
+    if args.case:
+        print(json.dumps(measure(*json.loads(args.case))))
+        return []
+    if args.sweep:
+        return [friction_sweep(args.dim, (args.sizes or SIZES[args.dim])[0], np.linspace(0.1, 0.5, args.sweep),
+                               args.solver)]
+    rows = run(args.dim, args.sizes or SIZES[args.dim], args.laws, args.formulation, args.solver)
+    if rows:
+        print("wrote", write_csv(rows, Path(args.out) / f"bench_{args.dim}d.csv"), plot(rows, Path(args.out) /
+                                                                                         f"bench_{args.dim}d.png"))
+    return rows
+
+
+if __name__ == "__main__":
+    main()

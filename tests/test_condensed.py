@@ -1,0 +1,101 @@
+"""The condensed path (issue 5): automatic choice, agreement with the full program, reuse, bench."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+import convexcontact as cc
+from convexcontact.scene.library import hertz_punch, pressure_patch
+from convexcontact.scene.model import Coulomb, SceneError
+from convexcontact.studies import bench
+
+
+@pytest.mark.parametrize("dim, law", [(2, "signorini"), (2, "tresca"), (2, "coulomb"), (3, "signorini"),
+                                      (3, "tresca")])
+def test_condensed_and_full_agree_on_the_benchmark_scenes(dim, law):
+    """auto condenses the punch, and its answer is the full sparse program's to solver tolerance."""
+    scene = bench.punch_scene(dim, law, 3000 if dim == 2 else 1500)
+    auto = cc.prepare(scene)
+    assert auto.formulation == "dual" and "condensed" in auto.reason
+    condensed, full = auto.solve("clarabel"), cc.prepare(scene, "primal").solve("clarabel")
+    assert condensed.status == full.status == "solved"
+    # 2-D cones are polished to round-off; the 3-D friction cone is Clarabel's interior point alone (tol 1e-10)
+    assert condensed.certificate.passes(1e-8 if dim == 2 else 1e-6)
+    p_max, agree = full.contact.pressure.max(), 1e-6 if dim == 2 else 1e-5  # 3-D: two certificates of ~1e-7
+    assert np.abs(condensed.contact.pressure - full.contact.pressure).max() < agree * p_max
+    assert np.abs(condensed.displacement - full.displacement).max() < agree * np.abs(full.displacement).max()
+    if law != "signorini":
+        assert np.abs(condensed.contact.friction - full.contact.friction).max() < agree * p_max
+    assert condensed.summary()["formulation_reason"] == auto.reason
+
+
+def test_auto_keeps_the_primal_where_condensing_does_not_pay_or_cannot_work():
+    nearly_incompressible = dataclasses.replace(hertz_punch(nx=16), materials=cc.Material(E=1.0, nu=0.4999))
+    compliance = hertz_punch(nx=16, law=cc.NormalCompliance(stiffness=1e4))
+    one_element = pressure_patch(nx=1)  # every free DOF is on the contact boundary
+    for scene, words in ((nearly_incompressible, "incompressible"), (compliance, "compliance"),
+                         (one_element, "too many")):
+        model = cc.prepare(scene)
+        assert model.formulation == "primal" and words in model.reason
+        assert model.solve("clarabel").status == "solved"
+
+
+def test_a_singular_stiffness_falls_back_to_the_primal_under_auto_and_is_an_error_when_asked_for():
+    """A body held only by the contact and a roller: K is singular, yet the contact problem is well posed
+    in the primal (the obstacle holds it). Forcing the dual names the Dirichlet data."""
+    scene = dataclasses.replace(pressure_patch(nx=8), dirichlet=(cc.Dirichlet("left", ux=0.0),))
+    model = cc.prepare(scene)
+    assert model.formulation == "primal" and "singular" in model.reason
+    assert model.solve("clarabel").status == "solved"
+    with pytest.raises(SceneError) as error:
+        cc.prepare(scene, "dual")
+    assert error.value.field == "dirichlet"
+
+
+def test_an_infeasible_scene_is_reported_infeasible_by_the_dual_too():
+    """The dual of an infeasible contact problem is unbounded: reported as the primal's infeasibility."""
+    scene = dataclasses.replace(
+        pressure_patch(nx=4),
+        dirichlet=(cc.Dirichlet("bottom", ux=0.0, uy=0.0),),
+        contact=cc.Contact("bottom", cc.Obstacle("flat", gap=-0.01), cc.Signorini()),
+    )
+    assert cc.solve(scene, "clarabel", formulation="dual").status == "infeasible"
+
+
+def test_a_sweep_over_friction_reuses_the_model_and_matches_independent_solves():
+    scene = bench.punch_scene(2, "coulomb", 3000)
+    model = cc.prepare(scene)
+    for F in (0.2, 0.4):
+        law = Coulomb(friction=F)
+        reused = model.with_law(law).solve("clarabel")
+        alone = cc.solve(dataclasses.replace(scene, contact=dataclasses.replace(scene.contact, law=law)))
+        assert reused.status == alone.status == "solved"
+        assert reused.scene.contact.law.friction == F
+        np.testing.assert_allclose(reused.contact.pressure, alone.contact.pressure, atol=1e-9 * alone.max_pressure)
+        np.testing.assert_allclose(reused.contact.friction, alone.contact.friction, atol=1e-9 * alone.max_pressure)
+    # the second coefficient's Picard steps were all warm-started from the first one's answer
+    assert all(step["inner_iterations"] == 0 for step in reused.extra["history"])
+
+
+def test_the_2d_friction_cone_is_polished_to_an_exact_active_set_answer():
+    """A 2-D Tresca cone |λ_T| ≤ s is two half-planes: the dual's answer is polished (certificate near
+    round-off), and the polished answer is the interior-point one to its tolerance."""
+    model = cc.prepare(bench.punch_scene(2, "tresca", 3000), "dual")
+    polished, raw = model.solve("clarabel"), model.solve("clarabel", polishing=False)
+    assert polished.certificate.worst < 1e-11 < raw.certificate.worst
+    p_max = raw.contact.pressure.max()
+    assert np.abs(polished.contact.friction - raw.contact.friction).max() < 1e-6 * p_max
+
+
+def test_bench_measures_a_case_and_the_command_writes_its_table(tmp_path, capsys):
+    row = bench.measure(2, "tresca", 2000, "auto", "clarabel")
+    assert row["status"] == "solved" and row["certificate"] < 1e-6
+    assert row["ratio"] == pytest.approx(row["contact_total"] / row["linear"])
+    assert row["contact_total"] >= row["condensation"] + row["contact_solve"]
+    rows = bench.main(["--sizes", "2000", "--laws", "signorini", "--out", str(tmp_path)])
+    assert [r["law"] for r in rows] == ["signorini"] and rows[0]["formulation"] == "dual"
+    assert (tmp_path / "bench_2d.csv").read_text().count("\n") == 2
+    assert (tmp_path / "bench_2d.png").exists()
+    json.dumps(rows)  # the rows are plain data, as the CSV writer and the docs need
