@@ -85,22 +85,21 @@ def main(argv=None) -> int:
                                 add_help=False)
     study.add_argument("kind", choices=["work-precision", "sweep", "stability"])
     study.add_argument("arguments", nargs=argparse.REMAINDER)
-    bench = commands.add_parser("bench", help="contact solve ÷ one linear solve per size (--dim 2|3 --sizes …)",
-                                add_help=False)
-    bench.add_argument("arguments", nargs=argparse.REMAINDER)
+    commands.add_parser("bench", help="contact solve ÷ one linear solve per size (--dim 2|3 --sizes …, --sweep N)")
     compare = commands.add_parser("compare", help="compare two summary.json files (contact-node fields)")
     compare.add_argument("reference", type=Path)
     compare.add_argument("other", type=Path)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["bench"]:  # its options (--dim …) belong to its own parser
+        from .studies import bench
+
+        bench.main(argv[1:])
+        return 0
     args = parser.parse_args(argv)
     if args.command == "study":
         from .studies import stability, sweeps, work_precision
 
         {"work-precision": work_precision, "sweep": sweeps, "stability": stability}[args.kind].main(args.arguments)
-        return 0
-    if args.command == "bench":
-        from .studies import bench
-
-        bench.main(args.arguments)
         return 0
     if args.command == "compare":
         from .studies.compare import compare_files, format_report
