@@ -92,7 +92,9 @@ def half_planes(program: ConicProgram) -> sp.csr_matrix | None:
 def polish(program: ConicProgram, solution: ConicSolution) -> ConicSolution:
     """The polished solution, or ``solution`` unchanged when polishing does not apply or fails."""
     H = half_planes(program)
-    if H is None or not solution.solved or not np.isfinite(solution.z).all():
+    # an "almost solved" answer is polished too: a polished answer is primal and dual feasible with
+    # complementarity by construction, i.e. the program's exact optimum, whatever the solver said
+    if H is None or solution.status not in ("solved", "inaccurate") or not np.isfinite(solution.z).all():
         return solution
     if program.is_linear:
         return _polish_linear(program, solution)
@@ -132,6 +134,7 @@ def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.nda
         violated = touches & ~equality & (s < -FEASIBLE * scale_s)
         negative = active & ~equality & (z < -FEASIBLE * scale_z)
         if not violated.any() and not negative.any():
-            return replace(solution, x=x, z=z, s=np.maximum(s, 0.0), info={**solution.info, "polished": True})
+            return replace(solution, x=x, z=z, s=np.maximum(s, 0.0), status="solved",
+                           info={**solution.info, "polished": True})
         active = (active | violated) & ~negative
     return solution
