@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -46,6 +46,13 @@ class FEModel:
     def f(self) -> np.ndarray:
         """Load on the free DOFs, with the Dirichlet data moved to the right-hand side."""
         return (self.f_full - self.K_full @ self.prescribed)[self.free]
+
+    def with_law(self, law) -> FEModel:
+        """This model with another contact law: the law enters neither K, f nor the trace, so the
+        copy keeps them, including the free-DOF slices already cached."""
+        copy = replace(self, scene=self.scene.with_law(law))
+        copy.__dict__.update({name: self.__dict__[name] for name in ("K", "f") if name in self.__dict__})
+        return copy
 
     @property
     def dim(self) -> int:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -540,6 +540,10 @@ class Scene:
         self._check_dimension()
         if isinstance(self.materials, dict) and not self.materials:
             raise SceneError("materials", "empty", "give [material] E and nu")
+
+    def with_law(self, law) -> Scene:
+        """The same scene under another contact law (a sweep over F, slip bounds, ε, …)."""
+        return replace(self, contact=replace(self.contact, law=law))
 
     def _check_dimension(self):
         """Components a built-in body cannot have (mesh files are checked when assembled)."""

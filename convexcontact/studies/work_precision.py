@@ -87,10 +87,6 @@ def methods(scene: Scene, scaling) -> list[Method]:
     return found
 
 
-def with_law(scene: Scene, law) -> Scene:
-    return dataclasses.replace(scene, contact=dataclasses.replace(scene.contact, law=law))
-
-
 def wall_time(result: ContactResult) -> float:
     """Assembly + formulation + solve [s]."""
     return float(sum(result.timings.get(k, 0.0) for k in ("assembly", "formulation", "solve")))
@@ -151,7 +147,7 @@ def overkill(scene: Scene, law) -> tuple[ContactResult, str]:
     """Exact primal Clarabel solve at the tightest tolerance it reaches; the result and its label."""
     for tol in REFERENCE_TOLS:
         exact = law if not isinstance(law, Coulomb) else dataclasses.replace(law, tol=min(law.tol, 1e-10))
-        result = prepare(with_law(scene, exact)).solve("clarabel", tol=tol)
+        result = prepare(scene.with_law(exact)).solve("clarabel", tol=tol)
         if result.status == "solved":
             return result, f"overkill (exact, clarabel, tol {tol:g}, {result.ndof} dofs)"
     raise RuntimeError(f"overkill reference: Clarabel returned {result.status!r}: {result.message}")
@@ -193,7 +189,7 @@ def run(
                     law = dataclasses.replace(law, tol=max(law.tol, tol))
                 model, why = None, ""
                 try:
-                    model = prepare(with_law(scene, law), formulation)
+                    model = prepare(scene.with_law(law), formulation)
                 except SceneError as error:
                     why = str(error)
                 for solver in solvers:
