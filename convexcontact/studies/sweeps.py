@@ -22,7 +22,7 @@ import numpy as np
 from ..drivers.solve import prepare
 from ..results.result import ContactResult
 from ..scene.model import NormalCompliance, Scene, Signorini, has_friction
-from .work_precision import wall_time, with_law
+from .work_precision import wall_time
 
 
 @dataclasses.dataclass
@@ -61,7 +61,7 @@ def row(parameter: float, result: ContactResult, error: float | None) -> dict:
 
 
 def exact_solve(scene: Scene, solver: str, **options) -> ContactResult:
-    result = prepare(with_law(scene, exact_law(scene.contact.law))).solve(solver, **options)
+    result = prepare(scene.with_law(exact_law(scene.contact.law))).solve(solver, **options)
     if not result.solved:
         raise RuntimeError(f"exact solve: {result.status}: {result.message}")
     return result
@@ -74,8 +74,8 @@ def penalty_sweep(scene: Scene, stiffness: Sequence[float] = np.logspace(3, 6, 4
     law, rows = exact_law(scene.contact.law), []
     for c in stiffness:
         penalty = NormalCompliance(float(c))
-        result = prepare(with_law(scene, dataclasses.replace(law, compliance=penalty) if has_friction(law)
-                                  else penalty)).solve(solver, **options)
+        result = prepare(scene.with_law(dataclasses.replace(law, compliance=penalty) if has_friction(law)
+                                        else penalty)).solve(solver, **options)
         error = None
         if result.solved:
             error = float(np.abs(result.contact.pressure - exact.contact.pressure).max() / exact.max_pressure)
@@ -93,7 +93,7 @@ def regularization_sweep(scene: Scene, epsilon: Sequence[float] = np.logspace(-5
     scale = np.abs(exact.displacement).max()
     rows = []
     for e in epsilon:
-        result = prepare(with_law(scene, dataclasses.replace(exact_law(law), regularization=float(e)))).solve(
+        result = prepare(scene.with_law(dataclasses.replace(exact_law(law), regularization=float(e)))).solve(
             solver, **options)
         error = float(np.abs(result.displacement - exact.displacement).max() / scale) if result.solved else None
         rows.append(row(e, result, error))
