@@ -12,6 +12,7 @@ Measurements behind the choices: docs/factorizations.md.
 from __future__ import annotations
 
 import time
+from abc import ABC, abstractmethod
 
 import numpy as np
 import scipy.linalg as la
@@ -102,7 +103,7 @@ def _pardiso_factors(K: sp.spmatrix, schur: np.ndarray | None = None):
         raise
 
 
-class Factorization:
+class Factorization(ABC):
     """K⁻¹ b and W = B K⁻¹ Bᵀ from one factorization of an SPD K (see :func:`factorize`).
 
     Attributes
@@ -115,9 +116,9 @@ class Factorization:
     timings: dict[str, float]
     _block = BLOCK
 
+    @abstractmethod
     def solve(self, b: np.ndarray) -> np.ndarray:
         """K⁻¹ b for b of shape (n,) or (n, k)."""
-        raise NotImplementedError
 
     def schur(self, B: sp.spmatrix) -> np.ndarray:
         """W = B K⁻¹ Bᵀ (dense, symmetrized), solving for a block of Bᵀ's columns at a time."""
@@ -186,13 +187,13 @@ class Condensation(Factorization):
         self.timings["cholesky"] = time.perf_counter() - start
         _check_definite(K, self.solve)
 
+    @abstractmethod
     def load(self, f: np.ndarray) -> np.ndarray:
         """Condensed load f_C − K_CI K_II⁻¹ f_I, for f of shape (n,) or (n, k)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def lift(self, u_C: np.ndarray, f: np.ndarray) -> np.ndarray:
         """All free DOFs u with u_C given and u_I = K_II⁻¹(f_I − K_IC u_C)."""
-        raise NotImplementedError
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """K⁻¹ b = lift(S⁻¹ load(b), b)."""

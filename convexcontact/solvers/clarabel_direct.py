@@ -55,17 +55,6 @@ RETRY_BELOW = 1e-8
 """Tolerances below which a stalled solve (InsufficientProgress) is retried at 10× the tolerance."""
 
 
-def _settings_copy(original: clarabel.DefaultSettings, looser: float) -> clarabel.DefaultSettings:
-    copy = clarabel.DefaultSettings()
-    for name in dir(original):
-        if not name.startswith("_") and not callable(getattr(original, name)):
-            setattr(copy, name, getattr(original, name))
-    copy.tol_gap_abs, copy.tol_gap_rel, copy.tol_feas = (looser * original.tol_gap_abs, looser * original.tol_gap_rel,
-                                                         looser * original.tol_feas)
-    copy.tol_ktratio = min(copy.tol_ktratio, copy.tol_gap_abs)
-    return copy
-
-
 class Session:
     """A Clarabel solver set up once; :meth:`update` changes q and b, keeping the setup.
 
@@ -93,7 +82,8 @@ class Session:
             # needs to in 3-D, where no polish follows: a Coulomb punch's Picard map stagnated at changes of
             # 1e-7 after 20 steps with 1e-10 and converged to 1e-9 in 6 steps with 1e-12
             tol = 1e-12 if dense(program.P) else 1e-10
-        self._settings = settings(tol, max_iter, verbose, **native)
+        self._tol, self._options = tol, dict(max_iter=max_iter, verbose=verbose, **native)
+        self._settings = settings(tol, **self._options)
         self._solver = self._setup(program)
         self._previous: ConicSolution | None = None
 
@@ -123,11 +113,11 @@ class Session:
                 return self._previous
         result = self._solver.solve()
         word = str(result.status).split(".")[-1]
-        if word == "InsufficientProgress" and self._settings.tol_gap_abs < RETRY_BELOW:
+        if word == "InsufficientProgress" and self._tol < RETRY_BELOW:
             # Clarabel sometimes stalls one step short of a 1e-10 gap and returns an iterate far from
             # the answer (a 3k-DOF punch: certificate 0.6); at 10× the tolerance the same program solves
             # and the polish restores full accuracy (certificate 1e-14), so retry once there
-            retry = _settings_copy(self._settings, 10.0)
+            retry = settings(10.0 * self._tol, **self._options)
             result = clarabel.DefaultSolver(*self._data(self.program), retry).solve()
             word = str(result.status).split(".")[-1]
         solution = ConicSolution(
