@@ -71,6 +71,10 @@ def _rows(vectors: np.ndarray, dofs: np.ndarray, ndofs: int) -> sp.csr_matrix:
     return sp.csr_matrix((vectors.ravel(), (np.repeat(np.arange(m), dim), dofs.ravel())), shape=(m, ndofs))
 
 
+ROUNDOFF = 1e-14
+"""Components of a unit normal below this are round-off of the quadrature and set to zero."""
+
+
 def tangent_frame(normals: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """Unit tangents (and in 3-D bitangents n × t) at each node, and the mean first tangent.
 
@@ -126,6 +130,11 @@ def contact_trace(
     # well defined for any Lagrange element and for curved facets
     weighted_normal = fe.asm(fe.LinearForm(lambda v, w: dot(w.n, v)), facet_basis)[dofs]
     normals = weighted_normal / np.linalg.norm(weighted_normal, axis=1, keepdims=True)
+    # the quadrature leaves round-off (~1e-17) in components that are zero on a plane face; through the
+    # tangents it would couple a roller's eliminated direction to its friction multiplier (an empty row of
+    # T becoming 1e-53: a rank-deficient instead of an empty column of the dual's W)
+    normals[np.abs(normals) < ROUNDOFF] = 0.0
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     mass = fe.asm(fe.BilinearForm(lambda u, v, w: u[0] * v[0]), facet_basis).tocsr()[dofs[:, 0]][:, dofs[:, 0]]
     weights = np.asarray(mass.sum(axis=1)).ravel()  # partition of unity: Σ_j ∫ψ_iψ_j = ∫ψ_i
 
