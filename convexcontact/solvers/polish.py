@@ -10,7 +10,9 @@ join, rows with negative multipliers leave. The answer is kept only if it is pri
 dual feasible.
 
 A 2-D second-order cone |s₁| ≤ s₀ (2-D friction) is the pair of half-planes s₀ − s₁ ≥ 0,
-s₀ + s₁ ≥ 0, so such programs are polished as the equivalent linear program.
+s₀ + s₁ ≥ 0, so such programs are polished as the equivalent linear program. Larger
+second-order cones (3-D friction) are polished by Newton's method (:mod:`.cone_polish`)
+when each cone bounds its own variables, as in the dual contact programs.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..conic import ConicProgram, ConicSolution, nonnegative
+from .cone_polish import bound_form, cone_polish
 
 FEASIBLE = 1e-10
 """Largest violation (relative to the answer's scale) a polished answer may have."""
@@ -89,13 +92,21 @@ def half_planes(program: ConicProgram) -> sp.csr_matrix | None:
     return H.tocsr()
 
 
+def polishable(program: ConicProgram) -> bool:
+    """Whether :func:`polish` applies to the program (it may still fail on a given answer)."""
+    return half_planes(program) is not None or bound_form(program) is not None
+
+
 def polish(program: ConicProgram, solution: ConicSolution) -> ConicSolution:
     """The polished solution, or ``solution`` unchanged when polishing does not apply or fails."""
-    H = half_planes(program)
     # an "almost solved" answer is polished too: a polished answer is primal and dual feasible with
     # complementarity by construction, i.e. the program's exact optimum, whatever the solver said
-    if H is None or solution.status not in ("solved", "inaccurate") or not np.isfinite(solution.z).all():
+    if solution.status not in ("solved", "inaccurate") or not np.isfinite(solution.z).all():
         return solution
+    H = half_planes(program)
+    if H is None:  # a cone that is not polyhedral: Newton's method if the cones bound their own variables
+        form = bound_form(program)
+        return solution if form is None else cone_polish(program, solution, form)
     if program.is_linear:
         return _polish_linear(program, solution)
     # the linear equivalent: slacks H s, multipliers H⁻ᵀ z (= ½ H z on pairs, z elsewhere)
