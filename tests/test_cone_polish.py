@@ -112,3 +112,18 @@ def test_roller_directions_give_empty_friction_rows():
     on_planes = (np.abs(contact.coords[:, :2]) < 1e-12).sum()  # nodes on x = 0 or y = 0 (the axis node twice)
     empty = np.diff(sp.csr_matrix(model.friction.R).indptr) == 0
     assert empty.sum() == on_planes
+
+
+def test_a_failed_polish_returns_its_input_even_when_the_guess_says_polished(monkeypatch):
+    """A warm start's guess is an earlier answer that carries {"polished": True}; when the rounds fail the
+    polish must hand the guess back (the session then runs the interior point), not pass it off as polished."""
+    import convexcontact.solvers.cone_polish as cone
+    import convexcontact.solvers.polish as linear
+
+    model_2d = cc.prepare(cc.library.hertz_punch(nx=16, law=cc.Tresca(slip_bound=0.01)), "dual")
+    for model, module in ((model_2d, linear), (tresca_dual(6), cone)):
+        answer = clarabel_direct.Session(model.program).solve()
+        assert answer.info.get("polished")
+        monkeypatch.setattr(module, "ROUNDS", 0)
+        guess = dataclasses.replace(answer, x=0.5 * answer.x)
+        assert polish(model.program, guess) is guess

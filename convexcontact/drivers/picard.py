@@ -17,7 +17,6 @@ from __future__ import annotations
 import hashlib
 import itertools
 import time
-from dataclasses import replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -57,14 +56,9 @@ def initial_pressure(model: Model, solver: str, options: dict) -> np.ndarray:
     if law.initial_pressure is not None:
         points = fem.contact.coords * fem.scaling.length
         return evaluate_field(law.initial_pressure, "contact.initial_pressure", points) / fem.scaling.pressure
-    # frictionless first step: the obstacle is not pulled tangentially yet; the same for every
-    # friction coefficient, so a sweep (Model.with_law) solves it once per solver and options
-    key = ("frictionless", solver, repr(sorted(options.items())))
-    if key not in model.cache:
-        frictionless = replace(fem.contact, tangential_coupling=None)
-        program, recover, _ = model.build(None, None, None, frictionless)
-        model.cache[key] = recover(solvers.solve(program, solver, **options)).pressure
-    return model.cache[key]
+    # frictionless first step: the obstacle is not pulled tangentially yet
+    frictionless, recover = model.frictionless(solver, options)
+    return recover(frictionless).pressure
 
 
 def reused_session(model: Model, solver: str, options: dict):
@@ -119,6 +113,7 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
         bound, unit_bound = pressure_map(model)
         s = bound(initial_pressure(model, solver, options))
     session = reused_session(model, solver, options)
+    model.seed(session, solver, options)
     history, states, changes = [], [s], []
     best = None
     status = None

@@ -16,6 +16,7 @@ from ..fem.assembly import FEModel, assemble
 from ..fem.factorization import Factorization, condense, factorize
 from ..fem.friction import FrictionPoints, friction_points
 from ..formulations import FORMULATIONS, contact_weights
+from ..formulations.dual import stick_guess
 from ..results.certificate import certify
 from ..results.result import ContactResult, contact_nodes
 from ..scene.model import Coulomb, Scene, SceneError, Tresca, compliance_of, evaluate_field, has_friction
@@ -88,10 +89,31 @@ class Model:
             return coulomb(self, solver, progress, **options)
         timings = dict(self.timings)
         with timed(timings, "solve"):
-            solution = solvers.solve(self.program, solver, **options)
+            session = solvers.session(self.program, solver, **options)
+            self.seed(session, solver, options)
+            solution = session.solve()
         with timed(timings, "postprocess"):
             result = self.result(solution, timings, self.slip_bound, extended=options.get("cvxpy_model") is not None)
         return result
+
+    def frictionless(self, solver: str, options: dict) -> tuple[ConicSolution, Recovery]:
+        """The answer of this model's frictionless program and its recovery map, kept in the cache:
+        the same for every friction law of a sweep (:meth:`with_law`)."""
+        key = ("frictionless", solver, repr(sorted(options.items())))
+        if key not in self.cache:
+            program, recover, _ = self.build(None, None, None, replace(self.fem.contact, tangential_coupling=None))
+            self.cache[key] = (solvers.solve(program, solver, **options), recover)
+        return self.cache[key]
+
+    def seed(self, session, solver: str, options: dict):
+        """Start a friction solve from the frictionless answer (every point sticking): the polish's
+        rounds from there replace an interior point on m·d unknowns by one on m (a 3-D Tresca punch,
+        1452 unknowns: 0.17 + 0.72 s against 2.06 s), and an interior point still runs if they fail.
+        Dual only, whose layout the guess needs."""
+        if self.formulation == "dual" and self.friction is not None and solvers.seedable(solver, options):
+            frictionless, _ = self.frictionless(solver, options)
+            if frictionless.solved:
+                session.seed(stick_guess(self.program, frictionless, self.fem.contact))
 
     def result(
         self, solution: ConicSolution, timings: dict, slip_bound, fields=None, extra=None, extended=False

@@ -15,6 +15,8 @@ multipliers are minus the obstacle's advance and shift.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -95,3 +97,17 @@ def dual(
         return {"b": updated}
 
     return program, recover, bound_update
+
+
+def stick_guess(program: ConicProgram, frictionless: ConicSolution, contact: ContactTrace) -> ConicSolution:
+    """A first guess for the frictional dual ``program`` from the answer of its frictionless counterpart
+    (the same trace without the tangential force): its pressures and obstacle advance, no friction
+    multipliers (every point sticks). The rows of both programs begin alike: the obstacle's force
+    equality, [the tangential force's], λ_N ≥ 0."""
+    m, obstacle = contact.m, int(contact.obstacle_coupling is not None)
+    equalities = obstacle + (contact.tangential_coupling is not None)
+    x, z = np.zeros(program.n_variables), np.zeros(program.n_constraints)
+    x[:m] = frictionless.x[:m]
+    z[:obstacle] = frictionless.z[:obstacle]
+    z[equalities: equalities + m] = frictionless.z[obstacle: obstacle + m]
+    return replace(frictionless, x=x, z=z, s=program.b - program.A @ x, status="inaccurate", info={})

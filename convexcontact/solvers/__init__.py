@@ -33,9 +33,14 @@ def session(program: ConicProgram, solver: str = "clarabel", **options):
     return cvxpy_model.Session(program, solver=sub or None, **options)
 
 
+def seedable(solver: str, options: dict) -> bool:
+    """Whether the solver's sessions start from a guess (``seed``); cvxpy rebuilds its model every solve."""
+    return check_name(solver).split(":", 1)[0] in ("clarabel", "osqp") and options.get("polishing", True)
+
+
 def solve(program: ConicProgram, solver: str = "clarabel", **options) -> ConicSolution:
     """Solve ``program`` with the named solver; ``options`` go to that adapter."""
     return session(program, solver, **options).solve()
 
 
-__all__ = ["SOLVERS", "ConeNotSupported", "check_name", "cvxpy_model", "solve"]
+__all__ = ["SOLVERS", "ConeNotSupported", "check_name", "cvxpy_model", "seedable", "solve"]

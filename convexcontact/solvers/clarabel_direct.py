@@ -110,10 +110,16 @@ class Session:
         else:
             self._solver = self._setup(self.program)
 
+    def seed(self, guess: ConicSolution):
+        """Start the next solve from ``guess`` (the answer of a related program, such as its frictionless
+        counterpart) unless the session has an answer of its own: the polish's rounds run from it first."""
+        if self._polishing and self._previous is None:
+            self._previous = guess
+
     def solve(self) -> ConicSolution:
         if self._polishing and self._previous is not None:
             start = time.perf_counter()
-            guess = replace(self._previous, s=self.program.b - self.program.A @ self._previous.x)
+            guess = replace(self._previous, s=self.program.b - self.program.A @ self._previous.x, info={})
             warm = polish(self.program, guess)
             if warm is not guess:
                 self._previous = replace(warm, iterations=0, solve_time=time.perf_counter() - start,

@@ -99,6 +99,10 @@ class Session:
         self.program = replace(self.program, q=self.program.q if q is None else q, b=self.program.b if b is None else b)
         self._solver.update(**changes)
 
+    def seed(self, guess: ConicSolution):
+        """Start OSQP's iterations from ``guess``'s primal point."""
+        self._solver.warm_start(x=guess.x)
+
     def solve(self) -> ConicSolution:
         result = self._solver.solve()
         word = str(result.info.status)

@@ -98,7 +98,7 @@ def polishable(program: ConicProgram) -> bool:
 
 
 def polish(program: ConicProgram, solution: ConicSolution) -> ConicSolution:
-    """The polished solution, or ``solution`` unchanged when polishing does not apply or fails."""
+    """The polished solution, or ``solution`` itself (the same object) when polishing does not apply or fails."""
     # an "almost solved" answer is polished too: a polished answer is primal and dual feasible with
     # complementarity by construction, i.e. the program's exact optimum, whatever the solver said
     if solution.status not in ("solved", "inaccurate") or not np.isfinite(solution.z).all():
@@ -115,8 +115,9 @@ def polish(program: ConicProgram, solution: ConicSolution) -> ConicSolution:
     cones = tuple(nonnegative(c.dim) if c.kind == "soc" else c for c in program.cones)
     linear = replace(program, A=sp.csr_matrix(H @ program.A), b=H @ program.b, cones=cones)
     pairs = np.flatnonzero(soc_rows & (np.asarray(H.sum(axis=1)).ravel() == 0))  # first rows: s₀ − s₁
-    polished = _polish_linear(linear, replace(solution, z=half * (H @ solution.z), s=H @ solution.s), pairs)
-    if not polished.info.get("polished"):
+    transformed = replace(solution, z=half * (H @ solution.z), s=H @ solution.s)
+    polished = _polish_linear(linear, transformed, pairs)
+    if polished is transformed:  # failed (a guess may carry an earlier answer's "polished" flag: not a test)
         return solution
     return replace(polished, z=H.T @ polished.z, s=half * (H.T @ polished.s))
 
