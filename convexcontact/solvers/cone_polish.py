@@ -115,10 +115,13 @@ def cone_polish(program: ConicProgram, solution: ConicSolution, form: BoundForm)
     slack = radius - np.linalg.norm(w, axis=1)
     on_sphere = (slack < z[form.ball_radius_rows] + np.linalg.norm(z[form.ball_rows], axis=1)) & (radius > 0)
     active = z[form.bound_rows] > b[form.bound_rows] - form.bound_coef * x[form.bound_vars]
+    # a variable in no cost and no equality (the dual's multiplier of a roller direction): if no cone
+    # holds it either, it keeps its value (it would make the reduced Hessian singular)
+    unused = ~(P != 0).any(axis=0) & (q == 0) & (np.diff(sp.csc_matrix(A[form.equality]).indptr) == 0)
     scale_s = max(np.abs(b).max(initial=0.0), np.abs(x).max(initial=0.0), 1.0)
     scale_z = max(np.abs(z).max(initial=0.0), 1.0)
     for _ in range(ROUNDS):
-        answer = _newton(P, q, b, A, form, x, z, active, on_sphere)
+        answer = _newton(P, q, b, A, form, x, z, active, on_sphere, unused)
         if answer is None:
             return solution
         x, z, converged = answer
@@ -139,7 +142,7 @@ def cone_polish(program: ConicProgram, solution: ConicSolution, form: BoundForm)
     return solution
 
 
-def _newton(P, q, b, A, form: BoundForm, x0, z0, active, on_sphere):
+def _newton(P, q, b, A, form: BoundForm, x0, z0, active, on_sphere, unused):
     """Newton steps towards the KKT point of the guess (active bounds held, chosen balls on their
     spheres) from (x0, z0): (x, z, converged), or None when the reduced system is singular."""
     n = q.size
@@ -157,11 +160,8 @@ def _newton(P, q, b, A, form: BoundForm, x0, z0, active, on_sphere):
     sphere_vars, sphere_coef = form.ball_vars[sphere], form.ball_coef[sphere]
     sphere_b, rho = b[form.ball_rows[sphere]], radius[sphere]
     held[sphere_vars] = True  # moved through their tangent bases instead
-    # a variable in no equality, with no cost, free of every bound keeps its value: it would make
-    # the reduced Hessian singular (the dual of a contact node on a roller has such multipliers)
     E = A[form.equality]
-    idle = ~held & ~np.abs(P).any(axis=0) & (q == 0) & (np.diff(sp.csc_matrix(E).indptr) == 0)
-    free = np.flatnonzero(~held & ~idle)
+    free = np.flatnonzero(~held & ~unused)
     k, p = sphere_vars.shape
     t = p - 1
     damping = DAMPING * max(np.abs(np.diag(P)).max(initial=0.0), 1e-300)

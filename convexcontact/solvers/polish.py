@@ -25,10 +25,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..conic import ConicProgram, ConicSolution, nonnegative
-from .cone_polish import bound_form, cone_polish
+from .cone_polish import FEASIBLE, bound_form, cone_polish
 
-FEASIBLE = 1e-10
-"""Largest violation (relative to the answer's scale) a polished answer may have."""
 ROUNDS = 10
 """Active-set rounds before polishing gives up (and the interior-point answer stands)."""
 
