@@ -2,20 +2,22 @@
 
 Computed from the recovered fields (u, λ_N, λ_T), never from the solver's own
 report. Each residual is scaled to the problem, so 1e-8 means the same on any
-mesh and in any units:
+mesh and in any units. Complementarity is measured by **natural maps**, not products:
+a residual r bounds the error of every quantity by about κ·r of its scale (κ the
+conditioning of the contact problem), where a product λ_N (u_N − g) would turn an
+error δ in both factors into δ² and pass a 1e-5 error as 1e-10.
 
 - ``non_penetration``   max (u_N − g)_+ / u_ref         (weighted by C for the weak form)
 - ``pressure_sign``     max (−λ_N)_+ / p_ref
-- ``complementarity``   max |λ_N (u_N − g)| / (p_ref u_ref)
+- ``complementarity``   max |min(λ_N / p_ref, (g − u_N) / u_ref)|   (the Signorini natural map)
 - ``equilibrium``       ‖Ku − f + NᵀCλ_N − Rᵀλ_T‖∞ / f_ref
 - ``obstacle_balance``  |Σ contact force − P| / max(P, Q, 1), likewise Q  (force control only)
 - ``friction_bound``    max (‖λ_T‖ − s)_+ / p_ref     (friction only)
-- ``slip_direction``    max ‖λ_T |v|_ε + s v‖ / (ω p_ref u_ref) (friction only), v = R u the
-                        weighted slip at the friction points (d − 1 components) and
-                        |v|_ε = sqrt(‖v‖² + ε²ω²)
-                        (|v| for the exact law): λ_T = −s v/|v|_ε, written as a product so
-                        that it vanishes in the stick zone and is not amplified where the
-                        slip is below ε
+- ``friction_law``      max ‖λ_T − Π_{B(s)}(λ_T − ρ v)‖ / p_ref with ρ = p_ref / u_ref (friction
+                        only): the projection (De Saxcé / Alart–Curnier) form of "‖λ_T‖ ≤ s, and
+                        λ_T = −s v/|v| where the point slips", v the slip at the friction point
+                        relative to the obstacle. For the ε-regularized law λ_T = −s v/|v|_ε,
+                        |v|_ε = sqrt(‖v‖² + ε²), it is ‖λ_T + s v/|v|_ε‖ / p_ref.
 
 For Coulomb friction s = F λ_N of the same solution: the residuals then measure how far
 the answer is from a fixed point of the Picard map, i.e. from the discrete Coulomb law.
@@ -105,7 +107,7 @@ def certify(
     if compliance is None:
         residuals = {
             "non_penetration": np.maximum(weighted_gap, 0.0).max(initial=0.0) / u_ref,
-            "complementarity": np.abs(lam_N * weighted_gap).max(initial=0.0) / (p_ref * u_ref),
+            "complementarity": np.abs(np.minimum(lam_N / p_ref, -weighted_gap / u_ref)).max(initial=0.0),
         }
     else:
         stiffness, exponent = compliance
@@ -135,13 +137,19 @@ def weighted_slip(friction: FrictionPoints, fields: ContactFields) -> np.ndarray
 
 
 def friction_residuals(friction, fields, slip_bound, p_ref, u_ref, epsilon=None) -> dict[str, float]:
-    """‖λ_T‖ ≤ s, and λ_T |v|_ε + s v = 0 (λ_T = −s v/|v|_ε where the point slips); vectors of
-    d − 1 components per point in 3-D."""
+    """‖λ_T‖ ≤ s, and the natural map of the friction law at each point (vectors of d − 1
+    components per point in 3-D; slips as lengths, the weights divided out)."""
     lam_T = friction.components(fields.friction)
-    v = friction.components(weighted_slip(friction, fields))
-    magnitude = np.sqrt((v**2).sum(axis=1) + ((epsilon or 0.0) * friction.weights) ** 2)
-    direction = np.linalg.norm(lam_T * magnitude[:, None] + slip_bound[:, None] * v, axis=1) / (friction.weights * u_ref)
+    slip = friction.components(weighted_slip(friction, fields)) / friction.weights[:, None]
+    if epsilon is None:  # λ_T = Π_{B(s)}(λ_T − ρ v)
+        trial = lam_T - (p_ref / u_ref) * slip
+        size = np.linalg.norm(trial, axis=1)
+        shrink = np.minimum(1.0, slip_bound / np.maximum(size, TINY))
+        law = lam_T - shrink[:, None] * trial
+    else:  # λ_T = −s v / sqrt(‖v‖² + ε²)
+        magnitude = np.sqrt((slip**2).sum(axis=1) + epsilon**2)
+        law = lam_T + (slip_bound / magnitude)[:, None] * slip
     return {
         "friction_bound": np.maximum(np.linalg.norm(lam_T, axis=1) - slip_bound, 0.0).max(initial=0.0) / p_ref,
-        "slip_direction": direction.max(initial=0.0) / p_ref,
+        "friction_law": np.linalg.norm(law, axis=1).max(initial=0.0) / p_ref,
     }
