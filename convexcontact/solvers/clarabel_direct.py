@@ -88,6 +88,8 @@ class Session:
         # (1500 dense unknowns: 2.3 s against 18 s; the Delassus program of a 26k-DOF punch: 0.12 s
         # against 0.22 s), but on sparse near-incompressible FE programs it stopped short of qdldl's accuracy
         native.setdefault("direct_solve_method", "faer" if dense(program.P) else "qdldl")
+        # a default tolerance relaxed because the polish was to finish the job: tightened if it does not
+        self._tight_tol = default_tol(program, False) if tol is None and polishing else None
         if tol is None:
             tol = default_tol(program, polishing)
         self._tol, self._options = tol, dict(max_iter=max_iter, verbose=verbose, **native)
@@ -125,16 +127,31 @@ class Session:
                 self._previous = replace(warm, iterations=0, solve_time=time.perf_counter() - start,
                                          info={**warm.info, "warm_start": True})
                 return self._previous
-        result = self._solver.solve()
+        solution = self._interior_point(self._solver, self._tol)
+        if not self._polishing:
+            return solution
+        polished = polish(self.program, solution)
+        if polished is solution and self._tight_tol is not None and self._tight_tol < self._tol:
+            # the polish could not settle the active set (a degenerate program: multipliers that are not
+            # unique, Gauss-point friction): the interior point's answer must then be accurate on its own
+            tight = clarabel.DefaultSolver(*self._data(self.program), settings(self._tight_tol, **self._options))
+            solution = self._interior_point(tight, self._tight_tol)
+            polished = polish(self.program, solution)
+        self._previous = polished if polished.info.get("polished") else None
+        return polished
+
+    def _interior_point(self, solver, tol: float) -> ConicSolution:
+        """Run Clarabel's interior point (set up at ``tol``; retried once at 10× ``tol`` if it stalls)."""
+        result = solver.solve()
         word = str(result.status).split(".")[-1]
-        if word == "InsufficientProgress" and self._tol < RETRY_BELOW:
+        if word == "InsufficientProgress" and tol < RETRY_BELOW:
             # Clarabel sometimes stalls one step short of a 1e-10 gap and returns an iterate far from
             # the answer (a 3k-DOF punch: certificate 0.6); at 10× the tolerance the same program solves
             # and the polish restores full accuracy (certificate 1e-14), so retry once there
-            retry = settings(10.0 * self._tol, **self._options)
+            retry = settings(10.0 * tol, **self._options)
             result = clarabel.DefaultSolver(*self._data(self.program), retry).solve()
             word = str(result.status).split(".")[-1]
-        solution = ConicSolution(
+        return ConicSolution(
             x=np.asarray(result.x),
             z=np.asarray(result.z),
             s=np.asarray(result.s),
@@ -144,11 +161,6 @@ class Session:
             solve_time=float(result.solve_time),
             solver="clarabel",
         )
-        if not self._polishing:
-            return solution
-        solution = polish(self.program, solution)
-        self._previous = solution if solution.info.get("polished") else None
-        return solution
 
 
 def solve(program: ConicProgram, **options) -> ConicSolution:

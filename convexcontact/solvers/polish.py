@@ -45,11 +45,15 @@ def kkt_solve(P: sp.spmatrix, q: np.ndarray, A: sp.csr_matrix, b: np.ndarray):
         x[fixed] = b / A.data
         free = np.setdiff1d(np.arange(n), fixed)
         P_dense = P.toarray()
+        reduced, rhs = P_dense[np.ix_(free, free)], -q[free] - P_dense[np.ix_(free, fixed)] @ x[fixed]
         try:
-            factor = sla.cho_factor(P_dense[np.ix_(free, free)])
+            x[free] = sla.cho_solve(sla.cho_factor(reduced), rhs)
         except sla.LinAlgError:
-            return None
-        x[free] = sla.cho_solve(factor, -q[free] - P_dense[np.ix_(free, fixed)] @ x[fixed])
+            # singular: multipliers that are not unique (more friction points than nodal DOFs they act
+            # on). The system is still consistent at the optimum: take its least-norm solution
+            x[free] = sla.lstsq(reduced, rhs)[0]
+            if np.abs(reduced @ x[free] - rhs).max(initial=0.0) > FEASIBLE * max(np.abs(rhs).max(initial=0.0), 1.0):
+                return None
         z = -(P_dense[fixed] @ x + q[fixed]) / A.data
         return (x, z) if np.isfinite(x).all() and np.isfinite(z).all() else None
     kkt = sp.bmat([[P, A.T], [A, None]], format="csc")
@@ -112,7 +116,12 @@ def polish(program: ConicProgram, solution: ConicSolution) -> ConicSolution:
     half = np.where(soc_rows, 0.5, 1.0)
     cones = tuple(nonnegative(c.dim) if c.kind == "soc" else c for c in program.cones)
     linear = replace(program, A=sp.csr_matrix(H @ program.A), b=H @ program.b, cones=cones)
-    pairs = np.flatnonzero(soc_rows & (np.asarray(H.sum(axis=1)).ravel() == 0))  # first rows: s₀ − s₁
+    # first rows (s₀ − s₁) of the pairs where s₀ or s₁ holds no variable (the dual's balls of radius
+    # b₀; the epigraph of a point whose slip is all prescribed): both half-planes active there pin the
+    # same variable twice. Elsewhere (t ≥ |R u|) both active is a sticking point, t = R u = 0
+    empty = np.diff(sp.csr_matrix(program.A).indptr) == 0
+    first = soc_rows & (np.asarray(H.sum(axis=1)).ravel() == 0)
+    pairs = np.flatnonzero(first & (empty | np.roll(empty, -1)))
     transformed = replace(solution, z=half * (H @ solution.z), s=H @ solution.s)
     polished = _polish_linear(linear, transformed, pairs)
     if polished is transformed:  # failed (a guess may carry an earlier answer's "polished" flag: not a test)
@@ -120,14 +129,52 @@ def polish(program: ConicProgram, solution: ConicSolution) -> ConicSolution:
     return replace(polished, z=H.T @ polished.z, s=half * (H.T @ polished.s))
 
 
+def free_variables(P: sp.spmatrix, q: np.ndarray, A: sp.csr_matrix, equality: np.ndarray) -> np.ndarray:
+    """Mask of the variables that have no cost (zero column of P, q_j = 0), appear in no equality,
+    and either with one sign in all their rows or only in rows of their own (bounds): any value that
+    satisfies their rows is optimal and those rows carry no multiplier (the dual's multipliers of a
+    contact node with no free DOF; the friction epigraph t_k ≥ |v_k| of a point with zero slip
+    bound). Left in, they make the KKT system singular and the polish fail; they are placed after
+    the others are solved for instead."""
+    columns = sp.csc_matrix(A)
+    costless = (np.diff(sp.csc_matrix(P).indptr) == 0) & (q == 0)
+    in_equality = np.diff(sp.csc_matrix(columns[equality]).indptr) > 0
+    signs = sp.csc_matrix(columns.sign())
+    one_sign = np.abs(np.asarray(signs.sum(axis=0)).ravel()) == np.diff(signs.indptr)
+    own_rows = np.diff(sp.csr_matrix(A).indptr) == 1
+    alone = np.asarray(abs(signs[~own_rows]).sum(axis=0)).ravel() == 0
+    return costless & ~in_equality & (one_sign | alone) & (np.diff(columns.indptr) > 0)
+
+
+def place_free(x: np.ndarray, guess: np.ndarray, A: sp.csr_matrix, b: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """x with each free variable at its ``guess`` value moved into what its rows A x ≤ b allow, given the others."""
+    others = x.copy()
+    others[free] = 0.0
+    room = b - A @ others  # A_rj x_j ≤ room_r
+    block = sp.csc_matrix(A)[:, free]
+    for k, j in enumerate(np.flatnonzero(free)):
+        rows = block.indices[block.indptr[k]:block.indptr[k + 1]]
+        coefficients = block.data[block.indptr[k]:block.indptr[k + 1]]
+        limits = room[rows] / coefficients
+        lower = limits[coefficients < 0].max(initial=-np.inf)
+        upper = limits[coefficients > 0].min(initial=np.inf)
+        x[j] = np.clip(guess[j], lower, upper)
+    return x
+
+
 def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.ndarray = ()) -> ConicSolution:
-    """Polish a linear program; ``pairs``: first rows of the half-plane pairs of a 2-D cone, of
-    which at most one is active (both active pin s₀ = s₁ = 0 twice: a singular KKT system)."""
+    """Polish a linear program; ``pairs``: first rows of half-plane pairs b₀ ∓ a x ≥ 0 of which at
+    most one is active (both active pin the same variable twice: a singular KKT system)."""
     equality = np.zeros(program.n_constraints, bool)
     for cone, rows in program.blocks():
         equality[rows] = cone.kind == "zero"
     A = sp.csr_matrix(program.A)
-    touches = np.diff(A.indptr) > 0  # an empty row has no say in x
+    free = free_variables(program.P, program.q, A, equality)
+    kept = np.flatnonzero(~free)
+    A_kept = A[:, kept]
+    touches = np.diff(A_kept.indptr) > 0  # an empty row has no say in the determined variables
+    touches &= np.diff(A[:, np.flatnonzero(free)].tocsr().indptr) == 0  # a free variable's rows carry no force
+    P_kept, q_kept = sp.csc_matrix(program.P)[kept][:, kept], program.q[kept]
     active = touches & (equality | (solution.z > solution.s))
     scale_s = max(np.abs(program.b).max(initial=0.0), np.abs(solution.x).max(initial=0.0), 1.0)
     scale_z = max(np.abs(solution.z).max(initial=0.0), 1.0)
@@ -135,11 +182,12 @@ def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.nda
     for _ in range(ROUNDS):
         both = pairs[active[pairs] & active[pairs + 1]]
         active[np.where(z[both] < z[both + 1], both, both + 1)] = False
-        answer = kkt_solve(program.P, program.q, A[active], program.b[active])
+        answer = kkt_solve(P_kept, q_kept, A_kept[active], program.b[active])
         if answer is None:
             return solution
-        x, z = answer[0], np.zeros(program.n_constraints)
-        z[active] = answer[1]
+        x, z = np.zeros(program.n_variables), np.zeros(program.n_constraints)
+        x[kept], z[active] = answer
+        x = place_free(x, solution.x, A, program.b, free)
         s = np.where(equality, 0.0, program.b - A @ x)
         violated = touches & ~equality & (s < -FEASIBLE * scale_s)
         negative = active & ~equality & (z < -FEASIBLE * scale_z)
