@@ -18,7 +18,7 @@ from ..fem.friction import FrictionPoints, friction_points
 from ..formulations import FORMULATIONS, contact_weights
 from ..formulations.dual import stick_guess
 from ..results.certificate import certify
-from ..results.result import ContactResult, contact_nodes
+from ..results.result import ContactResult, contact_nodes, not_unique
 from ..scene.model import Coulomb, Scene, SceneError, Tresca, compliance_of, evaluate_field, has_friction
 
 
@@ -155,6 +155,7 @@ class Model:
             certificate=certificate,
             displacement=fem.full(fields.u) * scaling.displacement,
             contact=contact_nodes(fem, fields, self.C, self.friction),
+            not_unique=not_unique(fem, fields, self.friction, self.law),
             obstacle_advance=fields.obstacle_advance * scaling.displacement
             if contact.obstacle_coupling is not None else None,
             obstacle_shift=fields.obstacle_shift * scaling.displacement

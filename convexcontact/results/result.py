@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..fem.assembly import FEModel
 from ..fem.friction import FrictionPoints
@@ -73,6 +74,7 @@ class ContactResult:
     formulation: str = "primal"
     message: str = ""
     extra: dict = field(default_factory=dict)
+    not_unique: dict[str, str] = field(default_factory=dict)  # quantity → why the answer does not fix it
 
     @property
     def solved(self) -> bool:
@@ -143,6 +145,7 @@ class ContactResult:
             "timings": self.timings,
             "message": self.message,
             "warnings": list(self.fem.warnings),
+            "not_unique": dict(self.not_unique),
         }
         if not self.solved:
             return out
@@ -226,6 +229,41 @@ def contact_nodes(
         bitangents=contact.bitangents,
         radius=radius_from_axis(fem) * scaling.length,
     )
+
+
+def not_unique(fem: FEModel, fields: ContactFields, friction: FrictionPoints | None, law) -> dict[str, str]:
+    """The reported quantities the discrete problem does not determine, each with the reason.
+
+    u is unique (K is SPD on the free DOFs); a multiplier is unique where its constraint rows are
+    independent. They are not at a contact node whose displacement is prescribed (its force goes into
+    the support: reported as 0), nor among Gauss friction points that stick on more points than the
+    nodal DOFs they act on (the nodal friction force Gᵀωλ_T stays unique and is what is reported).
+    """
+    from ..scene.model import Coulomb
+
+    contact, reasons = fem.contact, {}
+    held = np.diff(sp.csr_matrix(contact.N).indptr) == 0
+    if held.any():
+        reasons["pressure"] = (f"{held.sum()} contact nodes have a prescribed normal displacement: their contact "
+                               "force is the support's reaction, reported as 0")
+    if friction is None:
+        return reasons
+    held = (np.diff(sp.csr_matrix(friction.R).indptr) == 0).reshape(friction.dim, -1).all(axis=0)
+    if held.any():
+        reasons["friction"] = (f"{held.sum()} friction points have a prescribed tangential displacement: their "
+                               "friction force is the support's reaction, reported as 0")
+    if friction.count > contact.m:  # Gauss points
+        slip = np.linalg.norm(friction.components(friction.slip(fields.u)), axis=1) / friction.weights
+        sticking = slip <= SLIP * max(np.abs(fields.u).max(initial=0.0), 1.0)
+        nodes = np.unique(sp.csr_matrix(friction.interpolation)[sticking].indices).size
+        if sticking.sum() > nodes:
+            reasons["friction_at_points"] = (f"{sticking.sum()} sticking Gauss points act on {nodes} nodes: the "
+                                             "point tractions are one choice among many; the nodal friction "
+                                             "traction (their nodal force per contact weight) is unique")
+    if isinstance(law, Coulomb):
+        reasons["solution"] = ("Coulomb friction: this is one fixed point of the Picard map; the discrete problem is "
+                               "unique only for small enough F (Hild), which is not checked here")
+    return reasons
 
 
 def radius_from_axis(fem: FEModel) -> np.ndarray:
