@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..conic import ConicProgram, ConicSolution
-from .polish import polish
+from .polish import polish, polishable
 
 _STATUS = {
     cp.OPTIMAL: "solved",
@@ -107,7 +107,7 @@ def _dual(constraint, kind: str, rows: slice) -> np.ndarray:
 def solve(
     program: ConicProgram,
     solver: str | None = None,
-    tol: float = 1e-10,
+    tol: float | None = None,
     verbose: bool = False,
     cvxpy_model: CvxpyModel | None = None,
     **native,
@@ -115,13 +115,14 @@ def solve(
     """Solve ``program`` (or a user's extension of its model) through cvxpy.
 
     ``tol`` is passed to Clarabel (cvxpy's default solver here) as its gap and
-    feasibility tolerances, as on the direct path; other solvers take their own options
-    in ``native``.
+    feasibility tolerances (default: 1e-10 where the polish finishes the job, 1e-12 otherwise, as
+    on the direct path); other solvers take their own options in ``native``.
     """
     m = cvxpy_model if cvxpy_model is not None else model(program)
     options = dict(native)
     name = (solver or cp.CLARABEL).upper()
     if name == cp.CLARABEL:
+        tol = tol if tol is not None else 1e-10 if polishable(program) else 1e-12
         options.update(tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, tol_ktratio=tol)
     start = time.perf_counter()
     m.problem.solve(solver=name, verbose=verbose, **options)
