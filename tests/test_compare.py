@@ -137,3 +137,17 @@ def test_compare_files_matches_the_in_memory_comparison(tmp_path, tresca):
     cc.solve(hertz_punch(nx=16)).save(tmp_path / "c", formats=("json",))
     with pytest.raises(ValueError, match="not those of"):
         compare_files(tmp_path / "a" / "summary.json", tmp_path / "c" / "summary.json")
+
+
+def test_a_coulomb_answer_is_reported_as_possibly_one_of_several(tmp_path):
+    """Coulomb fixed points are not proven unique: the report (in memory, from files, as a table) says so."""
+    coulomb = cc.solve(hertz_punch(nx=16, law=cc.Coulomb(friction=0.2)))
+    frictionless = cc.solve(hertz_punch(nx=16))
+    report = compare(coulomb, frictionless)
+    assert "solution" in report["not_unique"]["reference"] and report["not_unique"]["other"] == {}
+    assert "not_unique" not in compare(frictionless, frictionless)
+    coulomb.save(tmp_path / "a", formats=("json",))
+    frictionless.save(tmp_path / "b", formats=("json",))
+    from_files = compare_files(tmp_path / "a" / "summary.json", tmp_path / "b" / "summary.json")
+    assert from_files["not_unique"] == report["not_unique"]
+    assert "not unique in the reference: solution" in format_report(from_files)

@@ -5,7 +5,7 @@ parabolic or formula obstacles, units from E = 1 to 2·10¹¹ and lengths from 1
 ``solved`` answers agrees to the accuracy their certificates claim, and spoiling an answer by δ in one
 quantity raises its certificate by about δ.
 
-The CI profile runs a few examples; the long one is behind a command:
+The CI profile runs a few examples; the long one is behind a command (profiles in conftest.py):
 ``python -m pytest tests/test_fuzz.py --hypothesis-profile=long``.
 """
 
@@ -13,18 +13,13 @@ import dataclasses
 import itertools
 
 import numpy as np
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import convexcontact as cc
 from convexcontact import solvers
 from convexcontact.results.certificate import certify
 from convexcontact.scene.model import Box
-
-settings.register_profile("ci", max_examples=12, deadline=None, derandomize=True,
-                          suppress_health_check=[HealthCheck.too_slow])
-settings.register_profile("long", max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-settings.load_profile("ci")
 
 AGREEMENT = 1e3
 """How far two certified answers may differ, in units of their worst residuals: a residual r bounds the

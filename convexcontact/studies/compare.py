@@ -14,6 +14,10 @@ imported from another code — report how far apart they are:
                               Σ w_i over the nodes open in one and closed in the other (user units)
 - ``stick_zone_difference``   the same for the stick zones (when both have stick / slip statuses)
 - ``certificates``            {"reference": residuals, "other": residuals or None}
+- ``not_unique``              {"reference": …, "other": …}: quantities either solution does not determine
+                              (``ContactResult.not_unique``), present only when there are some: a
+                              Coulomb answer may be one of several, so an error against it may be a
+                              different solution rather than a wrong one
 
 Every error is relative to the same norm of the reference field (L² to L², max to
 max), so it does not depend on the units; a field that is zero in the reference gives
@@ -25,7 +29,7 @@ out of the report rather than set to a dummy value.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +56,7 @@ class Fields:
     friction: np.ndarray | None = None
     status: np.ndarray | None = None
     residuals: dict[str, float] | None = None
+    not_unique: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self):
         """Arrays as floats and strings; without a status the contact zone is read from the pressure.
@@ -77,7 +82,7 @@ class Fields:
             raise ValueError(f"{name}: the solve has no answer to compare (status {result.status!r})")
         c = result.contact
         residuals = None if result.certificate is None else dict(result.certificate.residuals)
-        return cls(result.displacement, c.pressure, c.friction, c.status, residuals)
+        return cls(result.displacement, c.pressure, c.friction, c.status, residuals, dict(result.not_unique))
 
     @classmethod
     def from_arrays(
@@ -169,7 +174,14 @@ def compare(reference: ContactResult, other: Fields | ContactResult) -> dict:
         for name, matrix in (("energy_error", fem.K_full), ("l2_displacement_error", fe.asm(_mass, fem.basis))):
             report[name] = relative(np.sqrt(max(error @ (matrix @ error), 0.0)), np.sqrt(max(u @ (matrix @ u), 0.0)))
     report.update(contact_errors(ref, other, fem.contact.weights * fem.scaling.length))
-    report["certificates"] = {"reference": ref.residuals, "other": other.residuals}
+    return finish(report, ref, other)
+
+
+def finish(report: dict, reference: Fields, other: Fields) -> dict:
+    """The report with both certificates and, when either solution leaves some quantity undetermined, what."""
+    report["certificates"] = {"reference": reference.residuals, "other": other.residuals}
+    if reference.not_unique or other.not_unique:
+        report["not_unique"] = {"reference": reference.not_unique, "other": other.not_unique}
     return report
 
 
@@ -210,17 +222,17 @@ def compare_files(a: Path, b: Path) -> dict:
 
     def fields(nodes, data):
         residuals = {k: v for k, v in data["certificate"].items() if k != "worst"} if "certificate" in data else None
-        return Fields(None, nodes["lambda_N"], nodes.get("lambda_T"), nodes["status"], residuals)
+        return Fields(None, nodes["lambda_N"], nodes.get("lambda_T"), nodes["status"], residuals,
+                      data.get("not_unique", {}))
 
     reference, other = fields(nodes_a, data_a), fields(nodes_b, data_b)
     report = contact_errors(reference, other, spacing_weights(np.asarray(nodes_a["s"], float)))
-    report["certificates"] = {"reference": reference.residuals, "other": other.residuals}
-    return report
+    return finish(report, reference, other)
 
 
 def format_report(report: dict) -> str:
     """The report as an aligned text table, then the two certificates side by side."""
-    values = {k: v for k, v in report.items() if k != "certificates"}
+    values = {k: v for k, v in report.items() if k not in ("certificates", "not_unique")}
     width = max(map(len, values), default=0) + 2
     lines = [f"{'quantity':<{width}}value"] + [f"{k:<{width}}{v:.3e}" for k, v in values.items()]
     certificates = report.get("certificates")
@@ -234,4 +246,6 @@ def format_report(report: dict) -> str:
 
         lines += ["", f"{'certificate':<{width}}{'reference':<12}other"]
         lines += [f"{n:<{width}}{cell(ref, n)}{cell(other, n)}".rstrip() for n in names]
+    for side, reasons in report.get("not_unique", {}).items():
+        lines += [""] + [f"not unique in the {side}: {name} — {why}" for name, why in reasons.items()]
     return "\n".join(lines)
