@@ -89,3 +89,15 @@ def test_coulomb_punch_in_si_and_unit_free():
     assert a.extra["picard"]["iterations"] == b.extra["picard"]["iterations"]
     assert_same_relative_answer(a, b)
     assert {"stick", "slip+", "slip-"} <= set(a.contact.status)
+
+
+@pytest.mark.parametrize("formulation", ["primal", "dual"])
+def test_a_load_of_round_off_size_does_not_set_the_scale(formulation):
+    """A lone imposed 4e-290 m (found by the fuzz suite) once made the scaled gap 1e287 and the dual fail:
+    the displacement scale is at least 1e-12 of the body size, and the answer is u ≈ 0, no contact."""
+    base = cc.library.pressure_patch(nx=4)
+    scene = dataclasses.replace(base, tractions=(), dirichlet=(cc.Dirichlet("top", ux=4e-290, uy=0.0),),
+                                contact=cc.Contact("bottom", cc.Obstacle("flat", gap=1e-3), cc.Signorini()))
+    result = cc.solve(scene, formulation=formulation)
+    assert result.status == "solved" and result.certificate.passes(1e-12)
+    assert np.abs(result.displacement).max() <= 4e-290 and not result.closed.any()

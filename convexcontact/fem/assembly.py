@@ -185,6 +185,10 @@ def locking_warnings(scene: Scene, dim: int = 2) -> tuple[str, ...]:
     return ()
 
 
+MIN_STRAIN = 1e-12
+"""Smallest strain (pressure / E) that sets the displacement scale: smaller loads are measured against it."""
+
+
 def characteristic_pressure(scene: Scene, length: float, stress: float, overlap: float, dim: int = 2) -> float:
     """A pressure that sets the displacement scale: the largest applied load or imposed strain.
 
@@ -220,8 +224,9 @@ def assemble(scene: Scene) -> FEModel:
     trace = contact_trace(scene.contact, mesh, basis, Scaling(length, E_max, 1.0, dim), free, prescribed)
     overlap = max(-(trace.gap - trace.normal_offset).min(initial=0.0), 0.0)
     pressure = characteristic_pressure(scene, length, E_max, overlap, dim)
-    # zero load and zero gap: any displacement scale will do, the answer is u = 0
-    displacement = length * pressure / E_max if pressure > 0 else length
+    # zero load and zero gap: any displacement scale will do, the answer is u = 0. The scale is at least
+    # MIN_STRAIN × length: a lone imposed 4e-290 made the scaled obstacle gap 1e287 and W's program overflow
+    displacement = length * max(pressure / E_max, MIN_STRAIN) if pressure > 0 else length
     scaling = Scaling(length=length, stress=E_max, displacement=displacement, dim=dim)
 
     lame = lame_per_element(scene, mesh, scaling.stress)
