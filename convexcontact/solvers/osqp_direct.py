@@ -6,6 +6,9 @@ t − x ≥ 0 and t + x ≥ 0; a larger cone is refused, never approximated.
 
 from __future__ import annotations
 
+import os
+import sys
+from contextlib import contextmanager
 from dataclasses import replace
 
 import numpy as np
@@ -77,6 +80,24 @@ def _duals(y: np.ndarray, plan) -> np.ndarray:
     return z
 
 
+@contextmanager
+def silenced(active: bool):
+    """Send the C library's stdout to /dev/null: OSQP 1.1 prints "Polishing not needed …" even with
+    verbose off (it ended up in tables and JSON written from stdout). Python's own prints are kept."""
+    if not active:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+            yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
 class Session:
     """OSQP set up once (one LDL of its KKT matrix); :meth:`update` changes q and b and warm-starts."""
 
@@ -87,7 +108,7 @@ class Session:
         lower, upper = _bounds(program.b, self._plan)
         options = {"eps_abs": tol, "eps_rel": tol, "max_iter": max_iter, "polishing": True, "verbose": verbose}
         options.update(native)
-        self._solver = osqp.OSQP()
+        self._solver, self._verbose = osqp.OSQP(), options["verbose"]
         self._solver.setup(sp.triu(program.P, format="csc"), program.q, A, lower, upper, **options)
 
     def update(self, q: np.ndarray | None = None, b: np.ndarray | None = None):
@@ -104,7 +125,8 @@ class Session:
         self._solver.warm_start(x=guess.x)
 
     def solve(self) -> ConicSolution:
-        result = self._solver.solve()
+        with silenced(not self._verbose):
+            result = self._solver.solve()
         word = str(result.info.status)
         x = np.asarray(result.x, dtype=float)
         solution = ConicSolution(
