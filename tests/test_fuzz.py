@@ -91,12 +91,13 @@ def solved_paths(scene):
 
 @given(scenes())
 def test_certified_answers_agree(scene):
-    """Any two solved answers differ by no more than their certificates allow (in displacement and forces)."""
+    """Any two solved answers differ by no more than their certificates allow (in displacement and forces).
+
+    Coulomb answers are compared too: with F ≤ 0.3 on these blocks the fixed point is unique in practice,
+    and two paths finding two fixed points would be a finding worth a failure."""
     results = solved_paths(scene)
     assume(len(results) >= 2)
     for (a, ra), (b, rb) in itertools.combinations(results.items(), 2):
-        if "solution" in ra.not_unique:  # Coulomb: two paths may find different fixed points
-            continue
         allowed = AGREEMENT * (ra.certificate.worst + rb.certificate.worst) + FLOOR
         u_scale = max(np.abs(ra.displacement).max(), np.abs(rb.displacement).max(), 1e-300)
         f_scale = max(np.abs(ra.contact.forces).max(), np.abs(rb.contact.forces).max(), 1e-300)

@@ -91,10 +91,17 @@ def bound_form(program: ConicProgram) -> BoundForm | None:
     )
 
 
+def unit_rows(w: np.ndarray) -> np.ndarray:
+    """The rows of w scaled to unit length, without under- or overflow (a slip bound of 1e-259 gave
+    ‖w‖² = 0 and NaN directions)."""
+    scaled = w / np.abs(w).max(axis=1, keepdims=True)
+    return scaled / np.linalg.norm(scaled, axis=1, keepdims=True)
+
+
 def tangent_bases(w: np.ndarray) -> np.ndarray:
     """Orthonormal bases (k, p, p − 1) of the planes orthogonal to the rows of w: the last
     p − 1 columns of the Householder reflection taking ŵ to ∓e₁ (vectorized over the balls)."""
-    unit = w / np.linalg.norm(w, axis=1, keepdims=True)
+    unit = unit_rows(w)
     v = unit.copy()
     v[:, 0] += np.where(unit[:, 0] >= 0, 1.0, -1.0)
     p = w.shape[1]
@@ -167,7 +174,7 @@ def _newton(P, q, b, A, form: BoundForm, x0, z0, active, on_sphere, unused):
     damping = DAMPING * max(np.abs(np.diag(P)).max(initial=0.0), 1e-300)
 
     def retract(w):
-        w = w * (rho / np.linalg.norm(w, axis=1))[:, None]
+        w = rho[:, None] * unit_rows(w)
         x[sphere_vars] = (sphere_b - w) / sphere_coef
         return w
 
@@ -242,5 +249,5 @@ def _sphere_multipliers(gradient, w, sphere_vars, sphere_coef):
     """ν of each sphere from stationarity along its normal: ∇L = g + ν ∇‖w‖ = g − ν a ⊙ ŵ."""
     if not sphere_vars.size:
         return np.zeros(0)
-    normal = sphere_coef * w / np.linalg.norm(w, axis=1, keepdims=True)
+    normal = sphere_coef * unit_rows(w)
     return (normal * gradient[sphere_vars]).sum(axis=1) / (normal * normal).sum(axis=1)
