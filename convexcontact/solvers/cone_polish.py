@@ -35,6 +35,8 @@ NEWTON_STEPS = 5
 """Newton steps per round: a wrong guess shows in the signs long before Newton would converge on it
 (a sphere pulled on by ν < 0 makes the reduced Hessian wrong and Newton only linear), so the guess
 is corrected every few steps, from where Newton got to."""
+NEGLIGIBLE = 1e-200
+"""Radii below this fraction of the program's scale are taken as 0 (see :func:`centre`)."""
 DAMPING = 1e-12
 """Levenberg–Marquardt damping of the reduced Hessian, relative to P's largest diagonal entry."""
 
@@ -91,6 +93,13 @@ def bound_form(program: ConicProgram) -> BoundForm | None:
     )
 
 
+def centre(radius: np.ndarray, scale: float) -> np.ndarray:
+    """Balls of radius 0 — or so small beside the program's ``scale`` that their curvature ν/ρ would
+    overflow (a slip bound of 9e-311, found by the fuzz suite): each is its centre, to any precision a
+    solver has."""
+    return radius <= NEGLIGIBLE * scale
+
+
 def unit_rows(w: np.ndarray) -> np.ndarray:
     """The rows of w scaled to unit length, without under- or overflow (a slip bound of 1e-259 gave
     ‖w‖² = 0 and NaN directions)."""
@@ -114,13 +123,14 @@ def cone_polish(program: ConicProgram, solution: ConicSolution, form: BoundForm)
     P = program.P.toarray() if sp.issparse(program.P) else np.asarray(program.P)
     q, b, A = program.q, program.b, sp.csr_matrix(program.A)
     radius = b[form.ball_radius_rows]
+    size = max(np.abs(b).max(initial=0.0), 1.0)
     if (radius < 0).any():
         return solution
     x, z = solution.x, solution.z
     # eigenvalue pairs of s = (ρ, w) and z = (ν, z̄): ρ − ‖w‖ pairs with ν + ‖z̄‖, and z = 0 where it is the larger
     w = b[form.ball_rows] - form.ball_coef * x[form.ball_vars]
     slack = radius - np.linalg.norm(w, axis=1)
-    on_sphere = (slack < z[form.ball_radius_rows] + np.linalg.norm(z[form.ball_rows], axis=1)) & (radius > 0)
+    on_sphere = (slack < z[form.ball_radius_rows] + np.linalg.norm(z[form.ball_rows], axis=1)) & ~centre(radius, size)
     active = z[form.bound_rows] > b[form.bound_rows] - form.bound_coef * x[form.bound_vars]
     # a variable in no cost and no equality (the dual's multiplier of a roller direction): if no cone
     # holds it either, it keeps its value (it would make the reduced Hessian singular)
@@ -159,7 +169,7 @@ def _newton(P, q, b, A, form: BoundForm, x0, z0, active, on_sphere, unused):
     x[form.bound_vars[active]] = b[rows] / form.bound_coef[active]
     held[form.bound_vars[active]] = True
     radius = b[form.ball_radius_rows]
-    point = radius == 0  # a ball of radius 0 is its centre
+    point = centre(radius, max(np.abs(b).max(initial=0.0), 1.0))  # a ball of radius 0 is its centre
     centre_vars = form.ball_vars[point]
     x[centre_vars] = b[form.ball_rows[point]] / form.ball_coef[point]
     held[centre_vars] = True
