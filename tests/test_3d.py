@@ -210,3 +210,18 @@ def test_toml_box_scene_is_the_library_scene():
     assert loaded.contact.obstacle.force == pytest.approx(built.contact.obstacle.force, rel=1e-12)
     assert dataclasses.replace(loaded.contact.obstacle, force=None) == dataclasses.replace(built.contact.obstacle,
                                                                                            force=None)
+
+
+def test_a_stalled_interior_point_is_retried_until_it_solves():
+    """A sheared 3-D Tresca block (found by the fuzz suite): Clarabel stalls at 1e-12 and 1e-11 and solves at
+    1e-10; the primal's answer then agrees with the polished dual's."""
+    from convexcontact.scene.model import Box
+
+    scene = cc.Scene(name="sheared", body=cc.Body(Box(size=(1.0, 1.0, 0.5), cells=(3, 3, 3),
+                                                      origin=(-0.5, -0.5, 0.0)), "P1"),
+                     materials=cc.Material(1.0, 0.0), dirichlet=(cc.Dirichlet("top", ux=5e-4, uy=0.0, uz=0.0),),
+                     contact=cc.Contact("bottom", cc.Obstacle("parabolic", radius=2.0, center=(0.0, 0.0, 0.0),
+                                                              depth=1e-3), cc.Tresca(slip_bound=5e-4)))
+    primal, dual = (cc.prepare(scene, form).solve("clarabel") for form in ("primal", "dual"))
+    assert primal.status == dual.status == "solved"
+    assert np.abs(primal.displacement - dual.displacement).max() < 1e-8 * np.abs(dual.displacement).max()

@@ -3,6 +3,7 @@
 import dataclasses
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 
 import convexcontact as cc
@@ -129,15 +130,16 @@ def test_a_failed_polish_returns_its_input_even_when_the_guess_says_polished(mon
         assert polish(model.program, guess) is guess
 
 
-def test_a_vanishing_slip_bound_polishes_without_underflow():
-    """A 3-D slip bound of 1e-259 (found by the fuzz suite) squared to 0 in ‖w‖ and gave NaN directions;
-    the dual now polishes to the answer of the primal, which has no friction to speak of either."""
+@pytest.mark.parametrize("bound", [1e-259, 8.7e-311])
+def test_a_vanishing_slip_bound_polishes_without_underflow(bound):
+    """3-D slip bounds found by the fuzz suite: 1e-259 squared to 0 in ‖w‖ (NaN directions), 8.7e-311 made
+    the curvature ν/ρ overflow; the dual now polishes to the answer of the primal."""
     from convexcontact.scene.model import Box
 
     scene = cc.Scene(name="tiny bound", body=cc.Body(Box(size=(1.0, 1.0, 0.5), cells=(2, 2, 2),
                                                           origin=(-0.5, -0.5, 0.0)), "P1"),
                      materials=cc.Material(1.0, 0.0), dirichlet=(cc.Dirichlet("top", ux=0.0, uy=0.0, uz=0.0),),
-                     contact=cc.Contact("bottom", cc.Obstacle("flat", depth=0.0078125), cc.Tresca(slip_bound=1e-259)))
+                     contact=cc.Contact("bottom", cc.Obstacle("flat", depth=0.0078125), cc.Tresca(slip_bound=bound)))
     dual, primal = (cc.prepare(scene, form).solve("clarabel") for form in ("dual", "primal"))
     assert dual.status == primal.status == "solved" and dual.certificate.passes(1e-12)
     assert np.abs(dual.displacement - primal.displacement).max() < 1e-9 * np.abs(primal.displacement).max()
