@@ -54,6 +54,19 @@ class FEModel:
         copy.__dict__.update({name: self.__dict__[name] for name in ("K", "f") if name in self.__dict__})
         return copy
 
+    def at(self, scene: Scene) -> FEModel:
+        """This model under the loads, supports and obstacle of ``scene`` (a step of a history): the mesh,
+        the units and K are kept, f, the Dirichlet values and the contact trace are computed anew."""
+        free, prescribed = dirichlet(scene, self.mesh, self.basis, self.scaling.displacement)
+        if not np.array_equal(free, self.free):
+            raise SceneError("history", "a step prescribes other displacement components than the scene",
+                             "keep the same Dirichlet components at every step (only their values change)")
+        contact = contact_trace(scene.contact, self.mesh, self.basis, self.scaling, free, prescribed)
+        copy = replace(self, scene=scene, f_full=load_vector(scene, self.mesh, self.basis, self.scaling),
+                       prescribed=prescribed, contact=contact)
+        copy.__dict__.update({"K": self.__dict__["K"]} if "K" in self.__dict__ else {})  # K is the same
+        return copy
+
     @property
     def dim(self) -> int:
         return self.mesh.dim()
@@ -105,6 +118,18 @@ def lame_per_element(scene: Scene, mesh: fe.Mesh, stress_scale: float) -> tuple[
     if scene.body.plane == "stress" and mesh.dim() == 2:
         lam = 2.0 * lam * mu / (lam + 2.0 * mu)
     return lam, mu
+
+
+def viscous_stiffness(fem: FEModel) -> sp.csr_matrix | None:
+    """K_A of Kelvin–Voigt materials (A = τ B per element, τ = η/E; full DOFs), None if every body is elastic."""
+    scene = fem.scene
+    materials = {None: scene.materials} if isinstance(scene.materials, Material) else scene.materials
+    if not any(m.viscosity for m in materials.values()):
+        return None
+    tau = np.zeros(fem.mesh.t.shape[1])
+    for name, material in materials.items():
+        tau[slice(None) if name is None else fem.mesh.subdomains[name]] = material.viscosity / material.E
+    return stiffness(fem.basis, (fem.lame[0] * tau, fem.lame[1] * tau))
 
 
 def stiffness(basis: fe.Basis, lame: tuple[np.ndarray, np.ndarray]) -> sp.csr_matrix:

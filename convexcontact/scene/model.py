@@ -10,8 +10,12 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .history import History
 
 ELEMENTS = ("P1", "P2", "Q1", "Q2")
 PLANES = ("strain", "stress")
@@ -57,11 +61,16 @@ def positive_integer(value, field_name: str) -> int:
 
 @dataclass(frozen=True)
 class Material:
-    """Isotropic linear elastic material; ``name`` (a subdomain) only labels errors."""
+    """Isotropic linear elastic material; ``name`` (a subdomain) only labels errors.
+
+    ``viscosity`` η ≥ 0 makes it a Kelvin–Voigt body (seed 002, eq. 2.3.3), σ = A ε(u̇) + B ε(u) with
+    A = (η/E) B: a retardation time τ = η/E (time units of the history). It acts only in a history.
+    """
 
     E: float
     nu: float
     name: str = field(default="material", compare=False)
+    viscosity: float = 0.0
 
     def __post_init__(self):
         E = finite(self.E, f"{self.name}.E")
@@ -74,8 +83,11 @@ class Material:
                 f"Poisson's ratio must lie in (-1, 0.5), got {nu}",
                 "for near-incompressible bodies use e.g. 0.4999 with P2 or Q2",
             )
+        if finite(self.viscosity, f"{self.name}.viscosity") < 0:
+            raise SceneError(f"{self.name}.viscosity", f"must be ≥ 0 (0 is elastic), got {self.viscosity}")
         object.__setattr__(self, "E", E)
         object.__setattr__(self, "nu", nu)
+        object.__setattr__(self, "viscosity", float(self.viscosity))
 
 
 @dataclass(frozen=True)
@@ -526,6 +538,7 @@ class Scene:
     tractions: tuple[Traction, ...] = ()
     body_force: tuple[float, float] = (0.0, 0.0)
     name: str = "scene"
+    history: History | None = None  # a load history (scene/history.py); None: one static problem
 
     def __post_init__(self):
         object.__setattr__(self, "dirichlet", tuple(self.dirichlet))
@@ -538,6 +551,12 @@ class Scene:
                 "fix at least one boundary, e.g. [[dirichlet]] boundary = 'bottom', ux = 0, uy = 0",
             )
         self._check_dimension()
+        if self.history is not None:
+            from .history import History
+
+            if not isinstance(self.history, History):
+                raise SceneError("history", f"expected a History, got {type(self.history).__name__}",
+                                 "build it with cc.History(times=[...], values={'obstacle.depth': [...]})")
         if isinstance(self.materials, dict) and not self.materials:
             raise SceneError("materials", "empty", "give [material] E and nu")
 

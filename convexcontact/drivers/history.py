@@ -1,0 +1,178 @@
+"""Quasistatic contact processes: a load history solved step by step (seed 002, eq. 2.2.1).
+
+Inertia is neglected; friction depends on the slip *rate*, discretized by backward Euler:
+at step k the friction energy acts on the slip increment u_T^k − u_T^{k−1},
+
+    min ½uᵀKu − fᵀu + Σ s |R u + c^k − v^{k−1}|   s.t. non-penetration at step k,
+
+i.e. today's exact program with the tangential offset shifted by the previous step's slip
+v^{k−1} (relative to the obstacle). A point that sticks keeps its position; reverse slip on
+unloading comes out of the law. Kelvin–Voigt bodies (σ = A ε(u̇) + B ε(u), eq. 2.3.3, with
+A = τ B per material, τ = η/E) take the matrix K + K_A/Δt and the load f^k + K_A u^{k−1}/Δt.
+
+Everything that does not change is built once: the mesh, K and the formulation's choice, and
+K's condensation (W) for each distinct Δt; one solver session runs the whole history, each step
+updating q and b and starting from the previous answer (Clarabel's polish, OSQP's warm start).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .. import solvers
+from ..fem.assembly import FEModel, assemble, viscous_stiffness
+from ..results.result import ContactResult
+from ..scene.history import History
+from ..scene.model import Coulomb, Scene, SceneError
+from .solve import Model, condensed, formulate, timed
+
+
+@dataclass
+class HistoryResult:
+    """The answers of every step of a history, with the reuse that made them cheap."""
+
+    scene: Scene
+    history: History
+    steps: list[ContactResult]
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def times(self) -> tuple[float, ...]:
+        return self.history.times[: len(self.steps)]
+
+    @property
+    def status(self) -> str:
+        """solved when every step is; else the first step's status that is not."""
+        for step in self.steps:
+            if step.status != "solved":
+                return step.status
+        return "solved" if len(self.steps) == len(self.history) else "failed"
+
+    @property
+    def message(self) -> str:
+        for k, step in enumerate(self.steps):
+            if step.status != "solved":
+                return f"step {k + 1} (t = {self.times[k]:g}): {step.status}: {step.message}"
+        return ""
+
+    def series(self) -> dict[str, list]:
+        """Per-step scalars: forces, zones, obstacle motion, certificate (None where a step has no answer)."""
+        names = ("normal_force", "tangential_force", "max_pressure", "contact_half_width", "obstacle_advance",
+                 "obstacle_shift")
+        out = {"time": list(self.times), "status": [s.status for s in self.steps]}
+        for name in names:
+            out[name] = [value(step, name) for step in self.steps]
+        out["n_closed"] = [int(s.closed.sum()) if s.solved else None for s in self.steps]
+        for state in ("stick", "slip"):
+            out[f"n_{state}"] = [int(np.char.startswith(s.contact.status.astype(str), state).sum())
+                                 if s.solved else None for s in self.steps]
+        out["certificate"] = [s.certificate.worst if s.certificate else None for s in self.steps]
+        return out
+
+    def summary(self) -> dict:
+        return {"scene": self.scene.name, "status": self.status, "message": self.message, "steps": len(self.steps),
+                "timings": self.timings, "series": self.series(), "step": [s.summary() for s in self.steps]}
+
+    def save(self, directory, formats=("json", "vtk", "png")) -> list:
+        """summary.json, one solution_NNNN.vtu per step with a solution.pvd time series, history plots."""
+        from ..results.history_out import save_history
+
+        return save_history(self, directory, formats)
+
+
+def value(step: ContactResult, name: str):
+    if not step.solved:
+        return None
+    number = getattr(step, name)
+    return None if number is None or (name == "tangential_force" and step.contact.friction is None) else float(number)
+
+
+class Process:
+    """The state a history carries from step to step: the last displacement and slip, and what is reused."""
+
+    def __init__(self, scene: Scene, formulation: str, timings: dict):
+        self.scene, self.history = scene, scene.history
+        with timed(timings, "assembly"):
+            self.fem = assemble(self.history.envelope(scene))  # units from the largest load of the history
+            self.viscous = viscous_stiffness(self.fem)  # None for elastic bodies
+        self.model = formulate(self.fem, formulation, timings)
+        self.condensations = {None: self.model.condensation}  # per Δt (Kelvin–Voigt changes K)
+        self.u = np.zeros(self.fem.basis.N)  # t0 = 0: undeformed
+        self.slip = None  # absolute tangential positions relative to the obstacle, at the contact nodes
+
+    def step_model(self, k: int, timings: dict) -> Model:
+        """The program of step k: this step's loads, K (viscous), and the slip measured from step k − 1."""
+        fem = self.fem.at(self.history.scene(self.scene, k))
+        self.key = None  # what K depends on: Δt for viscous bodies
+        if self.viscous is not None:
+            dt = self.history.times[k] - (self.history.times[k - 1] if k else 0.0)
+            fem, self.key = viscous_step(fem, self.viscous, dt, self.u), dt
+        self.absolute = fem.contact
+        if self.slip is not None:
+            fem = replace(fem, contact=replace(fem.contact, tangent_offset=fem.contact.tangent_offset - self.slip))
+        if self.model.formulation == "dual" and self.key not in self.condensations:
+            self.condensations[self.key] = condensed(fem, timings)
+        condensation = self.condensations.get(self.key)
+        return formulate(fem, self.model.formulation, timings, condensation, self.model.reason)
+
+    def advance(self, result: ContactResult):
+        """Keep the step's displacement and slip for the next step."""
+        fem = result.fem
+        u = result.displacement / fem.scaling.displacement
+        self.u = u
+        contact = self.absolute
+        if contact.tangential_coupling is None and self.model.friction is None:
+            return
+        shift = 0.0 if result.obstacle_shift is None else result.obstacle_shift / fem.scaling.displacement
+        coupling = 0.0 if contact.tangential_coupling is None else contact.tangential_coupling * shift
+        self.slip = contact.T @ u[fem.free] + contact.tangent_offset - coupling
+
+
+def viscous_step(fem: FEModel, viscous, dt: float, u_previous: np.ndarray) -> FEModel:
+    """Backward Euler for Kelvin–Voigt: K + K_A/Δt and f + K_A u^{k−1}/Δt (full DOF vectors)."""
+    step = replace(fem, K_full=(fem.K_full + viscous / dt).tocsr(), f_full=fem.f_full + viscous @ u_previous / dt)
+    return step
+
+
+def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progress=None,
+        **options) -> HistoryResult:
+    """Solve ``scene``'s history step by step; ``progress(step, count, result)`` after each step.
+
+    A step that fails ends the history there (later steps start from its state): the result
+    holds the steps solved so far, and its status and message name the failing step.
+    """
+    if scene.history is None:
+        raise SceneError("history", "the scene has no history", "give history = {times = [...], ...} or solve it statically")
+    solvers.check_name(solver)
+    scene.history.check(scene)
+    timings: dict = {}
+    process = Process(scene, formulation, timings)
+    if isinstance(scene.contact.law, Coulomb):
+        raise SceneError("contact.law", "Coulomb friction in a history is not available yet",
+                         "use Tresca with a slip bound, or solve each load statically")
+    session, session_key = None, None
+    results = []
+    for k in range(len(scene.history)):
+        start = time.perf_counter()
+        step_timings: dict = {}
+        with timed(timings, "steps"):
+            model = process.step_model(k, step_timings)
+            if session is None or process.key != session_key:
+                session, session_key = solvers.session(model.program, solver, **options), process.key
+                model.seed(session, solver, options)
+            else:
+                session.update(q=model.program.q, b=model.program.b)
+            solution = session.solve()
+            step_timings["solve"] = time.perf_counter() - start
+            result = model.result(solution, step_timings, model.slip_bound)
+        result.extra["time"] = scene.history.times[k]
+        results.append(result)
+        if progress is not None:
+            progress(k + 1, len(scene.history), result)
+        if not result.solved:
+            break
+        process.advance(result)
+    return HistoryResult(scene, scene.history, results, timings)

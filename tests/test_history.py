@@ -1,0 +1,137 @@
+"""Quasistatic histories (issue 11): one step is the static problem, friction acts on the slip increment,
+Kelvin–Voigt bodies creep as backward Euler says, and everything is reused from step to step."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import convexcontact as cc
+from convexcontact.drivers.history import run
+from convexcontact.scene.history import History
+from convexcontact.scene.model import SceneError
+
+SLIP_BOUND, DEPTH, WIDTH = 0.002, 0.01, 1.0
+
+
+def sliding_block(ux: list[float], law=None) -> cc.Scene:
+    """A block pressed DEPTH into a flat rigid plane by its clamped top, which then moves by ``ux``."""
+    return cc.Scene(
+        name="sliding block",
+        body=cc.Body(cc.Rectangle(width=WIDTH, height=0.5, nx=16, ny=8)),
+        materials=cc.Material(1.0, 0.3),
+        dirichlet=(cc.Dirichlet("top", ux=0.0, uy=-DEPTH),),
+        contact=cc.Contact("bottom", cc.Obstacle("flat"), law or cc.Tresca(slip_bound=SLIP_BOUND)),
+        history=History(times=list(range(1, len(ux) + 1)), values={"dirichlet[top].ux": ux}),
+    )
+
+
+@pytest.mark.parametrize("law", [cc.Signorini(), cc.Tresca(slip_bound=0.005)])
+@pytest.mark.parametrize("formulation", ["primal", "dual"])
+def test_a_one_step_history_is_the_static_problem(law, formulation):
+    """The punch indented in one step: the static answer, to solver accuracy."""
+    scene = cc.library.tresca_punch(nx=16).with_law(law)
+    static = cc.solve(scene, formulation=formulation)
+    history = run(dataclasses.replace(scene, history=History(times=[1.0], values={"obstacle.depth": [0.01]})),
+                  formulation=formulation)
+    step = history.steps[0]
+    assert history.status == static.status == "solved"
+    assert np.abs(step.displacement - static.displacement).max() < 1e-10 * np.abs(static.displacement).max()
+    assert np.abs(step.contact.forces - static.contact.forces).max() < 1e-10 * np.abs(static.contact.forces).max()
+
+
+def test_a_dragged_block_sticks_then_slips_at_the_bound_and_slips_back_when_unloaded():
+    """Tresca: the tangential reaction rises while the block sticks, saturates at s × length once the whole
+    interface slips, and on the way back falls through 0 to −s × length; each step certified."""
+    out = [0.002 * k for k in range(9)]
+    result = run(sliding_block(out + out[-2::-1]))
+    assert result.status == "solved"
+    force = np.array(result.series()["tangential_force"])
+    saturated = SLIP_BOUND * WIDTH
+    assert np.all(np.diff(force[:9]) <= 1e-12)  # pulled along +x: friction on the body along −x grows
+    np.testing.assert_allclose(force[5:9], -saturated, rtol=1e-9)  # the whole interface slips
+    assert (result.steps[8].contact.status == "slip+").all()
+    np.testing.assert_allclose(force[-4:], saturated, rtol=1e-9)  # reverse slip on the way back
+    assert (result.steps[-1].contact.status == "slip-").all()
+    assert max(step.certificate.worst for step in result.steps) < 1e-10
+
+
+def test_the_dragged_block_dissipates_on_a_closed_cycle():
+    """Out and back to the start: the friction work Σ λ_T · Δslip over the cycle is positive (hysteresis)."""
+    out = [0.002 * k for k in range(9)]
+    result = run(sliding_block(out + out[-2::-1]))
+    work = sum(-(step.contact.friction * step.contact.slip * result.steps[0].fem.contact.weights).sum()
+               * step.fem.scaling.length for step in result.steps)
+    assert work > 0.5 * SLIP_BOUND * WIDTH * 2 * (0.016 - 0.004)  # at least the two fully slipping strokes
+
+
+def test_each_step_after_the_first_is_a_warm_start():
+    """One condensation and one solver session for the whole history: later steps start from the last
+    answer and need no interior point (Clarabel's polish from the previous step)."""
+    result = run(sliding_block([0.0, 0.002, 0.004, 0.006]), formulation="dual")
+    assert all(step.iterations == 0 for step in result.steps[1:])
+    assert "condensation" in result.timings and "condensation" not in result.steps[1].timings
+
+
+def creep_column(viscosity: float, times: list[float]) -> cc.Scene:
+    """A column (ν = 0) on a frictionless plane under a constant top pressure from t = 0: uniaxial stress."""
+    return cc.Scene(
+        name="creep",
+        body=cc.Body(cc.Rectangle(width=0.5, height=1.0, nx=2, ny=4), "Q1"),
+        materials=cc.Material(1.0, 0.0, viscosity=viscosity),
+        dirichlet=(cc.Dirichlet("left", ux=0.0),),
+        tractions=(cc.Traction("top", pressure=0.01),),
+        contact=cc.Contact("bottom", cc.Obstacle("flat"), cc.Signorini()),
+        history=History(times=times, values={"traction[top].pressure": [0.01] * len(times)}),
+    )
+
+
+def test_a_kelvin_voigt_column_creeps_as_backward_euler_says():
+    """u_k = u∞ (1 − (1 + Δt/τ)^−k) exactly (the discrete law), and → u∞ (1 − e^{−t/τ}) as Δt → 0;
+    the contact pressure balances the load at every step."""
+    tau, pressure = 2.0, 0.01
+    settled = -pressure * 1.0  # u∞ of the top: −p H / E
+
+    def top(step):
+        return step.displacement[step.fem.basis.nodal_dofs[1]][np.isclose(step.fem.mesh.p[1], 1.0)].mean() \
+            * step.fem.scaling.length
+
+    for dt in (0.5, 0.05):
+        times = list(np.arange(1, round(2.0 / dt) + 1) * dt)
+        result = run(creep_column(viscosity=tau * 1.0, times=times))
+        assert result.status == "solved"
+        k = np.arange(1, len(times) + 1)
+        discrete = settled * (1 - (1 + dt / tau) ** -k.astype(float))
+        np.testing.assert_allclose([top(s) for s in result.steps], discrete, rtol=1e-8)
+        for step in result.steps:
+            np.testing.assert_allclose(step.contact.pressure, pressure, rtol=1e-8)
+    exact = settled * (1 - np.exp(-2.0 / tau))
+    assert abs(top(result.steps[-1]) - exact) < 0.02 * abs(exact)  # first order in Δt: 1.3 % at Δt = τ/40
+
+
+def test_an_elastic_column_ignores_time():
+    """Viscosity 0: every step is the static answer, whatever the times."""
+    result = run(creep_column(viscosity=0.0, times=[0.1, 5.0]))
+    assert result.status == "solved"
+    np.testing.assert_allclose(result.steps[0].displacement, result.steps[1].displacement, rtol=1e-10, atol=1e-15)
+
+
+@pytest.mark.parametrize("times, values, field", [
+    ([0.0, 1.0], {"obstacle.depth": [0.01, 0.02]}, "history.times"),
+    ([2.0, 1.0], {"obstacle.depth": [0.01, 0.02]}, "history.times"),
+    ([1.0, 2.0], {"obstacle.depth": [0.01]}, "history.obstacle.depth"),
+    ([1.0, 2.0], {"obstacle.radius": [1.0, 2.0]}, "history.obstacle.radius"),
+    ([1.0, 2.0], {"obstacle.depth": [0.01, float("nan")]}, "history.obstacle.depth[1]"),
+    ([1.0], {}, "history"),
+])
+def test_a_malformed_history_names_its_field(times, values, field):
+    with pytest.raises(SceneError) as error:
+        History(times=times, values=values)
+    assert error.value.field == field
+
+
+def test_a_history_naming_a_load_the_scene_lacks_says_what_to_add():
+    scene = dataclasses.replace(cc.library.tresca_punch(nx=8),
+                                history=History(times=[1.0], values={"traction[top].pressure": [0.1]}))
+    with pytest.raises(SceneError, match=r"add a \[\[traction\]\] boundary = 'top'"):
+        run(scene)
