@@ -9,9 +9,12 @@ Build a :class:`Scene`, call :func:`solve`, read the :class:`ContactResult`::
 """
 
 from .conic import ConicProgram, ConicSolution
+from .drivers.history import HistoryResult
+from .drivers.history import run as run_history
 from .drivers.solve import Model, prepare, solve
 from .results.result import ContactResult
 from .scene import library
+from .scene.history import History
 from .scene.model import (
     Body,
     Contact,
@@ -30,7 +33,8 @@ from .scene.model import (
 )
 
 __all__ = [
-    "Body", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Coulomb", "Dirichlet", "Material", "MeshFile",
-    "Model", "NormalCompliance", "Obstacle", "Rectangle", "Scene", "SceneError", "Signorini", "Traction", "Tresca", "library", "prepare", "solve",
+    "Body", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Coulomb", "Dirichlet", "History",
+    "HistoryResult", "Material", "MeshFile", "Model", "NormalCompliance", "Obstacle", "Rectangle", "Scene",
+    "SceneError", "Signorini", "Traction", "Tresca", "library", "prepare", "run_history", "solve",
 ]
 __version__ = "0.1.0"
