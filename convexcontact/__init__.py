@@ -10,6 +10,7 @@ Build a :class:`Scene`, call :func:`solve`, read the :class:`ContactResult`::
 
 from .conic import ConicProgram, ConicSolution
 from .drivers.history import HistoryResult
+from .drivers.solutions import SolutionSet, all_solutions
 from .drivers.history import run as run_history
 from .drivers.solve import Model, prepare, solve
 from .results.result import ContactResult
@@ -35,6 +36,7 @@ from .scene.model import (
 __all__ = [
     "Body", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Coulomb", "Dirichlet", "History",
     "HistoryResult", "Material", "MeshFile", "Model", "NormalCompliance", "Obstacle", "Rectangle", "Scene",
-    "SceneError", "Signorini", "Traction", "Tresca", "library", "prepare", "run_history", "solve",
+    "SceneError", "Signorini", "SolutionSet", "Traction", "Tresca", "all_solutions", "library", "prepare",
+    "run_history", "solve",
 ]
 __version__ = "0.1.0"

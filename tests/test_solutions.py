@@ -81,3 +81,35 @@ def test_the_uniqueness_map_reproduces_prop_4_1_on_a_grid(tmp_path):
     assert {1, 3} <= {r["solutions"] for r in rows}  # the grid reaches the three-solution wedge
     assert (tmp_path / "uniqueness.csv").read_text().count("\n") == len(rows) + 1
     assert (tmp_path / "uniqueness.png").stat().st_size > 0
+
+
+def side_by_side_triangles(loads, friction):
+    """Hild's triangle repeated along x, one per load, with nothing coupling them: the solutions of the
+    whole are the products of each triangle's."""
+    import skfem as fe
+
+    n = len(loads)
+    points = np.hstack([np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) + [[2.0 * i], [0.0]] for i in range(n)])
+    boundaries = {"contact": lambda x: np.isclose(x[1], 0.0),
+                  "clamped": lambda x: np.isclose((x[0] % 2.0) + x[1], 1.0)}
+    boundaries.update({f"loaded{i}": (lambda x, i=i: np.isclose(x[0], 2.0 * i) & (x[1] > 0)) for i in range(n)})
+    mesh = fe.MeshTri1(points, np.arange(3 * n).reshape(n, 3).T).with_boundaries(boundaries)
+    return cc.Scene(name="triangles", body=cc.Body(mesh, "P1"), materials=cc.Material(1.0, NU),
+                    dirichlet=(cc.Dirichlet("clamped", ux=0.0, uy=0.0),),
+                    tractions=tuple(cc.Traction(f"loaded{i}", vector=load) for i, load in enumerate(loads)),
+                    contact=cc.Contact("contact", cc.Obstacle("flat", gap=0.0), cc.Coulomb(friction=friction)))
+
+
+def test_products_of_solution_sets_are_found():
+    """Two triangles with three solutions each and one with one: 9, exhaustively."""
+    found = all_solutions(side_by_side_triangles([(-1.0, -0.5), (-1.0, -0.5), (0.5, -1.0)], 2.5))
+    assert found.complete and len(found) == 9
+
+
+def test_beyond_the_exhaustive_size_the_search_finds_a_second_solution_and_says_it_is_not_complete():
+    """Eleven triangles (beyond 10 nodes), one with three solutions: the search finds separation and stick
+    there (left slip repels every Picard iteration) and does not claim completeness."""
+    found = all_solutions(side_by_side_triangles([(-1.0, -0.5)] + [(0.5, -1.0)] * 10, 2.5))
+    assert not found.complete and "not proven complete" in found.statement and found.examined > 2
+    first = {s.states[0] for s in found.solutions}
+    assert {"open", "stick"} <= first and all(s.result.status == "solved" for s in found.solutions)

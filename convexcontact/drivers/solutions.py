@@ -106,14 +106,14 @@ def all_solutions(scene: Scene, solver: str = "clarabel", **options) -> Solution
         found, examined = enumerate_pieces(model, carries)
         method, complete = f"exhaustive enumeration of the 4^{carries.size} contact states", True
     else:
-        found, examined = search(scene, solver, options), None
+        found, examined = search(scene, solver, options)
         method, complete = "Picard map from diverse starting pressures", False
     timings = {"search": time.perf_counter() - start}
     solutions = [certified(model, r, states, continuum) for r, states, continuum in found]
     for solution in solutions:
         solution.picard_slope = picard_slope(model, solution.result, solver, options)
     timings["total"] = time.perf_counter() - start
-    return SolutionSet(solutions, complete, method, examined if complete else len(found), timings)
+    return SolutionSet(solutions, complete, method, examined, timings)
 
 
 def supported(model: Model) -> None:
@@ -291,13 +291,14 @@ def picard_slope(model: Model, result: ContactResult, solver: str, options: dict
 
 
 def search(scene: Scene, solver: str, options: dict):
-    """Picard from the frictionless pressure and from scaled and random pressures, with two relaxations."""
+    """Picard from the frictionless pressure and from scaled and random pressures, with two relaxations:
+    the distinct certified answers, and how many runs there were."""
     from .solve import solve
 
     law: Coulomb = scene.contact.law
     first = solve(scene, solver, formulation="dual", **options)
     if not first.solved:
-        return []
+        return [], 1
     pressure = first.contact.pressure
     rng = np.random.default_rng(0)
     starts = [pressure * factor for factor in (0.0, 0.5, 2.0, 5.0)] + [pressure.max() * rng.random(pressure.size)
@@ -313,4 +314,4 @@ def search(scene: Scene, solver: str, options: dict):
         r = np.concatenate([result.contact.pressure, result.contact.friction]) / result.fem.scaling.pressure
         if not any(np.abs(r - kept).max() <= 1e-7 * max(np.abs(r).max(), 1e-300) for kept, _, _ in found):
             found.append((r, tuple(result.contact.status.tolist()), 0))
-    return found
+    return found, len(results)
