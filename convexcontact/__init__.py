@@ -10,8 +10,8 @@ Build a :class:`Scene`, call :func:`solve`, read the :class:`ContactResult`::
 
 from .conic import ConicProgram, ConicSolution
 from .drivers.history import HistoryResult
-from .drivers.solutions import SolutionSet, all_solutions
 from .drivers.history import run as run_history
+from .drivers.solutions import SolutionSet, all_solutions
 from .drivers.solve import Model, prepare, solve
 from .results.result import ContactResult
 from .scene import library
