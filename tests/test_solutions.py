@@ -113,3 +113,11 @@ def test_beyond_the_exhaustive_size_the_search_finds_a_second_solution_and_says_
     assert not found.complete and "not proven complete" in found.statement and found.examined > 2
     first = {s.states[0] for s in found.solutions}
     assert {"open", "stick"} <= first and all(s.result.status == "solved" for s in found.solutions)
+
+
+def test_solve_takes_solutions_all():
+    """cc.solve(..., solutions="all") is all_solutions; a misspelt value names the argument."""
+    scene = triangle_scene(-1.0, -0.5, cc.Coulomb(friction=2.5))
+    assert len(cc.solve(scene, solutions="all")) == 3
+    with pytest.raises(cc.SceneError, match="solutions"):
+        cc.solve(scene, solutions="every")

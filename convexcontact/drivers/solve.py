@@ -327,7 +327,17 @@ def condensed(fem: FEModel, timings: dict):
         return factorize(fem.K, dim=fem.dim)  # nothing to condense from or onto: W from K's factors
 
 
-def solve(scene: Scene, solver: str = "clarabel", formulation: str = "auto", **options) -> ContactResult:
-    """Solve ``scene`` exactly with ``solver``; see :meth:`Model.solve`."""
+def solve(scene: Scene, solver: str = "clarabel", formulation: str = "auto", solutions: str = "one", **options):
+    """Solve ``scene`` exactly with ``solver``; see :meth:`Model.solve`.
+
+    ``solutions="all"`` (Coulomb scenes) returns a :class:`~convexcontact.drivers.solutions.SolutionSet`
+    instead: every solution, or as many as a search finds, each certified (docs/uniqueness.md).
+    """
     solvers.check_name(solver)
+    if solutions not in ("one", "all"):
+        raise SceneError("solutions", f"got {solutions!r}", "use 'one' (the default) or 'all'")
+    if solutions == "all":
+        from .solutions import all_solutions
+
+        return all_solutions(scene, solver, **options)
     return prepare(scene, formulation).solve(solver, **options)
