@@ -40,6 +40,8 @@ def table(result) -> str:
         if "picard" in s:
             picard = s["picard"]
             rows.append(("Picard map", f'{picard["outcome"]} after {picard["iterations"]} iterations'))
+            rows.append(("Picard attempts", "; ".join(f'{a["formulation"]}/{a["solver"]} ω={a["relaxation"]:g}: '
+                                                      f'{a["outcome"]} ({a["iterations"]})' for a in picard["attempts"])))
         rows += [
             ("certificate (worst)", f'{s["certificate"]["worst"]:.2e}'),
         ]

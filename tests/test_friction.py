@@ -4,10 +4,8 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_friction_hild import LENGTH, NU, E, matches_one_of, triangle_scene
 
 import convexcontact as cc
-from convexcontact.analytic import hild_one_triangle_solutions
 from convexcontact.fem.mollifier import mollifier
 from convexcontact.scene.library import frictional_punch, hertz_punch, punch_mesh, tresca_punch
 from convexcontact.scene.model import Coulomb, Tresca
@@ -135,20 +133,6 @@ def test_picard_reuses_one_solver_session_and_matches_a_fresh_solve():
     bound = F * result.contact.pressure
     check = cc.solve(frictional_punch(h=0.01, depth=0.02, element="Q1", law=Tresca(slip_bound=bound)))
     np.testing.assert_allclose(check.contact.friction, result.contact.friction, atol=1e-6 * result.max_pressure)
-
-
-def test_picard_cycling_beyond_uniqueness_is_reported_and_relaxation_cures_it():
-    """F = 2.5 > 3 − 4ν on one triangle: ω = 1 cycles (reported, with history); ω = ½ converges."""
-    F1, F2, friction = 3.0, 0.3, 2.5
-    (solution,) = hild_one_triangle_solutions(F1, F2, friction, E, NU, LENGTH)
-    cycling = cc.solve(triangle_scene(F1, F2, Coulomb(friction=friction, max_iterations=40)), tol=1e-12)
-    assert cycling.status == "not converged"
-    assert cycling.extra["picard"]["outcome"].startswith("cycling")
-    assert len(cycling.extra["history"]) >= 4 and "best iterate" in cycling.message
-    assert cycling.summary()["picard_history"]
-    relaxed = cc.solve(triangle_scene(F1, F2, Coulomb(friction=friction, relaxation=0.5, tol=1e-10)), tol=1e-12)
-    assert relaxed.status == "solved"
-    assert matches_one_of(relaxed, [solution])[0]
 
 
 def test_mollifier_is_a_local_average():

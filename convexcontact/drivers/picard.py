@@ -8,8 +8,13 @@ program, the factorization (dual) and the solver's setup are built once, and eac
 step updates the data of one solver session (OSQP also warm-starts).
 
 The map converges only for small enough F (Hild); otherwise it may stagnate, cycle
-or diverge. That is a reported outcome — with the best iterate, its Coulomb
-residuals and the whole history — never an exception and never a silent success.
+or diverge. The driver adapts: a cycling or diverging map is run again with half the
+relaxation ω; a stagnating one (or a failed inner solve) with another solver, then the
+other formulation. Each run is an *attempt*, recorded in ``extra["picard"]["attempts"]``.
+The map stops when its relative change is below max(tol, NOISE × the inner solve's own
+residual): never below what the inner solver can reach. What no attempt solves is a
+reported outcome — with the best iterate, its Coulomb residuals and the whole history —
+never an exception and never a silent success.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -24,12 +30,20 @@ import scipy.sparse as sp
 from .. import solvers
 from ..fem.mollifier import mollifier
 from ..results.certificate import certify
-from ..scene.model import Coulomb, evaluate_field
-from .solve import CERTIFIED, Model, field_at_points, timed
+from ..scene.model import Coulomb, SceneError, evaluate_field
+from .solve import CERTIFIED, Model, field_at_points, formulate, timed
 
 CYCLE_PERIODS = (2, 3, 4)
 WINDOW = 8
 """Iterations looked back on to call the map cycling, diverging or stagnating."""
+HALVINGS = 4
+"""Times ω is halved on a cycling or diverging map before another solver or formulation is tried
+(Hild's triangle, unique solutions up to F = 4 > F_c = 1.8: ω = 1 cycles, ω = ½ converges)."""
+NOISE = 10.0
+"""A change of the slip bounds below NOISE × the inner solve's residual (its certificate against
+the bound it was given) is the inner solver's noise: the map has converged as far as it can."""
+ALTERNATIVES = ("clarabel", "osqp")
+"""Solvers tried, at their defaults, after the user's one stagnates."""
 
 
 def pressure_map(model: Model):
@@ -73,23 +87,36 @@ def reused_session(model: Model, solver: str, options: dict):
     return model.cache[key]
 
 
-def outcome(changes: list[float], tol: float, states: list[np.ndarray]) -> str | None:
-    """converged / cycling (period p) / diverging / stagnated, or None to go on.
+def oscillating(changes: list[float], states: list[np.ndarray]) -> bool:
+    """Each of the last three steps turns back on the one before (cosine < −½) while the change shrinks by
+    less than ½ over two steps: the relaxation overshoots the fixed point."""
+    if len(states) < 5:
+        return False
+    steps = np.diff(np.array(states[-5:]), axis=0)
+    steps /= np.maximum(np.linalg.norm(steps, axis=1, keepdims=True), 1e-300)
+    return max(a @ b for a, b in itertools.pairwise(steps)) < -0.5 and changes[-1] > 0.5 * changes[-3]
 
-    Cycling: the state returns to itself after p steps while the step size stays large
-    (above sqrt(tol)) and does not shrink. Smaller steps that stop shrinking are the
-    inner solver's noise: the map has stagnated at the solver's accuracy.
+
+def outcome(changes: list[float], stop: float, states: list[np.ndarray]) -> str | None:
+    """converged / oscillating / cycling (period p) / diverging / stagnated, or None to go on.
+
+    Converged: the change is below ``stop``, max(tol, the inner solver's noise). Oscillating
+    and cycling are judged while the change is large (above sqrt(stop)): the steps keep
+    reversing, or the state returns to itself after p steps without the step shrinking.
+    Stagnated: the change stopped shrinking above ``stop``.
     """
-    if changes[-1] < tol:
+    if changes[-1] < stop:
         return "converged"
+    if changes[-1] > np.sqrt(stop) and oscillating(changes, states):
+        return "oscillating"
     if len(changes) > 2 * WINDOW and min(changes[-WINDOW:]) > 0.5 * min(changes[:-WINDOW]):
         return "stagnated"
     scale = max(np.abs(states[-1]).max(), 1e-300)
     for period in CYCLE_PERIODS:
         if (
             len(changes) > 2 * period
-            and changes[-1] > np.sqrt(tol)
-            and np.abs(states[-1] - states[-1 - period]).max() < tol * scale
+            and changes[-1] > np.sqrt(stop)
+            and np.abs(states[-1] - states[-1 - period]).max() < stop * scale
             and changes[-1] > 0.5 * changes[-1 - period]
         ):
             return f"cycling (period {period})"
@@ -99,69 +126,188 @@ def outcome(changes: list[float], tol: float, states: list[np.ndarray]) -> str |
     return None
 
 
-def unfinished(changes: list[float]) -> str:
-    """The iteration limit was reached while the change still decreased."""
-    return "not converged (still decreasing: raise max_iterations)"
+UNFINISHED = "not converged (still decreasing: raise max_iterations)"
 
 
-def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
-    """Run the Picard map for the model's Coulomb law; return the best iterate's result."""
-    law: Coulomb = model.law
+def rank(iterate: tuple) -> tuple:
+    """Order of iterates (Coulomb residual, iteration, solution, …): solved inner programs first, then by residual."""
+    return iterate[2].status != "solved", iterate[0]
+
+
+@dataclass
+class Attempt:
+    """One run of the map: a formulation (``model``), a solver with its options, a relaxation ω."""
+
+    model: Model
+    solver: str
+    options: dict
+    relaxation: float
+    outcome: str = "not started"
+    iterations: int = 0
+    stop: float = 0.0  # the change it stopped at: max(tol, NOISE × inner residual)
+    time: float = 0.0
+    required: bool = False  # the user's own formulation and solver: errors of its setup are raised
+    best: tuple | None = None  # (Coulomb residual, iteration, solution, fields, bound) of its best iterate
+    failed: object = None  # the inner solution that failed, if one did
+
+    @property
+    def solved(self) -> bool:
+        """Converged, and its best iterate is a solved inner program that passes the certificate."""
+        return self.outcome == "converged" and self.best[0] <= CERTIFIED and self.best[2].status == "solved"
+
+    def keep(self, iterate: tuple):
+        """Keep the iterate closest to the Coulomb law, preferring inner solves the solver called solved."""
+        if self.best is None or rank(iterate) <= rank(self.best):
+            self.best = iterate
+
+    @property
+    def oscillates(self) -> bool:
+        return self.outcome.startswith(("oscillating", "cycling", "diverging"))
+
+    def record(self) -> dict:
+        return {"formulation": self.model.formulation, "solver": self.solver, "relaxation": self.relaxation,
+                "outcome": self.outcome, "iterations": self.iterations, "stop_change": self.stop,
+                "best_residual": None if self.best is None else self.best[0], "time": self.time}
+
+
+def inaccurate(noise: list[float]) -> str | None:
+    """The last three inner solves missed their own certificate: no fixed point of theirs can pass it."""
+    if len(noise) >= 3 and min(noise[-3:]) > CERTIFIED:
+        return f"inner solves inaccurate (residual {min(noise[-3:]):.1e} > {CERTIFIED:g})"
+    return None
+
+
+def residual(model: Model, fields, bound: np.ndarray) -> float:
+    """Worst certificate residual of ``fields`` under the slip bound ``bound``."""
     fem = model.fem
-    timings = dict(model.timings)
-    with timed(timings, "initial"):
-        bound, unit_bound = pressure_map(model)
-        s = bound(initial_pressure(model, solver, options))
-    session = reused_session(model, solver, options)
-    model.seed(session, solver, options)
-    history, states, changes = [], [s], []
-    best = None
-    status = None
-    for k in range(1, law.max_iterations + 1):
+    return certify(fem.K, fem.f, fem.contact, model.C, fields, model.friction, bound, model.epsilon,
+                   model.compliance).worst
+
+
+def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, history: list, timings: dict,
+            progress) -> np.ndarray:
+    """Run the map from the slip bounds ``s`` for at most ``steps``; fill ``attempt``, return the last bounds."""
+    model, law = attempt.model, attempt.model.law
+    bound, unit_bound = pressure_bound
+    try:
+        session = reused_session(model, attempt.solver, attempt.options)
+    except solvers.ConeNotSupported as error:  # OSQP and a 3-D cone: the user's choice is the user's error
+        if attempt.required:
+            raise
+        attempt.outcome = f"refused ({error})"
+        return s
+    model.seed(session, attempt.solver, attempt.options)
+    states, changes, noise = [s], [], []
+    attempt.outcome = UNFINISHED
+    for k in steps:
         start = time.perf_counter()
         session.update(**model.bound_update(s))
         solution = session.solve()
         inner = time.perf_counter() - start
         timings["solve"] = timings.get("solve", 0.0) + inner
         if not solution.solved:
-            status = f"failed (inner solve {solution.solver_status})"
+            attempt.outcome, attempt.failed = f"failed (inner solve {solution.solver_status})", solution
             break
         fields = model.recover(solution)
         target = bound(fields.pressure)
-        change = float(np.abs(target - s).max() / max(np.abs(target).max(), unit_bound))
-        residual = certify(fem.K, fem.f, fem.contact, model.C, fields, model.friction, target, model.epsilon,
-                           model.compliance)
-        history.append({"iteration": k, "relative_change": change, "coulomb_residual": residual.worst,
-                        "inner_iterations": solution.iterations, "inner_time": inner})
-        if best is None or residual.worst <= best[0]:
-            best = (residual.worst, k, solution, fields, target)
-        last = (residual.worst, k, solution, fields, target)
+        changes.append(float(np.abs(target - s).max() / max(np.abs(target).max(), unit_bound)))
+        coulomb_residual, inner_residual = residual(model, fields, target), residual(model, fields, s)
+        noise.append(inner_residual)
+        attempt.stop = max(law.tol, NOISE * inner_residual)
+        attempt.iterations += 1
+        history.append({"iteration": k, "relative_change": changes[-1], "coulomb_residual": coulomb_residual,
+                        "inner_residual": inner_residual, "inner_iterations": solution.iterations,
+                        "inner_time": inner, "relaxation": attempt.relaxation})
+        attempt.keep((coulomb_residual, k, solution, fields, target))
         if progress is not None:
-            progress(k, change)
-        changes.append(change)
-        s = (1.0 - law.relaxation) * s + law.relaxation * target
+            progress(k, changes[-1])
+        s = (1.0 - attempt.relaxation) * s + attempt.relaxation * target
         states.append(s)
-        status = outcome(changes, law.tol, states)
-        if status is not None:
+        found = outcome(changes, attempt.stop, states) or inaccurate(noise)
+        if found is not None:
+            attempt.outcome = found
             break
-    else:
-        status = unfinished(changes)
-    extra = {"picard": {"outcome": status, "iterations": len(history), "relaxation": law.relaxation,
-                        "tol": law.tol, "reported_iteration": None}, "history": history}
-    if best is None:  # the first inner solve failed: report it, judged against the bounds it was given
-        return model.result(solution, timings, s, extra=extra)
-    # converged: the last iterate (the fixed point) if it passes the certificate; otherwise, or when an
-    # ill-conditioned inner solve left it failing, the iterate closest to the Coulomb law
-    chosen = last if status == "converged" and last[0] <= CERTIFIED else best
-    _, extra["picard"]["reported_iteration"], solution, fields, target = chosen
+    return s
+
+
+def other_formulation(model: Model, timings: dict) -> Model | None:
+    """The model of the same scene in the other formulation (None: the dual needs a nonsingular K)."""
+    name = "primal" if model.formulation == "dual" else "dual"
+    try:
+        return formulate(model.fem, name, timings, model.condensation,
+                         f"tried after the {model.formulation} Picard map failed")
+    except SceneError as error:
+        if error.field != "dirichlet":
+            raise
+        return None
+
+
+def paths(model: Model, solver: str, options: dict, timings: dict):
+    """(model, solver, options) to try in turn: the user's, the other formulation with the user's
+    solver, then the other solvers at their defaults on each formulation."""
+    yield model, solver, options
+    other = other_formulation(model, timings)
+    if other is not None:
+        yield other, solver, options
+    for name in ALTERNATIVES:
+        if name != solver:
+            yield model, name, {}
+            if other is not None:
+                yield other, name, {}
+
+
+def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
+    """Run the Picard map for the model's Coulomb law, adapting ω, solver and formulation as it fails;
+    return the result of the first certified fixed point, or of the best iterate of all attempts."""
+    law: Coulomb = model.law
+    timings = dict(model.timings)
+    with timed(timings, "initial"):
+        pressure_bound = pressure_map(model)
+        s = pressure_bound[0](initial_pressure(model, solver, options))
+    history, attempts = [], []
+    tries = paths(model, solver, options, timings)
+    path, relaxation, halvings = next(tries), law.relaxation, 0
+    while path is not None and len(history) < law.max_iterations:
+        attempt = Attempt(*path, relaxation, required=not attempts)
+        attempts.append(attempt)
+        start = time.perf_counter()
+        end = iterate(attempt, s, range(len(history) + 1, law.max_iterations + 1), pressure_bound, history, timings,
+                      progress)
+        attempt.time = time.perf_counter() - start
+        if attempt.outcome == "converged" and not attempt.solved:
+            attempt.outcome = f"converged, not certified (best residual {attempt.best[0]:.1e})"
+        if attempt.solved or attempt.outcome == UNFINISHED:
+            break
+        s = end if attempt.best is None else attempt.best[4]  # the next attempt starts from the best iterate
+        if attempt.oscillates and halvings < HALVINGS:
+            relaxation, halvings = relaxation / 2, halvings + 1
+        else:  # the map is the same with another inner solver: ω starts again from the law's
+            path, relaxation, halvings = next(tries, None), law.relaxation, 0
+    return report(attempts, history, timings, law)
+
+
+def report(attempts: list[Attempt], history: list, timings: dict, law: Coulomb):
+    """The result of the solved attempt, or of the best iterate of all, with every attempt recorded."""
+    final = attempts[-1]
+    tried = [attempt for attempt in attempts if attempt.best is not None]
+    failed = [attempt for attempt in attempts if attempt.failed is not None]
+    chosen = final if final.solved else min(tried, key=lambda attempt: rank(attempt.best), default=None) or failed[-1]
+    _, iteration, solution, fields, bound = chosen.best or (None, None, chosen.failed, None, None)
+    extra = {"picard": {"outcome": final.outcome, "iterations": len(history), "relaxation": final.relaxation,
+                        "tol": law.tol, "stop_change": final.stop, "reported_iteration": iteration,
+                        "attempts": [attempt.record() for attempt in attempts]}, "history": history}
     with timed(timings, "postprocess"):
-        result = model.result(solution, timings, target, fields=fields, extra=extra)
-    if status != "converged":
+        result = chosen.model.result(solution, timings, bound, fields=fields, extra=extra)
+    if not final.solved and chosen.best is not None:  # else the failed inner solve's own status
         result.status = "not converged"
-        result.message = (
-            f"Picard map {status} after {len(history)} iterations (smallest relative change "
-            f"{min(changes, default=float('nan')):.1e}, tol {law.tol:g}); best iterate reported. A change that stalls "
-            "near the inner solver's accuracy needs a tighter solver tol or a looser Picard tol; a large one, "
-            "a smaller relaxation or a smaller friction coefficient (the map contracts only for small F)"
-        )
+        result.message = failure_message(attempts, history, law)
     return result
+
+
+def failure_message(attempts: list[Attempt], history: list, law: Coulomb) -> str:
+    tried = "; ".join(f"{a.model.formulation}/{a.solver} ω={a.relaxation:g}: {a.outcome}" for a in attempts)
+    smallest = min((step["relative_change"] for step in history), default=float("nan"))
+    return (f"Picard map not converged after {len(history)} iterations in {len(attempts)} attempts ({tried}); "
+            f"smallest relative change {smallest:.1e}, tol {law.tol:g}; best iterate reported. A map that "
+            "cycles at every relaxation may have several fixed points or none (the map contracts only for "
+            "small F); one still decreasing needs a larger max_iterations")
