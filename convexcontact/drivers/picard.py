@@ -231,14 +231,13 @@ def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, histo
 
 
 def other_formulation(model: Model, timings: dict) -> Model | None:
-    """The model of the same scene in the other formulation (None: the dual needs a nonsingular K)."""
+    """The model of the same scene in the other formulation, or None where it does not apply (the dual
+    needs a nonsingular K and takes no normal compliance)."""
     name = "primal" if model.formulation == "dual" else "dual"
     try:
         return formulate(model.fem, name, timings, model.condensation,
                          f"tried after the {model.formulation} Picard map failed")
-    except SceneError as error:
-        if error.field != "dirichlet":
-            raise
+    except SceneError:
         return None
 
 
