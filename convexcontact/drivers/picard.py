@@ -8,9 +8,10 @@ program, the factorization (dual) and the solver's setup are built once, and eac
 step updates the data of one solver session (OSQP also warm-starts).
 
 The map converges only for small enough F (Hild); otherwise it may stagnate, cycle
-or diverge. The driver adapts: a cycling or diverging map is run again with half the
-relaxation ω; a stagnating one (or a failed inner solve) with another solver, then the
-other formulation. Each run is an *attempt*, recorded in ``extra["picard"]["attempts"]``.
+or diverge. The driver adapts: an oscillating, cycling or diverging map is run again with
+half the relaxation ω; one that fails otherwise (stagnates, inaccurate or failed inner
+solves) with the other formulation, then the other solvers. Each run is an *attempt*,
+recorded in ``extra["picard"]["attempts"]``.
 The map stops when its relative change is below max(tol, NOISE × the inner solve's own
 residual): never below what the inner solver can reach. What no attempt solves is a
 reported outcome — with the best iterate, its Coulomb residuals and the whole history —
@@ -37,13 +38,13 @@ CYCLE_PERIODS = (2, 3, 4)
 WINDOW = 8
 """Iterations looked back on to call the map cycling, diverging or stagnating."""
 HALVINGS = 4
-"""Times ω is halved on a cycling or diverging map before another solver or formulation is tried
+"""Times ω is halved on an oscillating, cycling or diverging map before another formulation or solver is tried
 (Hild's triangle, unique solutions up to F = 4 > F_c = 1.8: ω = 1 cycles, ω = ½ converges)."""
 NOISE = 10.0
 """A change of the slip bounds below NOISE × the inner solve's residual (its certificate against
 the bound it was given) is the inner solver's noise: the map has converged as far as it can."""
 ALTERNATIVES = ("clarabel", "osqp")
-"""Solvers tried, at their defaults, after the user's one stagnates."""
+"""Solvers tried, at their defaults, after the user's one fails on both formulations."""
 
 
 def pressure_map(model: Model):
