@@ -135,3 +135,18 @@ def test_a_history_naming_a_load_the_scene_lacks_says_what_to_add():
                                 history=History(times=[1.0], values={"traction[top].pressure": [0.1]}))
     with pytest.raises(SceneError, match=r"add a \[\[traction\]\] boundary = 'top'"):
         run(scene)
+
+
+def test_a_coulomb_block_saturates_at_mu_times_the_normal_reaction_both_ways():
+    """Coulomb μ = 0.3 on the slip increment: tangential / normal reaction rises while stuck, is exactly
+    ∓μ once the whole interface slips, and reverses on the way back; every step a certified fixed point."""
+    out = [0.004 * k for k in range(11)]
+    result = run(sliding_block(out + out[-2::-1], law=cc.Coulomb(friction=0.3)))
+    assert result.status == "solved", result.message
+    series = result.series()
+    ratio = np.array(series["tangential_force"]) / np.array(series["normal_force"])
+    assert abs(ratio[1]) < 0.3 - 1e-3  # partly stuck at first
+    np.testing.assert_allclose(ratio[6:11], -0.3, rtol=1e-7)
+    np.testing.assert_allclose(ratio[-3:], 0.3, rtol=1e-7)
+    assert all(step.extra["picard"]["outcome"] == "converged" for step in result.steps)
+    assert max(step.certificate.worst for step in result.steps) < 1e-6

@@ -102,10 +102,16 @@ class Process:
         self.condensations = {None: self.model.condensation}  # per Δt (Kelvin–Voigt changes K)
         self.u = np.zeros(self.fem.basis.N)  # t0 = 0: undeformed
         self.slip = None  # absolute tangential positions relative to the obstacle, at the contact nodes
+        self.pressure = None  # nodal pressures of the last step, user units
 
     def step_model(self, k: int, timings: dict) -> Model:
-        """The program of step k: this step's loads, K (viscous), and the slip measured from step k − 1."""
-        fem = self.fem.at(self.history.scene(self.scene, k))
+        """The program of step k: this step's loads, K (viscous), and the slip measured from step k − 1.
+        A Coulomb law's Picard map starts from the pressures of step k − 1."""
+        scene = self.history.scene(self.scene, k)
+        law = scene.contact.law
+        if isinstance(law, Coulomb) and self.pressure is not None and law.initial_pressure is None:
+            scene = scene.with_law(replace(law, initial_pressure=self.pressure))
+        fem = self.fem.at(scene)
         self.key = None  # what K depends on: Δt for viscous bodies
         if self.viscous is not None:
             dt = self.history.times[k] - (self.history.times[k - 1] if k else 0.0)
@@ -122,7 +128,7 @@ class Process:
         """Keep the step's displacement and slip for the next step."""
         fem = result.fem
         u = result.displacement / fem.scaling.displacement
-        self.u = u
+        self.u, self.pressure = u, result.contact.pressure
         contact = self.absolute
         if contact.tangential_coupling is None and self.model.friction is None:
             return
@@ -150,24 +156,13 @@ def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progr
     scene.history.check(scene)
     timings: dict = {}
     process = Process(scene, formulation, timings)
-    if isinstance(scene.contact.law, Coulomb):
-        raise SceneError("contact.law", "Coulomb friction in a history is not available yet",
-                         "use Tresca with a slip bound, or solve each load statically")
-    session, session_key = None, None
+    stepper = Stepper(solver, options)
     results = []
     for k in range(len(scene.history)):
-        start = time.perf_counter()
         step_timings: dict = {}
         with timed(timings, "steps"):
             model = process.step_model(k, step_timings)
-            if session is None or process.key != session_key:
-                session, session_key = solvers.session(model.program, solver, **options), process.key
-                model.seed(session, solver, options)
-            else:
-                session.update(q=model.program.q, b=model.program.b)
-            solution = session.solve()
-            step_timings["solve"] = time.perf_counter() - start
-            result = model.result(solution, step_timings, model.slip_bound)
+            result = stepper.solve(model, process.key, step_timings)
         result.extra["time"] = scene.history.times[k]
         results.append(result)
         if progress is not None:
@@ -176,3 +171,33 @@ def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progr
             break
         process.advance(result)
     return HistoryResult(scene, scene.history, results, timings)
+
+
+class Stepper:
+    """The solver session of the history, kept while K is (one per Δt for viscous bodies): each step
+    updates q and b and starts from the last answer. Coulomb steps run the Picard driver, whose
+    sessions are kept the same way (each update carries the step's q and b besides the slip bounds)."""
+
+    def __init__(self, solver: str, options: dict):
+        self.solver, self.options = solver, options
+        self.key, self.session, self.cache = object(), None, {}
+
+    def solve(self, model: Model, key, timings: dict) -> ContactResult:
+        if key != self.key:
+            self.key, self.session, self.cache = key, None, {}
+        if isinstance(model.law, Coulomb):
+            from .picard import coulomb
+
+            program, bounds = model.program, model.bound_update
+            model.cache = self.cache
+            model.bound_update = lambda s: {"q": program.q, "b": program.b, **bounds(s)}
+            return coulomb(model, self.solver, **self.options)
+        start = time.perf_counter()
+        if self.session is None:
+            self.session = solvers.session(model.program, self.solver, **self.options)
+            model.seed(self.session, self.solver, self.options)
+        else:
+            self.session.update(q=model.program.q, b=model.program.b)
+        solution = self.session.solve()
+        timings["solve"] = time.perf_counter() - start
+        return model.result(solution, timings, model.slip_bound)
