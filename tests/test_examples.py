@@ -57,3 +57,15 @@ def test_hertz_sphere(tmp_path):
     assert all(abs(error) < 0.05 for error in rows[0][2:6])
     assert (tmp_path / "contact.png").exists() and (tmp_path / "solution.vtu").exists()
     assert not (tmp_path / "deformed.png").exists()
+
+
+def test_cattaneo_mindlin_cycle(tmp_path):
+    """Issue 11 / case 5 as a history: the loading stick zone and, after pulling back, the reverse-slip annulus
+    of Mindlin–Deresiewicz, each within one node spacing (h / a = 0.1) of the closed form."""
+    result, measured, theory = example("cattaneo_mindlin_cycle").main(h=0.01, out=tmp_path)
+    assert result.status == "solved"
+    for name in theory:
+        assert measured[name] == pytest.approx(theory[name], abs=0.1), name
+    assert (result.steps[2].contact.status == "slip+").any()  # reverse slip, opposite to the loading slip
+    assert (result.steps[1].contact.status == "slip-").any()
+    assert (tmp_path / "solution.pvd").exists() and (tmp_path / "history.png").exists()
