@@ -104,13 +104,14 @@ def outcome(changes: list[float], stop: float, states: list[np.ndarray]) -> str 
     Converged: the change is below ``stop``, max(tol, the inner solver's noise). Oscillating
     and cycling are judged while the change is large (above sqrt(stop)): the steps keep
     reversing, or the state returns to itself after p steps without the step shrinking.
-    Stagnated: the change stopped shrinking above ``stop``.
+    Stagnated: over the last WINDOW steps the change came no closer than 10 % below its earlier
+    minimum (a rate slower than 0.987 a step; slow but steady convergence is not stagnation).
     """
     if changes[-1] < stop:
         return "converged"
     if changes[-1] > np.sqrt(stop) and oscillating(changes, states):
         return "oscillating"
-    if len(changes) > 2 * WINDOW and min(changes[-WINDOW:]) > 0.5 * min(changes[:-WINDOW]):
+    if len(changes) > 2 * WINDOW and min(changes[-WINDOW:]) > 0.9 * min(changes[:-WINDOW]):
         return "stagnated"
     scale = max(np.abs(states[-1]).max(), 1e-300)
     for period in CYCLE_PERIODS:
