@@ -150,3 +150,33 @@ def test_a_coulomb_block_saturates_at_mu_times_the_normal_reaction_both_ways():
     np.testing.assert_allclose(ratio[-3:], 0.3, rtol=1e-7)
     assert all(step.extra["picard"]["outcome"] == "converged" for step in result.steps)
     assert max(step.certificate.worst for step in result.steps) < 1e-6
+
+
+def stick_ratios(friction: float) -> tuple[list[float], float]:
+    """c/a of every step of Spence's monotone indentation (depth × 1.25 per step) and of the one-step static
+    solve at the final depth."""
+    from convexcontact.scene.library import frictional_punch
+
+    def ratio(step):
+        s, status = step.contact.coordinate, step.contact.status
+        return np.ptp(s[status == "stick"]) / np.ptp(s[status != "open"]) if (status == "stick").any() else 0.0
+
+    scene = frictional_punch(h=0.0025, friction=friction, element="Q1")
+    depths = list(0.004 * 1.25 ** np.arange(8))
+    result = run(dataclasses.replace(scene, history=History(times=list(range(1, 9)), values={"obstacle.depth": depths})))
+    assert result.status == "solved"
+    static = cc.solve(dataclasses.replace(scene, contact=dataclasses.replace(
+        scene.contact, obstacle=dataclasses.replace(scene.contact.obstacle, depth=depths[-1]))))
+    return [ratio(step) for step in result.steps], ratio(static)
+
+
+def test_spence_indentation_is_self_similar_and_its_stick_zone_grows_with_friction():
+    """Case 4 as a process: after the first step c/a stays constant (within a node, h/a ≤ 0.06) while the
+    contact zone grows 2.2-fold, and grows with F; the one-step static answer is another problem
+    (friction on the total slip from the undeformed state) and its stick zone is far smaller."""
+    low, low_static = stick_ratios(0.2)
+    high, high_static = stick_ratios(0.6)
+    for ratios in (low, high):
+        assert np.ptp(ratios[1:]) < 0.08
+    assert np.mean(high[1:]) > np.mean(low[1:]) + 0.3
+    assert high_static < np.mean(high[1:]) - 0.2 and low_static < np.mean(low[1:]) - 0.2
