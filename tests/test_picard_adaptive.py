@@ -19,7 +19,7 @@ MU = 0.3
 
 def dragged_block(friction: float = MU) -> cc.Scene:
     """A box pressed on a rigid plane by a pressure on its top and dragged by it (u_x prescribed): every
-    closed node slides. The first default run stagnated at a relative change of 1e-7 (certificate 2.4e-7)."""
+    closed node slides. The single-run driver stagnated there: 17 steps at a relative change of 9.9e-8."""
     return cc.Scene(
         name="dragged_block",
         body=cc.Body(Box(size=(1.0, 1.0, 0.5), cells=(8, 8, 4)), "P1"),
