@@ -180,3 +180,21 @@ def test_spence_indentation_is_self_similar_and_its_stick_zone_grows_with_fricti
         assert np.ptp(ratios[1:]) < 0.08
     assert np.mean(high[1:]) > np.mean(low[1:]) + 0.3
     assert high_static < np.mean(high[1:]) - 0.2 and low_static < np.mean(low[1:]) - 0.2
+
+
+def test_the_shear_of_a_near_incompressible_punch_comes_from_the_clamped_base():
+    """Issue 11's question: why does the one-step static punch at ν = 0.499 (Q2) show tangential traction of
+    0.3 F p_max at the contact edge, where a half-plane has none? A clamped base couples the normal and
+    tangential response of a finite block: the same block on rollers, 4× wider and deeper, has 2.4× less."""
+    from convexcontact.scene.library import frictional_punch, punch_mesh
+
+    def edge_shear(scene):
+        result = cc.solve(scene)
+        assert result.status == "solved"
+        return np.abs(result.contact.friction).max() / (0.6 * result.max_pressure)
+
+    clamped = frictional_punch(h=0.01, nu=0.499, element="Q2")
+    rollers = dataclasses.replace(clamped, body=cc.Body(punch_mesh(0.01, width=16.0, depth=8.0, quads=True), "Q2"),
+                                  dirichlet=(cc.Dirichlet("bottom", uy=0.0), cc.Dirichlet("left", ux=0.0),
+                                             cc.Dirichlet("right", ux=0.0)))
+    assert edge_shear(clamped) > 2 * edge_shear(rollers)
