@@ -10,8 +10,8 @@ from test_friction_hild import LENGTH, NU, E, matches_one_of, triangle_scene
 import convexcontact as cc
 from convexcontact.analytic import hild_critical_friction, hild_one_triangle_solutions
 from convexcontact.cli import table
-from convexcontact.drivers.picard import NOISE, UNFINISHED
-from convexcontact.scene.library import HERTZ_FORCE, frictional_punch, punch_mesh
+from convexcontact.drivers.picard import NOISE, UNFINISHED, paths
+from convexcontact.scene.library import HERTZ_FORCE, frictional_punch, hertz_punch, punch_mesh
 from convexcontact.scene.model import Box, Coulomb
 
 MU = 0.3
@@ -83,6 +83,16 @@ def test_a_map_that_cannot_converge_is_reported_not_converged():
     assert [a["relaxation"] for a in picard["attempts"]] == [1.0, 0.5]
     assert not result.certificate.passes(1e-6)
     assert "best iterate" in result.message and "ω=0.5" in result.message
+
+
+def test_the_driver_changes_only_what_the_user_left_to_it():
+    """Named formulation and solver options are kept (a study's row is what it says); "auto" and the
+    solver's defaults may give way to the other formulation and solvers."""
+    scene = hertz_punch(nx=8, law=Coulomb(friction=0.3))
+    pinned = cc.prepare(scene, "dual")
+    assert [(m.formulation, s) for m, s, _ in paths(pinned, "clarabel", {"tol": 1e-6}, {})] == [("dual", "clarabel")]
+    free = [(m.formulation, s) for m, s, _ in paths(cc.prepare(scene), "clarabel", {}, {})]
+    assert free == [("dual", "clarabel"), ("primal", "clarabel"), ("dual", "osqp"), ("primal", "osqp")]
 
 
 def test_cattaneo_mindlin_nearly_incompressible_falls_back_to_the_primal():

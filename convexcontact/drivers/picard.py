@@ -43,6 +43,8 @@ HALVINGS = 4
 NOISE = 10.0
 """A change of the slip bounds below NOISE × the inner solve's residual (its certificate against
 the bound it was given) is the inner solver's noise: the map has converged as far as it can."""
+USER_CHOICE = "chosen by the user"
+"""``Model.reason`` of a formulation the user named: the driver keeps it."""
 ALTERNATIVES = ("clarabel", "osqp")
 """Solvers tried, at their defaults, after the user's one fails on both formulations."""
 
@@ -245,16 +247,17 @@ def other_formulation(model: Model, timings: dict) -> Model | None:
 
 def paths(model: Model, solver: str, options: dict, timings: dict):
     """(model, solver, options) to try in turn: the user's, the other formulation with the user's
-    solver, then the other solvers at their defaults on each formulation."""
+    solver, then the other solvers at their defaults on each formulation. Only what the user left to
+    the driver changes: the formulation if "auto" chose it, the solver if no solver options were given
+    (a study that asks for one formulation, solver and tol gets that one)."""
     yield model, solver, options
-    other = other_formulation(model, timings)
-    if other is not None:
+    models = [model]
+    if model.reason != USER_CHOICE and (other := other_formulation(model, timings)) is not None:
+        models.append(other)
         yield other, solver, options
-    for name in ALTERNATIVES:
+    for name in ALTERNATIVES if not options else ():
         if name != solver:
-            yield model, name, {}
-            if other is not None:
-                yield other, name, {}
+            yield from ((each, name, {}) for each in models)
 
 
 def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
