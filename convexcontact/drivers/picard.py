@@ -138,6 +138,11 @@ def rank(iterate: tuple) -> tuple:
     return iterate[2].status != "solved", iterate[0]
 
 
+def certified(iterate: tuple) -> bool:
+    """A solved inner program whose answer passes the Coulomb certificate."""
+    return iterate[0] <= CERTIFIED and iterate[2].status == "solved"
+
+
 @dataclass
 class Attempt:
     """One run of the map: a formulation (``model``), a solver with its options, a relaxation ω."""
@@ -152,15 +157,21 @@ class Attempt:
     time: float = 0.0
     required: bool = False  # the user's own formulation and solver: errors of its setup are raised
     best: tuple | None = None  # (Coulomb residual, iteration, solution, fields, bound) of its best iterate
+    last: tuple | None = None
     failed: object = None  # the inner solution that failed, if one did
 
     @property
+    def answer(self) -> tuple | None:
+        """The fixed point (last iterate) of a converged run if certified, else the best iterate."""
+        return self.last if self.outcome == "converged" and certified(self.last) else self.best
+
+    @property
     def solved(self) -> bool:
-        """Converged, and its best iterate is a solved inner program that passes the certificate."""
-        return self.outcome == "converged" and self.best[0] <= CERTIFIED and self.best[2].status == "solved"
+        return self.outcome == "converged" and certified(self.answer)
 
     def keep(self, iterate: tuple):
-        """Keep the iterate closest to the Coulomb law, preferring inner solves the solver called solved."""
+        """Keep the last iterate and the one closest to the Coulomb law (solved inner programs first)."""
+        self.last = iterate
         if self.best is None or rank(iterate) <= rank(self.best):
             self.best = iterate
 
@@ -296,7 +307,7 @@ def report(attempts: list[Attempt], history: list, timings: dict, law: Coulomb):
     tried = [attempt for attempt in attempts if attempt.best is not None]
     failed = [attempt for attempt in attempts if attempt.failed is not None]
     chosen = final if final.solved else min(tried, key=lambda attempt: rank(attempt.best), default=None) or failed[-1]
-    _, iteration, solution, fields, bound = chosen.best or (None, None, chosen.failed, None, None)
+    _, iteration, solution, fields, bound = chosen.answer or (None, None, chosen.failed, None, None)
     extra = {"picard": {"outcome": final.outcome, "iterations": len(history), "relaxation": final.relaxation,
                         "tol": law.tol, "stop_change": final.stop, "reported_iteration": iteration,
                         "attempts": [attempt.record() for attempt in attempts]}, "history": history}
