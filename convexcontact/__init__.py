@@ -11,8 +11,9 @@ Build a :class:`Scene`, call :func:`solve`, read the :class:`ContactResult`::
 from .conic import ConicProgram, ConicSolution
 from .drivers.history import HistoryResult
 from .drivers.history import run as run_history
+from .drivers.model import Model, prepare
 from .drivers.solutions import SolutionSet, all_solutions
-from .drivers.solve import Model, prepare, solve
+from .drivers.solve import solve
 from .results.result import ContactResult
 from .scene import library
 from .scene.history import History

@@ -27,7 +27,7 @@ from ..fem.assembly import FEModel, assemble, viscous_stiffness
 from ..results.result import ContactResult
 from ..scene.history import History
 from ..scene.model import Coulomb, Scene, SceneError
-from .solve import Model, condensed, formulate, timed
+from .model import Model, condensed, formulate, timed
 
 
 @dataclass

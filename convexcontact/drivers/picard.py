@@ -32,7 +32,7 @@ from .. import solvers
 from ..fem.mollifier import mollifier
 from ..results.certificate import certify
 from ..scene.model import Coulomb, SceneError, evaluate_field
-from .solve import CERTIFIED, Model, field_at_points, formulate, timed
+from .model import CERTIFIED, LAW_DRIVERS, Model, field_at_points, formulate, timed
 
 CYCLE_PERIODS = (2, 3, 4)
 WINDOW = 8
@@ -326,3 +326,6 @@ def failure_message(attempts: list[Attempt], history: list, law: Coulomb) -> str
             f"smallest relative change {smallest:.1e}, tol {law.tol:g}; best iterate reported. A map that "
             "cycles at every relaxation may have several fixed points or none (the map contracts only for "
             "small F); one still decreasing needs a larger max_iterations")
+
+
+LAW_DRIVERS[Coulomb] = coulomb

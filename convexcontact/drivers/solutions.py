@@ -35,7 +35,7 @@ from .. import solvers
 from ..conic import ConicSolution
 from ..results.result import ContactResult
 from ..scene.model import Coulomb, Scene, SceneError
-from .solve import Model, field_at_points, prepare
+from .model import Model, field_at_points, prepare
 
 EXHAUSTIVE_LIMIT = 10
 """Most contact nodes enumerated exhaustively: 4^10 ≈ 10⁶ linear systems of order 20 (seconds)."""
@@ -106,7 +106,7 @@ def all_solutions(scene: Scene, solver: str = "clarabel", **options) -> Solution
         found, examined = enumerate_pieces(model, carries)
         method, complete = f"exhaustive enumeration of the 4^{carries.size} contact states", True
     else:
-        found, examined = search(scene, solver, options)
+        found, examined = search(model, solver, options)
         method, complete = "Picard map from diverse starting pressures", False
     timings = {"search": time.perf_counter() - start}
     solutions = [certified(model, r, states, continuum) for r, states, continuum in found]
@@ -290,13 +290,11 @@ def picard_slope(model: Model, result: ContactResult, solver: str, options: dict
     return float(np.abs(np.linalg.eigvals(jacobian)).max(initial=0.0))
 
 
-def search(scene: Scene, solver: str, options: dict):
+def search(model: Model, solver: str, options: dict):
     """Picard from the frictionless pressure and from scaled and random pressures, with two relaxations:
-    the distinct certified answers, and how many runs there were."""
-    from .solve import solve
-
-    law: Coulomb = scene.contact.law
-    first = solve(scene, solver, formulation="dual", **options)
+    the distinct certified answers, and how many runs there were (one assembly and condensation for all)."""
+    law: Coulomb = model.law
+    first = model.solve(solver, **options)
     if not first.solved:
         return [], 1
     pressure = first.contact.pressure
@@ -306,7 +304,7 @@ def search(scene: Scene, solver: str, options: dict):
     results = [first]
     for start, relaxation in itertools.product(starts, (1.0, 0.5)):
         trial = replace(law, initial_pressure=np.asarray(start), relaxation=relaxation)
-        results.append(solve(scene.with_law(trial), solver, formulation="dual", **options))
+        results.append(model.with_law(trial).solve(solver, **options))
     found = []
     for result in results:
         if result.status != "solved":

@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .model import SceneError
+from .checks import SceneError
 
 VARIABLES = ("x", "y", "z")
 CONSTANTS = {"pi": np.float64(math.pi), "e": np.float64(math.e)}

@@ -20,10 +20,14 @@ import itertools
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .model import Scene, SceneError, finite, finite_vector
+from .checks import SceneError, finite, finite_vector
+
+if TYPE_CHECKING:
+    from .model import Scene
 
 PATH = re.compile(r"^(?:(obstacle)\.(depth|force|tangential_force|gap)"
                   r"|(dirichlet)\[([^\]]+)\]\.(ux|uy|uz)"

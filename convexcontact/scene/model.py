@@ -6,57 +6,18 @@ Plain dataclasses. Each checks its own fields where the value enters and raises
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from .history import History
+from .checks import SceneError, finite, finite_vector, positive_integer
+from .expressions import compile_expression
+from .history import History
 
 ELEMENTS = ("P1", "P2", "Q1", "Q2")
 PLANES = ("strain", "stress")
-
-
-class SceneError(ValueError):
-    """A scene field is missing, malformed or physically meaningless."""
-
-    def __init__(self, field_name: str, problem: str, fix: str = ""):
-        self.field = field_name
-        message = f"{field_name}: {problem}"
-        super().__init__(message + (f" — {fix}" if fix else ""))
-
-
-def finite(value, field_name: str) -> float:
-    """Return ``value`` as a float, refusing NaN, infinity and non-numbers (strings, booleans)."""
-    if isinstance(value, (str, bool, np.bool_)):
-        raise SceneError(field_name, f"expected a number, got {value!r}")
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise SceneError(field_name, f"expected a number, got {value!r}") from None
-    if not math.isfinite(number):
-        raise SceneError(field_name, f"got {value!r}", "give a finite number")
-    return number
-
-
-def finite_vector(value, field_name: str, length: int | tuple[int, ...] = 2) -> tuple[float, ...]:
-    """Return ``value`` as a tuple of ``length`` finite floats (``length`` may list the lengths allowed)."""
-    lengths = (length,) if isinstance(length, int) else length
-    if np.ndim(value) != 1 or len(value) not in lengths:
-        expected = " or ".join(str(n) for n in lengths)
-        raise SceneError(field_name, f"expected {expected} numbers, got {value!r}")
-    return tuple(finite(v, f"{field_name}[{i}]") for i, v in enumerate(value))
-
-
-def positive_integer(value, field_name: str) -> int:
-    """Return ``value`` if it is an integer ≥ 1 (booleans refused)."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise SceneError(field_name, f"expected a positive integer, got {value!r}")
-    return int(value)
 
 
 @dataclass(frozen=True)
@@ -293,8 +254,6 @@ class Obstacle:
             if self.expression is None:
                 raise SceneError("obstacle.expression", "missing", "give a formula in x and y, e.g. 'x**2/2 - 0.01'")
             if isinstance(self.expression, str):
-                from .expressions import compile_expression
-
                 compile_expression(self.expression, "obstacle.expression")
         if self.depth is not None and self.force is not None:
             raise SceneError("obstacle", "both depth and force given", "give depth (displacement control) or force")
@@ -384,8 +343,6 @@ NodalValues = float | str | np.ndarray | Callable
 def check_field(value, field_name: str, minimum: float = 0.0):
     """Validate a :data:`NodalValues` field (finite, ≥ ``minimum``); return it unchanged in kind."""
     if isinstance(value, str):
-        from .expressions import compile_expression
-
         compile_expression(value, field_name)
         return value
     if callable(value):
@@ -406,8 +363,6 @@ def evaluate_field(value, field_name: str, points: np.ndarray, minimum: float = 
     coordinates = dict(zip("xyz", np.asarray(points, dtype=float).T))
     shape = (len(points),)
     if isinstance(value, str):
-        from .expressions import compile_expression
-
         values = compile_expression(value, field_name)(**coordinates)
     elif callable(value):
         values = np.broadcast_to(np.asarray(value(*coordinates.values()), dtype=float), shape).copy()
@@ -551,12 +506,9 @@ class Scene:
                 "fix at least one boundary, e.g. [[dirichlet]] boundary = 'bottom', ux = 0, uy = 0",
             )
         self._check_dimension()
-        if self.history is not None:
-            from .history import History
-
-            if not isinstance(self.history, History):
-                raise SceneError("history", f"expected a History, got {type(self.history).__name__}",
-                                 "build it with cc.History(times=[...], values={'obstacle.depth': [...]})")
+        if self.history is not None and not isinstance(self.history, History):
+            raise SceneError("history", f"expected a History, got {type(self.history).__name__}",
+                             "build it with cc.History(times=[...], values={'obstacle.depth': [...]})")
         if isinstance(self.materials, dict) and not self.materials:
             raise SceneError("materials", "empty", "give [material] E and nu")
 

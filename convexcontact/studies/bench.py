@@ -82,7 +82,7 @@ def _rss_mb(key: str) -> float:
 
 def measure(dim: int, law: str, dofs: float, formulation: str, solver: str) -> dict:
     """One benchmark case in this process (call it in a fresh one: see :func:`run`)."""
-    from ..drivers.solve import formulate
+    from ..drivers.model import formulate
     from ..fem.assembly import assemble
     from ..fem.factorization import condense, factorize
 
@@ -144,8 +144,8 @@ def run(dim: int, sizes, laws=LAWS, formulation: str = "auto", solver: str = "cl
 
 def friction_sweep(dim: int, dofs: float, coefficients, solver: str = "clarabel", progress=print) -> dict:
     """Coulomb solves for many friction coefficients: independent solves against one model reused
-    through :meth:`~convexcontact.drivers.solve.Model.with_law` (assembly, trace, condensation kept)."""
-    from ..drivers.solve import prepare
+    through :meth:`~convexcontact.drivers.model.Model.with_law` (assembly, trace, condensation kept)."""
+    from ..drivers.model import prepare
     from ..scene.model import Coulomb
 
     scene = punch_scene(dim, "coulomb", dofs)

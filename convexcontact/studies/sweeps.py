@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..drivers.solve import prepare
+from ..drivers.model import prepare
 from ..results.result import ContactResult
 from ..scene.model import NormalCompliance, Scene, Signorini, has_friction
 from .work_precision import wall_time

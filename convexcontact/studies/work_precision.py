@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analytic import hertz_plane_strain, hertz_pressure
-from ..drivers.solve import prepare
+from ..drivers.model import prepare
 from ..results.result import ContactResult
 from ..scene.model import Coulomb, Material, NormalCompliance, Scene, SceneError, Signorini, has_friction
 from ..solvers import ConeNotSupported

@@ -1,0 +1,334 @@
+"""The prepared model: scene → FE model → formulation, ready for any solver; a timing for every stage.
+
+The drivers build on it: :mod:`.picard` (Coulomb), :mod:`.history` (load histories),
+:mod:`.solutions` (every solution); :mod:`.solve` is the entry point that picks one.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import scipy.sparse as sp
+
+from .. import solvers
+from ..conic import ConicProgram, ConicSolution, Recovery
+from ..fem.assembly import FEModel, assemble
+from ..fem.factorization import Factorization, condense, factorize
+from ..fem.friction import FrictionPoints, friction_points
+from ..formulations import FORMULATIONS, contact_weights
+from ..formulations.dual import stick_guess
+from ..results.certificate import certify
+from ..results.result import ContactResult, contact_nodes, not_unique
+from ..scene.model import Coulomb, Scene, SceneError, Tresca, compliance_of, evaluate_field, has_friction
+
+LAW_DRIVERS: dict[type, Callable] = {}
+"""Drivers of the laws that are no single convex program, registered by their modules (:mod:`.picard`
+registers Coulomb's Picard map): :meth:`Model.solve` hands such a law to its driver."""
+
+
+@contextmanager
+def timed(timings: dict, stage: str):
+    start = time.perf_counter()
+    yield
+    timings[stage] = timings.get(stage, 0.0) + time.perf_counter() - start
+
+
+def field_at_points(value, name: str, fem: FEModel, friction: FrictionPoints) -> np.ndarray:
+    """A law's field (constant, formula, callable or nodal array) at the friction points, user units."""
+    if isinstance(value, np.ndarray):
+        return friction.interpolation @ evaluate_field(value, name, fem.contact.coords)
+    return evaluate_field(value, name, friction.coords * fem.scaling.length)  # x, y[, z] columns
+
+
+@dataclass
+class Model:
+    """An assembled and formulated scene, ready to solve with any solver.
+
+    ``program`` is the ConicProgram in scaled units (see ``fem.scaling``), built for
+    ``slip_bound`` (Tresca's bound; for Coulomb, re-set by every Picard step through
+    ``bound_update``). :meth:`cvxpy` gives the editable cvxpy model of it.
+    """
+
+    fem: FEModel
+    formulation: str
+    C: sp.spmatrix
+    friction: FrictionPoints | None
+    slip_bound: np.ndarray | None
+    program: ConicProgram
+    recover: Recovery
+    bound_update: Callable
+    build: Callable  # formulation with the FE data bound: (friction, slip_bound, epsilon, contact) → triple
+    epsilon: float | None = None  # regularization of the friction term (scaled), None = exact
+    compliance: tuple[float, float] | None = None  # (c_N, p) scaled, None = non-penetration
+    timings: dict = field(default_factory=dict)
+    reason: str = "chosen by the user"  # why this formulation runs (see choose_formulation)
+    condensation: Reused | None = None  # K condensed onto Γ_C (dual), kept for with_law
+    cache: dict = field(default_factory=dict)  # results that do not depend on the law's coefficients
+
+    @property
+    def law(self):
+        return self.fem.scene.contact.law
+
+    def with_law(self, law) -> Model:
+        """This model under another contact law, for sweeps (F, slip bounds, ε): the assembly,
+        the contact trace and K's condensation are reused; only the program is rebuilt."""
+        model = formulate(self.fem.with_law(law), self.formulation, {}, self.condensation, self.reason)
+        model.cache = self.cache  # shared: the frictionless first Picard step is the same for every law
+        return model
+
+    def cvxpy(self) -> solvers.cvxpy_model.CvxpyModel:
+        """The cvxpy Problem of this model, to inspect or extend before :meth:`solve`."""
+        return solvers.cvxpy_model.model(self.program)
+
+    def solve(self, solver: str = "clarabel", progress: Callable | None = None, **options) -> ContactResult:
+        """Solve with ``solver`` (clarabel, osqp, cvxpy, cvxpy:NAME) and certify the answer.
+
+        ``options`` go to the solver adapter (``tol``, ``max_iter``, ``verbose``,
+        native settings; ``cvxpy_model`` for an extended cvxpy model). Coulomb laws
+        run the Picard map; ``progress(iteration, change)`` is called after each step.
+        """
+        driver = LAW_DRIVERS.get(type(self.law))
+        if driver is not None:
+            return driver(self, solver, progress, **options)
+        timings = dict(self.timings)
+        with timed(timings, "solve"):
+            session = solvers.session(self.program, solver, **options)
+            self.seed(session, solver, options)
+            solution = session.solve()
+        with timed(timings, "postprocess"):
+            result = self.result(solution, timings, self.slip_bound, extended=options.get("cvxpy_model") is not None)
+        return result
+
+    def frictionless(self, solver: str, options: dict) -> tuple[ConicSolution, Recovery]:
+        """The answer of this model's frictionless program and its recovery map, kept in the cache:
+        the same for every friction law of a sweep (:meth:`with_law`)."""
+        key = ("frictionless", solver, repr(sorted(options.items())))
+        if key not in self.cache:
+            program, recover, _ = self.build(None, None, None, replace(self.fem.contact, tangential_coupling=None))
+            self.cache[key] = (solvers.solve(program, solver, **options), recover)
+        return self.cache[key]
+
+    def seed(self, session, solver: str, options: dict):
+        """Start a friction solve from the frictionless answer (every point sticking): the polish's
+        rounds from there replace an interior point on m·d unknowns by one on m (a 3-D Tresca punch,
+        1452 unknowns: 0.17 + 0.72 s against 2.06 s), and an interior point still runs if they fail.
+        Dual only, whose layout the guess needs."""
+        if self.formulation == "dual" and self.friction is not None and solvers.seedable(solver, options):
+            frictionless, _ = self.frictionless(solver, options)
+            if frictionless.solved:
+                session.seed(stick_guess(self.program, frictionless, self.fem.contact))
+
+    def result(
+        self, solution: ConicSolution, timings: dict, slip_bound, fields=None, extra=None, extended=False
+    ) -> ContactResult:
+        """Certified result of a solution (``fields`` when already recovered).
+
+        ``extended``: the user added to the cvxpy model, so the certificate (which checks
+        the scene's own contact conditions) may rightly fail; the status is left as is.
+        """
+        fem = self.fem
+        if self.formulation == "dual":  # by weak duality an unbounded dual is an infeasible primal, and back
+            swapped = {"unbounded": "infeasible", "infeasible": "unbounded"}
+            solution = replace(solution, status=swapped.get(solution.status, solution.status))
+        common = {
+            "fem": fem,
+            "solver": solution.solver,
+            "solver_status": solution.solver_status,
+            "iterations": solution.iterations,
+            "timings": timings,
+            "formulation": self.formulation,
+            "extra": {"formulation_reason": self.reason, **(extra or {})},
+        }
+        usable = solution.solved or (solution.status == "failed" and np.isfinite(solution.x).all()
+                                     and np.isfinite(solution.z).all())
+        if not usable:
+            return ContactResult(status=solution.status, certificate=None, displacement=None, contact=None,
+                                 message=failure_message(solution), **common)
+        fields = fields or self.recover(solution)
+        certificate = certify(fem.K, fem.f, fem.contact, self.C, fields, self.friction, slip_bound, self.epsilon,
+                              self.compliance)
+        status, message = judge(solution, certificate, extended)
+        if status is None:
+            return ContactResult(status=solution.status, certificate=certificate, displacement=None, contact=None,
+                                 message=message, **common)
+        scaling, contact = fem.scaling, fem.contact
+        return ContactResult(
+            status=status,
+            message=message,
+            certificate=certificate,
+            displacement=fem.full(fields.u) * scaling.displacement,
+            contact=contact_nodes(fem, fields, self.C, self.friction),
+            not_unique=not_unique(fem, fields, self.friction, self.law),
+            obstacle_advance=fields.obstacle_advance * scaling.displacement
+            if contact.obstacle_coupling is not None else None,
+            obstacle_shift=fields.obstacle_shift * scaling.displacement
+            if contact.tangential_coupling is not None else None,
+            **common,
+        )
+
+
+CERTIFIED = 1e-6
+"""A solve whose certificate is worse than this is reported as inaccurate, whatever the solver said."""
+
+
+def judge(solution: ConicSolution, certificate, extended: bool) -> tuple[str | None, str]:
+    """Our status and message from the solver's word and the certificate (None: no usable answer).
+
+    A solver that stopped early (iterations, progress) is judged by its last iterate; a
+    "solved" whose certificate fails is inaccurate; a user-extended model is a different
+    problem than the scene's, so its certificate is reported but does not judge it.
+    """
+    passes = certificate.passes(CERTIFIED)
+    if not solution.solved:
+        if not passes:
+            return None, failure_message(solution)
+        return "inaccurate", (f"{solution.solver} stopped with {solution.solver_status}; its last iterate passes "
+                              f"the certificate (worst {certificate.worst:.1e} ≤ {CERTIFIED:g})")
+    if extended:
+        return solution.status, "solved a user-extended cvxpy model: the certificate checks the scene's own conditions"
+    if not passes:
+        return "inaccurate", (f"{solution.solver} reported {solution.solver_status}, but the certificate's worst "
+                              f"residual is {certificate.worst:.1e} > {CERTIFIED:g}: tighten tol, raise max_iter "
+                              "or try another solver")
+    return solution.status, ""
+
+
+def failure_message(solution: ConicSolution) -> str:
+    hints = {
+        "infeasible": "the obstacle penetrates nodes whose displacement is prescribed: "
+        "check the gap against the Dirichlet data on the contact boundary",
+        "unbounded": "the body can move rigidly along a direction the contact does not hold: add Dirichlet conditions",
+    }
+    hint = hints.get(solution.status, "try another solver, a looser tol, or more iterations (max_iter)")
+    return f"{solution.solver} returned {solution.solver_status}: {hint}"
+
+
+INCOMPRESSIBLE = 1000.0
+"""λ/μ (ν ≈ 0.4995) from which "auto" keeps the primal: on the Cattaneo–Mindlin scene the
+dual's certificate was 1e-9 at ν = 0.499 (λ/μ = 499), 9e-5 at 0.4999 and 3e-2 at 0.49999."""
+
+DENSE_LIMIT = 10000
+"""Most contact unknowns (rows of B) the condensed program takes: its W is dense, so memory
+grows as m² (800 MB at the limit). With the frictionless seed the interior point runs on the
+normal multipliers only and the polish factors W restricted to the free multipliers a few
+times. Measured at 6348 rows (3-D Tresca, 2.8·10⁵ DOFs): contact 3.9× one linear solve, peak
+memory 2.3× (the interior point on the whole dense program, before the seed, took 0.9 s per
+iteration already at 3072 rows)."""
+
+
+def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
+    """The formulation "auto" runs, and why (before knowing whether K is singular)."""
+    if compliance_of(law) is not None:
+        return "primal", "normal compliance is posed in the primal only"
+    lam, mu = fem.lame
+    if np.max(lam / mu) >= INCOMPRESSIBLE:
+        return "primal", (f"near-incompressible (λ/μ up to {np.max(lam / mu):.0f}): the condensed program loses "
+                          "accuracy with the conditioning of W, the primal does not")
+    columns = contact_columns(fem).size
+    if columns == 0:
+        return "primal", "no contact node has a free DOF: nothing to condense onto"
+    if unknowns > DENSE_LIMIT:
+        return "primal", (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}: the dense condensed program would "
+                          "cost more than the sparse one")
+    if 4 * columns > fem.n_free:
+        return "primal", f"the contact nodes carry {columns} of the {fem.n_free} DOFs: too many to gain by condensing"
+    reuse = " and is reused by every Picard step" if isinstance(law, Coulomb) else ""
+    return "dual", (f"{unknowns} contact unknowns beside {fem.n_free} DOFs: K is condensed onto Γ_C once "
+                    f"(Delassus operator W){reuse}, then the program is small and dense")
+
+
+def contact_columns(fem: FEModel) -> np.ndarray:
+    """Free DOFs of the contact nodes: the columns of N, T and R, where K is condensed to."""
+    position = np.full(fem.K_full.shape[0], -1)
+    position[fem.free] = np.arange(fem.n_free)
+    columns = position[fem.contact.dofs.ravel()]
+    return np.unique(columns[columns >= 0])
+
+
+def prepare(scene: Scene, formulation: str = "auto") -> Model:
+    """Assemble and formulate ``scene``.
+
+    ``formulation``: "primal" (the sparse program over all DOFs), "dual" (condensed onto
+    the contact multipliers with the Delassus operator) or "auto", which picks one from
+    the problem's shape and records why in ``Model.reason``.
+    """
+    if formulation not in (*FORMULATIONS, "auto"):
+        raise SceneError("formulation", f"unknown {formulation!r}", f"use one of {sorted(FORMULATIONS)} or 'auto'")
+    timings: dict = {}
+    with timed(timings, "assembly"):
+        fem = assemble(scene)
+    return formulate(fem, formulation, timings)
+
+
+def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, reason: str = "chosen by the user"):
+    """The Model of an assembled scene (``condensation``: K's, when already built)."""
+    with timed(timings, "formulation"):
+        law = fem.scene.contact.law
+        C = contact_weights(fem.contact, law.non_penetration)
+        friction = slip_bound = epsilon = None
+        if has_friction(law):
+            friction = friction_points(fem.contact, fem.mesh, fem.basis, law.quadrature, law.non_penetration)
+            epsilon = None if law.regularization is None else law.regularization / fem.scaling.displacement
+            slip_bound = (
+                field_at_points(law.slip_bound, "contact.slip_bound", fem, friction) / fem.scaling.pressure
+                if isinstance(law, Tresca) else np.zeros(friction.count)
+            )
+        compliance = None
+        if compliance_of(law) is not None:
+            c_N, p = compliance_of(law).stiffness, compliance_of(law).exponent
+            compliance = (c_N * fem.scaling.displacement**p / fem.scaling.pressure, p)
+    if formulation == "auto":
+        unknowns = fem.contact.m + (friction.R.shape[0] if friction is not None else 0)
+        formulation, reason = choose_formulation(fem, law, unknowns)
+        if formulation == "dual":
+            try:
+                condensation = condensation or condensed(fem, timings)
+            except SceneError as error:
+                if error.field != "dirichlet":
+                    raise
+                formulation, reason = "primal", "K is singular (the contact holds a rigid motion): nothing to condense"
+    elif formulation == "dual":
+        condensation = condensation or condensed(fem, timings)
+    options = {"factorization": condensation if isinstance(condensation, Reused) else Reused(condensation)
+               } if formulation == "dual" else {}
+    with timed(timings, "formulation"):
+
+        def build(friction, slip_bound, epsilon, contact=fem.contact):
+            return FORMULATIONS[formulation](fem.K, fem.f, contact, C, friction, slip_bound, epsilon, compliance,
+                                             **options)
+
+        program, recover, bound_update = build(friction, slip_bound, epsilon)
+    return Model(fem, formulation, C, friction, slip_bound, program, recover, bound_update, build, epsilon,
+                 compliance, timings, reason, options.get("factorization"))
+
+
+class Reused:
+    """K's factorization or condensation, keeping the last W = B K⁻¹ Bᵀ: a sweep over the law's
+    coefficients rebuilds the dual program with the same B, and W is then not recomputed."""
+
+    def __init__(self, factorization: Factorization):
+        self.factorization = factorization
+        self._key, self._W = None, None
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        return self.factorization.solve(b)
+
+    def schur(self, B: sp.spmatrix) -> np.ndarray:
+        B = sp.csr_matrix(B)
+        key = (B.shape, B.indptr.tobytes(), B.indices.tobytes(), B.data.tobytes())
+        if key != self._key:
+            self._key, self._W = key, self.factorization.schur(B)
+        return self._W
+
+
+def condensed(fem: FEModel, timings: dict):
+    """K condensed onto the contact DOFs (one sparse factorization; see :func:`~convexcontact.fem.factorization.condense`)."""
+    columns = contact_columns(fem)
+    with timed(timings, "condensation"):
+        if 0 < columns.size < fem.n_free:
+            return condense(fem.K, columns, dim=fem.dim)
+        return factorize(fem.K, dim=fem.dim)  # nothing to condense from or onto: W from K's factors
