@@ -517,7 +517,7 @@ CASES: dict[str, Callable[[bool], tuple[cc.Scene, Check]]] = {
     "Coulomb F = 1e-6": functools.partial(coulomb_vs_signorini, friction=1e-6, tol=EXACT),
     "Coulomb F = 10 (full stick)": full_stick,
     "Hild F = 2.5 (3 solutions)": functools.partial(hild, F1=-2.4, F2=-1.0, friction=2.5),
-    "Hild F = 2.5 (map cycles)": functools.partial(hild, F1=3.0, F2=-1.0, friction=2.5),
+    "Hild F = 2.5 (right slip, repels ω = 1)": functools.partial(hild, F1=3.0, F2=-1.0, friction=2.5),
     "Hild F = 10 (stick)": functools.partial(hild, F1=0.5, F2=-1.0, friction=10.0),
     "zero load": zero_load,
     "zero load, force control": zero_force,
