@@ -198,3 +198,34 @@ def test_the_shear_of_a_near_incompressible_punch_comes_from_the_clamped_base():
                                   dirichlet=(cc.Dirichlet("bottom", uy=0.0), cc.Dirichlet("left", ux=0.0),
                                              cc.Dirichlet("right", ux=0.0)))
     assert edge_shear(clamped) > 2 * edge_shear(rollers)
+
+
+def test_a_scene_file_carries_its_history():
+    """examples/scenes/sliding_block.toml: the [history] table, solved as a whole history by cc.solve."""
+    from pathlib import Path
+
+    from convexcontact.scene.toml import load_scene
+
+    scene = load_scene(Path(__file__).resolve().parents[1] / "examples" / "scenes" / "sliding_block.toml")
+    assert len(scene.history) == 13 and scene.history.values["dirichlet[top].ux"][6] == 0.024
+    result = cc.solve(scene)
+    assert isinstance(result, cc.HistoryResult) and result.status == "solved"
+    series = result.series()
+    assert series["tangential_force"][-1] == pytest.approx(0.3 * series["normal_force"][-1], rel=1e-7)
+
+
+@pytest.mark.parametrize("history, field", [
+    ({"obstacle.depth": [0.01]}, "history.times"),
+    ({"times": [1.0], "obstacle.depth": 0.01}, "history.obstacle.depth"),
+    ({"times": [1.0], "obstacle.depthh": [0.01]}, "history.obstacle.depthh"),
+    ({"times": [1.0], "traction[top].pressure": [0.1]}, "history.traction[top].pressure"),
+])
+def test_a_bad_history_table_names_the_key(history, field):
+    from convexcontact.scene.toml import scene_from_dict
+
+    data = {"body": {"mesh": "rectangle", "nx": 4, "ny": 4}, "material": {"E": 1.0, "nu": 0.3},
+            "dirichlet": [{"boundary": "bottom", "ux": 0.0, "uy": 0.0}],
+            "contact": {"boundary": "top"}, "obstacle": {"shape": "flat", "depth": 0.01}, "history": history}
+    with pytest.raises(SceneError) as error:
+        scene_from_dict(data)
+    assert error.value.field == field

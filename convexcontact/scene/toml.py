@@ -16,6 +16,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
+from .history import History
 from .model import (
     Body,
     Box,
@@ -42,7 +43,7 @@ TABLE, TABLES = "a table [name]", "an array of tables [[name]]"
 
 TOP = {
     "name": TEXT, "body_force": VECTOR, "body": TABLE, "material": TABLE, "materials": TABLE,
-    "dirichlet": TABLES, "traction": TABLES, "contact": TABLE, "obstacle": TABLE,
+    "dirichlet": TABLES, "traction": TABLES, "contact": TABLE, "obstacle": TABLE, "history": TABLE,
 }
 BODY = {"mesh": TEXT, "element": TEXT, "plane": TEXT}
 RECTANGLE = {
@@ -50,7 +51,7 @@ RECTANGLE = {
     "grading": PAIR, "refine_x": NUMBER, "refine_y": TEXT,
 }
 BOX = {**BODY, "size": TRIPLE, "cells": INTEGERS3, "origin": TRIPLE, "grading": TRIPLE, "refine": TRIPLE}
-MATERIAL = {"E": NUMBER, "nu": NUMBER}
+MATERIAL = {"E": NUMBER, "nu": NUMBER, "viscosity": NUMBER}
 DIRICHLET = {"boundary": TEXT, "ux": NUMBER, "uy": NUMBER, "uz": NUMBER}
 TRACTION = {"boundary": TEXT, "pressure": NUMBER, "vector": VECTOR}
 CONTACT = {"boundary": TEXT, "law": TEXT}
@@ -83,6 +84,7 @@ EXAMPLES = {
     "body.mesh": 'mesh = "rectangle" (built-in, boundaries left/right/bottom/top), mesh = "box" (3-D, '
                  'left/right/front/back/bottom/top) or mesh = "part.msh"',
     "material": "[material]\nE = 1.0\nnu = 0.3\n(or one [materials.NAME] table per mesh subdomain)",
+    "history.times": '[history]\ntimes = [1.0, 2.0]\n"obstacle.depth" = [0.01, 0.02]',
     "E": "E = 1.0",
     "nu": "nu = 0.3",
     "dirichlet": '[[dirichlet]]\nboundary = "bottom"\nux = 0.0\nuy = 0.0',
@@ -120,14 +122,29 @@ def scene_from_dict(data: dict, base_dir: Path | str = ".") -> Scene:
             name: Material(**_table(entry, f"materials.{name}", MATERIAL, required=("E", "nu")), name=f"materials.{name}")
             for name, entry in _table(data["materials"], "materials", None).items()
         }
-    return Scene(
+    scene = Scene(
         body=_body(data["body"], Path(base_dir)),
         materials=materials,
         dirichlet=[Dirichlet(**entry) for entry in _entries(data, "dirichlet", DIRICHLET)],
         tractions=[Traction(**entry) for entry in _entries(data, "traction", TRACTION)],
         contact=_contact(data["contact"], data.get("obstacle", {})),
         **{key: data[key] for key in ("name", "body_force") if key in data},
+        history=_history(data["history"]) if "history" in data else None,
     )
+    if scene.history is not None:
+        scene.history.check(scene)
+    return scene
+
+
+def _history(table) -> History:
+    """``[history]``: ``times = [...]`` and one array per quantity that changes, keyed by its quoted path."""
+    table = _table(table, "history", None, required=("times",))
+    for key, series in table.items():
+        if not isinstance(series, list):
+            raise SceneError(f"history.{key}", f"expected an array with a value per step, got {series!r}",
+                             f'write "{key}" = [v1, v2, …] (quote paths such as "obstacle.depth")')
+    times = table.pop("times")
+    return History(times=times, values=table)
 
 
 def _body(table, base_dir: Path) -> Body:
