@@ -53,12 +53,47 @@ def table(result) -> str:
     return "\n".join(f"{name:<{width}}  {value}" for name, value in rows)
 
 
-EXIT = {"solved": 0, "inaccurate": 3, "not converged": 3}
+def history_table(history) -> str:
+    """One row per step of a history: time, status, forces, zones, certificate."""
+    series = history.series()
+    header = (f"{'step':>4} {'time':>8} {'status':<13} {'normal F':>11} {'tangential F':>12} {'closed':>6} "
+              f"{'stick':>5} {'slip':>5} {'certificate':>11}")
+    rows = [header]
+
+    def number(value, spec):
+        return format(value, spec) if value is not None else "—"
+
+    for k, time in enumerate(series["time"]):
+        rows.append(f"{k + 1:>4} {time:>8.4g} {series['status'][k]:<13} {number(series['normal_force'][k], '>11.5g')} "
+                    f"{number(series['tangential_force'][k], '>12.5g')} {number(series['n_closed'][k], '>6')} "
+                    f"{number(series['n_stick'][k], '>5')} {number(series['n_slip'][k], '>5')} "
+                    f"{number(series['certificate'][k], '>11.2e')}")
+    rows.append(f"status {history.status}" + (f": {history.message}" if history.message else ""))
+    rows.append("times [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in history.timings.items()))
+    return "\n".join(rows)
+
+
+def solutions_table(found) -> str:
+    """The statement of completeness, then one row per solution."""
+    rows = [found.statement, f"{'#':>3} {'continuum':>9} {'Picard slope':>12} {'certificate':>11}  states"]
+    for k, solution in enumerate(found.solutions, start=1):
+        summary = solution.summary()
+        states = ", ".join(f"{state} {summary['states'].count(state)}" for state in dict.fromkeys(summary["states"]))
+        rows.append(f"{k:>3} {summary['continuum']:>9} {summary['picard_slope']:>12.3g} "
+                    f"{summary['certificate']:>11.2e}  {states}")
+    return "\n".join(rows)
+
+
+EXIT = {"solved": 0, "inaccurate": 3, "not converged": 3, "not complete": 3}
 """Exit codes: 0 solved and certified, 3 an answer with a caveat (see the message), 1 no answer, 2 bad input."""
 
 
 def report(result, out: Path | None, json_file: Path | None) -> int:
-    print(table(result))
+    from .drivers.history import HistoryResult
+    from .drivers.solutions import SolutionSet
+
+    print(history_table(result) if isinstance(result, HistoryResult) else solutions_table(result)
+          if isinstance(result, SolutionSet) else table(result))
     if out is not None:
         paths = result.save(out)
         print("wrote", ", ".join(str(p) for p in paths))
@@ -73,7 +108,9 @@ def main(argv=None) -> int:
     for name, help_text in (("demo", "solve the built-in Hertz punch scene"), ("run", "solve a scene from a TOML file")):
         command = commands.add_parser(name, help=help_text)
         if name == "run":
-            command.add_argument("scene", type=Path, help="scene file (see docs/scenes.md)")
+            command.add_argument("scene", type=Path, help="scene file (see docs/scenes.md); a [history] runs every step")
+            command.add_argument("--solutions", choices=["one", "all"], default="one",
+                                 help="all: every solution of a Coulomb scene, each certified (docs/uniqueness.md)")
         else:
             command.add_argument("--nx", type=int, default=80, help="elements across the block (default 80)")
         command.add_argument("--solver", default="clarabel", help="clarabel | osqp | cvxpy[:NAME]")
@@ -83,25 +120,27 @@ def main(argv=None) -> int:
         command.add_argument("--out", type=Path, default=Path("out") if name == "demo" else None,
                              help="folder for summary.json, solution.vtu, PNG plots")
         command.add_argument("--json", type=Path, default=None, help="also write the JSON summary here")
-    study = commands.add_parser("study", help="work-precision SCENE … | sweep penalty|regularization … | stability …",
-                                add_help=False)
-    study.add_argument("kind", choices=["work-precision", "sweep", "stability"])
+    study = commands.add_parser("study", help="work-precision SCENE … | sweep penalty|regularization … | stability … "
+                                "| uniqueness …", add_help=False)
+    study.add_argument("kind", choices=["work-precision", "sweep", "stability", "uniqueness"])
     study.add_argument("arguments", nargs=argparse.REMAINDER)
-    commands.add_parser("bench", help="contact solve ÷ one linear solve per size (--dim 2|3 --sizes …, --sweep N)")
+    commands.add_parser("bench", help="contact solve ÷ one linear solve per size (--dim 2|3 --sizes …, --sweep N, "
+                        "--history N)")
     compare = commands.add_parser("compare", help="compare two summary.json files (contact-node fields)")
     compare.add_argument("reference", type=Path)
     compare.add_argument("other", type=Path)
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["bench"]:  # its options (--dim …) belong to its own parser
-        from .studies import bench
+        from .studies import bench, history_bench
 
-        bench.main(argv[1:])
+        (history_bench if "--history" in argv else bench).main(argv[1:])
         return 0
     args = parser.parse_args(argv)
     if args.command == "study":
-        from .studies import stability, sweeps, work_precision
+        from .studies import stability, sweeps, uniqueness, work_precision
 
-        {"work-precision": work_precision, "sweep": sweeps, "stability": stability}[args.kind].main(args.arguments)
+        studies = {"work-precision": work_precision, "sweep": sweeps, "stability": stability, "uniqueness": uniqueness}
+        studies[args.kind].main(args.arguments)
         return 0
     if args.command == "compare":
         from .studies.compare import compare_files, format_report
@@ -121,7 +160,10 @@ def main(argv=None) -> int:
 
             scene = load_scene(args.scene)
         options = {} if args.tol is None else {"tol": args.tol}
-        result = solve(scene, args.solver, formulation=args.formulation, **options)
+        if scene.history is not None:
+            options["progress"] = lambda k, count, step: print(f"step {k}/{count}: {step.status}", flush=True)
+        result = solve(scene, args.solver, formulation=args.formulation,
+                       solutions=getattr(args, "solutions", "one"), **options)
     except (SceneError, ValueError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2

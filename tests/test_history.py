@@ -229,3 +229,20 @@ def test_a_bad_history_table_names_the_key(history, field):
     with pytest.raises(SceneError) as error:
         scene_from_dict(data)
     assert error.value.field == field
+
+
+def test_the_command_line_runs_a_history_and_benchmarks_one(tmp_path, capsys):
+    """`convexcontact run` of a scene with a history prints a row per step and writes the time series;
+    `convexcontact bench --history N` times a history against its static solves."""
+    from pathlib import Path
+
+    from convexcontact import cli
+
+    scene = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "sliding_block.toml"
+    assert cli.main(["run", str(scene), "--out", str(tmp_path / "out")]) == 0
+    printed = capsys.readouterr().out
+    assert "step 13/13: solved" in printed and "status solved" in printed
+    assert (tmp_path / "out" / "solution.pvd").read_text().count("<DataSet") == 13
+    assert cli.main(["bench", "--history", "2", "--sizes", "300", "--out", str(tmp_path / "bench")]) == 0
+    rows = (tmp_path / "bench" / "history_bench.csv").read_text().splitlines()
+    assert len(rows) == 2 and ",solved," in rows[1]

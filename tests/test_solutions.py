@@ -121,3 +121,19 @@ def test_solve_takes_solutions_all():
     assert len(cc.solve(scene, solutions="all")) == 3
     with pytest.raises(cc.SceneError, match="solutions"):
         cc.solve(scene, solutions="every")
+
+
+def test_the_command_line_lists_every_solution(tmp_path, capsys):
+    """`convexcontact run SCENE --solutions all`: the statement, a row per solution, a summary that says it."""
+    import json
+
+    from convexcontact import cli
+
+    scene = tmp_path / "block.toml"
+    scene.write_text('[body]\nmesh = "rectangle"\nwidth = 1.0\nheight = 0.5\nnx = 3\nny = 2\n'
+                     '[material]\nE = 1.0\nnu = 0.3\n[[dirichlet]]\nboundary = "top"\nux = 0.004\nuy = -0.01\n'
+                     '[contact]\nboundary = "bottom"\nlaw = "coulomb"\nfriction = 0.2\n[obstacle]\nshape = "flat"\n')
+    assert cli.main(["run", str(scene), "--solutions", "all", "--json", str(tmp_path / "all.json")]) == 0
+    assert "all solutions, 1 isolated" in capsys.readouterr().out
+    summary = json.loads((tmp_path / "all.json").read_text())
+    assert summary["complete"] and len(summary["solutions"]) == 1 and summary["status"] == "solved"

@@ -86,8 +86,28 @@ class SolutionSet:
             return f"all solutions, {what}; {self.method}, {self.examined} states examined"
         return f"found {what}, not proven complete; {self.method}, {self.examined} starts"
 
+    @property
+    def status(self) -> str:
+        """solved when the list is complete and every solution certified; else what is missing."""
+        if not all(s.result.status == "solved" for s in self.solutions):
+            return "inaccurate"
+        return "solved" if self.complete else "not complete"
+
+    def save(self, directory) -> list:
+        """summary.json, and each solution's outputs in solution_K/."""
+        import json
+        from pathlib import Path
+
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        paths = [directory / "summary.json"]
+        paths[0].write_text(json.dumps(self.summary(), indent=1))
+        for k, solution in enumerate(self.solutions, start=1):
+            paths += solution.result.save(directory / f"solution_{k}")
+        return paths
+
     def summary(self) -> dict:
-        return {"statement": self.statement, "complete": self.complete, "method": self.method,
+        return {"statement": self.statement, "status": self.status, "complete": self.complete, "method": self.method,
                 "examined": self.examined, "timings": self.timings,
                 "solutions": [s.summary() for s in self.solutions]}
 
