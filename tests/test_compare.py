@@ -151,3 +151,22 @@ def test_a_coulomb_answer_is_reported_as_possibly_one_of_several(tmp_path):
     from_files = compare_files(tmp_path / "a" / "summary.json", tmp_path / "b" / "summary.json")
     assert from_files["not_unique"] == report["not_unique"]
     assert "not unique in the reference: solution" in format_report(from_files)
+
+
+def test_compare_files_weighs_3d_nodes_by_their_areas(tmp_path):
+    """3-D summaries: every node weighted by its contact area (the spacing along s, which repeats along rows,
+    weighted 20 of 121 nodes and reported 0), zones as areas, and x, y, z all matched."""
+    from convexcontact.scene.library import punch_3d
+
+    exact = cc.solve(punch_3d(4))
+    shifted = cc.solve(punch_3d(4, depth=0.03))
+    exact.save(tmp_path / "a", formats=("json",))
+    shifted.save(tmp_path / "b", formats=("json",))
+    from_files = compare_files(tmp_path / "a" / "summary.json", tmp_path / "b" / "summary.json")
+    in_memory = compare(exact, shifted)
+    for name in ("pressure_l2_error", "contact_zone_difference"):
+        assert from_files[name] == pytest.approx(in_memory[name], rel=1e-10), name
+    assert from_files["pressure_l2_error"] > 0.01 and from_files["contact_zone_difference"] > 0
+    fem = exact.fem
+    areas = fem.contact.weights * fem.scaling.length**2
+    assert from_files["contact_zone_difference"] == pytest.approx(areas[exact.closed != shifted.closed].sum())

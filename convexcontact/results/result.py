@@ -161,6 +161,7 @@ class ContactResult:
             contact_nodes={
                 **{axis: c.coords[:, i].tolist() for i, axis in enumerate("xyz"[: c.coords.shape[1]])},
                 "s": c.coordinate.tolist(),
+                "weight": (self.fem.contact.weights * self.fem.scaling.length ** (self.fem.dim - 1)).tolist(),
                 "gap": c.gap.tolist(),
                 "u_N": c.normal_displacement.tolist(),
                 "lambda_N": c.pressure.tolist(),

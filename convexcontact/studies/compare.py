@@ -10,8 +10,9 @@ imported from another code — report how far apart they are:
 - ``pressure_l2_error``       ‖λ_N − μ_N‖ / ‖λ_N‖ in the contact weights w_i (Σ w_i e_i² ≈ ∫_Γc e²)
 - ``pressure_max_error``      max |λ_N − μ_N| / max |λ_N|
 - ``friction_l2_error``, ``friction_max_error``  the same for λ_T (when both have friction)
-- ``contact_zone_difference`` length of the symmetric difference of the closed zones along Γ_C:
-                              Σ w_i over the nodes open in one and closed in the other (user units)
+- ``contact_zone_difference`` size of the symmetric difference of the closed zones on Γ_C: Σ w_i over
+                              the nodes open in one and closed in the other (a length in 2-D, an area
+                              in 3-D; user units)
 - ``stick_zone_difference``   the same for the stick zones (when both have stick / slip statuses)
 - ``certificates``            {"reference": residuals, "other": residuals or None}
 - ``not_unique``              {"reference": …, "other": …}: quantities either solution does not determine
@@ -173,7 +174,7 @@ def compare(reference: ContactResult, other: Fields | ContactResult) -> dict:
         error = other.displacement / fem.scaling.displacement - u
         for name, matrix in (("energy_error", fem.K_full), ("l2_displacement_error", fe.asm(_mass, fem.basis))):
             report[name] = relative(np.sqrt(max(error @ (matrix @ error), 0.0)), np.sqrt(max(u @ (matrix @ u), 0.0)))
-    report.update(contact_errors(ref, other, fem.contact.weights * fem.scaling.length))
+    report.update(contact_errors(ref, other, fem.contact.weights * fem.scaling.length ** (fem.dim - 1)))
     return finish(report, ref, other)
 
 
@@ -183,6 +184,17 @@ def finish(report: dict, reference: Fields, other: Fields) -> dict:
     if reference.not_unique or other.not_unique:
         report["not_unique"] = {"reference": reference.not_unique, "other": other.not_unique}
     return report
+
+
+def node_weights(nodes: dict, path: Path) -> np.ndarray:
+    """The contact weights w_i (lengths in 2-D, areas in 3-D, user units) a summary stores; for summaries
+    written before they were stored, the 2-D trapezoid weights of the node spacing along s. In 3-D s
+    repeats along rows of nodes, so spacing weights would be wrong (they weighted 20 of 121 nodes)."""
+    if "weight" in nodes:
+        return np.asarray(nodes["weight"], float)
+    if "z" in nodes:
+        raise ValueError(f"{path}: a 3-D summary without contact weights; write it again with this version")
+    return spacing_weights(np.asarray(nodes["s"], float))
 
 
 def spacing_weights(s: np.ndarray) -> np.ndarray:
@@ -205,14 +217,12 @@ def read_summary(path: Path) -> tuple[dict, dict]:
 def compare_files(a: Path, b: Path) -> dict:
     """Compare the contact-node fields of two ``summary.json`` files (``a`` is the reference).
 
-    The files hold no displacement field and no contact weights: the weights are
-    approximated from the node spacing along the contact coordinate s (trapezoid
-    rule). This equals w_i = ∫ψ_i for P1/Q1 on a straight Γ_C; for P2/Q2 (w = h/6
-    at vertices, 2h/3 at mid-sides) and curved boundaries the L² errors and zone
-    lengths are approximations. Both files must have the same contact nodes.
+    The files hold no displacement field, so the errors are those of the contact-node fields, weighted
+    by the contact weights w_i = ∫ψ_i the files store (older 2-D files: the trapezoid weights of the
+    node spacing). Both files must have the same contact nodes (x, y and, in 3-D, z).
     """
     (data_a, nodes_a), (data_b, nodes_b) = read_summary(a), read_summary(b)
-    xy_a, xy_b = (np.column_stack([n["x"], n["y"]]) for n in (nodes_a, nodes_b))
+    xy_a, xy_b = (np.column_stack([n[axis] for axis in "xyz" if axis in n]) for n in (nodes_a, nodes_b))
     extent = np.ptp(xy_a, axis=0).max(initial=0.0)
     if xy_a.shape != xy_b.shape or not np.allclose(xy_a, xy_b, rtol=0, atol=1e-9 * extent):
         raise ValueError(
@@ -226,7 +236,7 @@ def compare_files(a: Path, b: Path) -> dict:
                       data.get("not_unique", {}))
 
     reference, other = fields(nodes_a, data_a), fields(nodes_b, data_b)
-    report = contact_errors(reference, other, spacing_weights(np.asarray(nodes_a["s"], float)))
+    report = contact_errors(reference, other, node_weights(nodes_a, a))
     return finish(report, reference, other)
 
 
