@@ -102,6 +102,24 @@ def report(result, out: Path | None, json_file: Path | None) -> int:
     return EXIT.get(result.status, 1)
 
 
+def compare_scene(args) -> dict:
+    """The exact answer of the scene file against a peer's output file (``convexcontact compare SCENE PEER``)."""
+    from .scene.toml import load_scene
+    from .studies.peer import compare_peer, plot_pressures
+
+    scene = load_scene(args.reference)
+    if scene.history is not None:
+        raise ValueError(f"{args.reference}: compare takes a static scene; drop its [history]")
+    result = solve(scene)
+    if not result.solved:
+        raise ValueError(f"{args.reference}: the exact solve returned {result.status}: {result.message}")
+    report = compare_peer(result, args.other, args.displacement, args.pressure)
+    if args.out is not None and "pressure_curves" in report:
+        print("wrote", plot_pressures(report, args.out / "pressures.png"))
+    report.pop("pressure_curves", None)
+    return report
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="convexcontact", description="Exact contact solves as convex programs.")
     commands = parser.add_subparsers(dest="command", required=True)
@@ -126,9 +144,16 @@ def main(argv=None) -> int:
     study.add_argument("arguments", nargs=argparse.REMAINDER)
     commands.add_parser("bench", help="contact solve ÷ one linear solve per size (--dim 2|3 --sizes …, --sweep N, "
                         "--history N)")
-    compare = commands.add_parser("compare", help="compare two summary.json files (contact-node fields)")
-    compare.add_argument("reference", type=Path)
-    compare.add_argument("other", type=Path)
+    compare = commands.add_parser(
+        "compare", help="compare two summary.json files, or a scene's exact answer with another code's output file",
+        description="REFERENCE OTHER: two summary.json files of one mesh (contact-node fields), or SCENE.toml and a "
+                    "peer's output (VTU, XDMF, Exodus… read by meshio) on its own mesh: the scene is solved exactly "
+                    "and the peer's fields are interpolated onto our mesh (docs/peer.md)")
+    compare.add_argument("reference", type=Path, help="summary.json, or a scene file (.toml)")
+    compare.add_argument("other", type=Path, help="summary.json, or the peer's output file")
+    compare.add_argument("--displacement", default=None, help="the peer's displacement point data (default: found by name)")
+    compare.add_argument("--pressure", default=None, help="the peer's contact pressure point data (default: by name)")
+    compare.add_argument("--out", type=Path, default=None, help="folder for the pressure overlay PNG (peer files)")
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["bench"]:  # its options (--dim …) belong to its own parser
         from .studies import bench, history_bench
@@ -146,7 +171,8 @@ def main(argv=None) -> int:
         from .studies.compare import compare_files, format_report
 
         try:
-            print(format_report(compare_files(args.reference, args.other)))
+            print(format_report(compare_files(args.reference, args.other) if args.reference.suffix != ".toml"
+                                else compare_scene(args)))
         except (OSError, ValueError) as error:
             print(f"error: {error}", file=sys.stderr)
             return 2

@@ -242,9 +242,13 @@ def compare_files(a: Path, b: Path) -> dict:
 
 def format_report(report: dict) -> str:
     """The report as an aligned text table, then the two certificates side by side."""
-    values = {k: v for k, v in report.items() if k not in ("certificates", "not_unique")}
+    values = {k: v for k, v in report.items() if isinstance(v, (int, float))}
     width = max(map(len, values), default=0) + 2
     lines = [f"{'quantity':<{width}}value"] + [f"{k:<{width}}{v:.3e}" for k, v in values.items()]
+    for name in ("fields", "normal_force"):  # a peer's report: which fields were read, both resultants
+        if name in report:
+            lines.append(f"{name}: " + ", ".join(f"{k} {v:.6g}" if isinstance(v, float) else f"{k} {v!r}"
+                                                  for k, v in report[name].items()))
     certificates = report.get("certificates")
     if certificates:
         ref, other = certificates.get("reference") or {}, certificates.get("other") or {}

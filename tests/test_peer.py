@@ -1,0 +1,73 @@
+"""Cross-validating another code's output on its own mesh (issue 14): a penalty 'peer' written to VTU."""
+
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+import convexcontact as cc
+from convexcontact import cli
+from convexcontact.results.output import write_vtk
+from convexcontact.studies.peer import compare_peer
+
+
+@pytest.fixture(scope="module")
+def exact():
+    return cc.solve(cc.library.tresca_punch(nx=24).with_law(cc.Signorini()))
+
+
+def written(result, path: Path) -> Path:
+    write_vtk(result, path)
+    return path
+
+
+def peer(tmp_path, nx: int, stiffness: float) -> Path:
+    """A normal-compliance (penalty) answer of the same body on an nx mesh, as a VTU file."""
+    result = cc.solve(cc.library.tresca_punch(nx=nx).with_law(cc.NormalCompliance(stiffness=stiffness)))
+    return written(result, tmp_path / f"peer_{nx}_{stiffness:g}.vtu")
+
+
+def test_our_own_answer_read_back_has_no_error(exact, tmp_path):
+    report = compare_peer(exact, written(exact, tmp_path / "same.vtu"))
+    assert report["fields"] == {"displacement": "displacement", "pressure": "contact_pressure"}
+    for name in ("energy_error", "l2_displacement_error", "pressure_l2_error", "pressure_max_error"):
+        assert report[name] < 1e-10, name  # boundary nodes are probed 1e-12 of the box inside the peer's mesh
+    assert report["normal_force"]["peer"] == pytest.approx(report["normal_force"]["reference"], rel=1e-12)
+
+
+def test_a_penalty_peer_converges_like_one_over_its_stiffness_until_the_meshes_differ(exact, tmp_path):
+    """Same mesh: the error falls tenfold per decade of c_N. Another mesh: it stalls at the discretization
+    difference, which the exact answer on that mesh shows as well."""
+    same = [compare_peer(exact, peer(tmp_path, 24, c))["energy_error"] for c in (1e2, 1e3, 1e4)]
+    assert same[0] / same[1] == pytest.approx(10, rel=0.2) and same[1] / same[2] == pytest.approx(10, rel=0.2)
+    other = [compare_peer(exact, peer(tmp_path, 34, c))["energy_error"] for c in (1e2, 1e4, 1e5)]
+    floor = compare_peer(exact, written(cc.solve(cc.library.tresca_punch(nx=34).with_law(cc.Signorini())),
+                                        tmp_path / "exact_34.vtu"))["energy_error"]
+    assert other[0] > other[1] and other[2] == pytest.approx(floor, rel=0.05) and floor > 10 * same[2]
+
+
+def test_mismatched_files_are_clear_errors(exact, tmp_path):
+    path = written(exact, tmp_path / "same.vtu")
+    mesh = meshio.read(path)
+    meshio.write(tmp_path / "mm.vtu", meshio.Mesh(mesh.points * 1000.0, mesh.cells, point_data=mesh.point_data))
+    with pytest.raises(ValueError, match="same units"):
+        compare_peer(exact, tmp_path / "mm.vtu")
+    meshio.write(tmp_path / "bare.vtu", meshio.Mesh(mesh.points, mesh.cells, point_data={"T": mesh.points[:, 0]}))
+    with pytest.raises(ValueError, match=r"no displacement or contact pressure.*\['T'\]"):
+        compare_peer(exact, tmp_path / "bare.vtu")
+    with pytest.raises(ValueError, match="no point data 'U_peer'"):
+        compare_peer(exact, path, displacement="U_peer")
+    box = cc.solve(cc.library.punch_3d(3))
+    with pytest.raises(ValueError, match="3-D mesh against a 2-D scene"):
+        compare_peer(exact, written(box, tmp_path / "box.vtu"))
+
+
+def test_the_command_line_compares_a_scene_with_a_peer_file(tmp_path, capsys):
+    scene = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "hertz.toml"
+    reference = cc.solve(cc.scene.toml.load_scene(scene))
+    path = written(reference, tmp_path / "peer.vtu")
+    assert cli.main(["compare", str(scene), str(path), "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "energy_error" in printed and "fields: displacement 'displacement'" in printed
+    assert (tmp_path / "pressures.png").exists()
