@@ -139,8 +139,8 @@ def main(argv=None) -> int:
                              help="folder for summary.json, solution.vtu, PNG plots")
         command.add_argument("--json", type=Path, default=None, help="also write the JSON summary here")
     study = commands.add_parser("study", help="work-precision SCENE … | sweep penalty|regularization … | stability … "
-                                "| uniqueness …", add_help=False)
-    study.add_argument("kind", choices=["work-precision", "sweep", "stability", "uniqueness"])
+                                "| uniqueness … | grid SCENE --param PATH=V1,V2 …", add_help=False)
+    study.add_argument("kind", choices=["work-precision", "sweep", "stability", "uniqueness", "grid"])
     study.add_argument("arguments", nargs=argparse.REMAINDER)
     commands.add_parser("bench", help="contact solve ÷ one linear solve per size (--dim 2|3 --sizes …, --sweep N, "
                         "--history N)")
@@ -162,9 +162,10 @@ def main(argv=None) -> int:
         return 0
     args = parser.parse_args(argv)
     if args.command == "study":
-        from .studies import stability, sweeps, uniqueness, work_precision
+        from .studies import grid, stability, sweeps, uniqueness, work_precision
 
-        studies = {"work-precision": work_precision, "sweep": sweeps, "stability": stability, "uniqueness": uniqueness}
+        studies = {"work-precision": work_precision, "sweep": sweeps, "stability": stability, "uniqueness": uniqueness,
+                   "grid": grid}
         studies[args.kind].main(args.arguments)
         return 0
     if args.command == "compare":

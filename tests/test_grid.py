@@ -1,0 +1,74 @@
+"""Parameter grids on Dask (issue 14): every case solved once, failures kept as rows, reruns resumed."""
+
+import csv
+import dataclasses
+
+import numpy as np
+import pytest
+
+import convexcontact as cc
+from convexcontact import cli
+from convexcontact.studies.grid import run_grid
+
+
+def block(law) -> cc.Scene:
+    return cc.Scene(name="block", body=cc.Body(cc.Rectangle(width=1.0, height=0.5, nx=8, ny=4)),
+                    materials=cc.Material(1.0, 0.3), dirichlet=(cc.Dirichlet("top", ux=0.002, uy=-0.01),),
+                    contact=cc.Contact("bottom", cc.Obstacle("flat"), law))
+
+
+GRID = {"contact.friction": [0.1, 0.3], "dirichlet[top].uy": [-0.01, -0.02], "body.nx": [8, 10]}
+
+
+def independent(parameters) -> cc.ContactResult:
+    scene = block(cc.Coulomb(friction=parameters["contact.friction"]))
+    scene = dataclasses.replace(scene, dirichlet=(cc.Dirichlet("top", ux=0.002, uy=parameters["dirichlet[top].uy"]),),
+                                body=cc.Body(cc.Rectangle(width=1.0, height=0.5, nx=parameters["body.nx"], ny=4)))
+    return cc.solve(scene)
+
+
+def test_every_case_is_the_independent_solve_and_a_rerun_skips_them(tmp_path):
+    """8 cases in 2 groups (one per mesh: assembled and condensed once); each row is the answer of the same case
+    solved on its own; the CSV holds them all, and a second run finds nothing left to do."""
+    rows = run_grid(block(cc.Coulomb(friction=0.2)), GRID, tmp_path, scheduler="serial", progress=lambda _: None)
+    assert len(rows) == 8 and {r["status"] for r in rows} == {"solved"} and len({r["group"] for r in rows}) == 2
+    for row in rows[::3]:
+        alone = independent(row)
+        assert row["normal_force"] == pytest.approx(alone.normal_force, rel=1e-8)
+        assert row["tangential_force"] == pytest.approx(alone.tangential_force, rel=1e-7, abs=1e-12)
+    with open(tmp_path / "grid.csv", newline="") as handle:
+        assert len(list(csv.DictReader(handle))) == 8
+    assert run_grid(block(cc.Coulomb(friction=0.2)), GRID, tmp_path, scheduler="serial", progress=lambda _: None) == []
+
+
+def test_a_failing_case_is_a_row_and_the_others_are_solved(tmp_path):
+    """A friction formula that evaluates to infinity fails its case with the reason; the rest are solved."""
+    rows = run_grid(block(cc.Coulomb(friction=0.2)), {"contact.friction": [0.2, "1/(x - x)"]}, tmp_path,
+                    scheduler="serial", progress=lambda _: None)
+    status = {row["contact.friction"]: row for row in rows}
+    assert status[0.2]["status"] == "solved"
+    assert status["1/(x - x)"]["status"] == "error" and "contact.friction" in status["1/(x - x)"]["error"]
+
+
+def test_a_local_dask_cluster_gives_the_serial_rows(tmp_path):
+    """Two worker processes, one task per mesh: the same numbers as in this process."""
+    grid = {"contact.friction": [0.1, 0.3], "body.nx": [8, 10]}
+    serial = run_grid(block(cc.Coulomb(friction=0.2)), grid, tmp_path / "serial", scheduler="serial",
+                      progress=lambda _: None)
+    parallel = run_grid(block(cc.Coulomb(friction=0.2)), grid, tmp_path / "dask", workers=2, progress=lambda _: None)
+    by_key = {row["key"]: row for row in parallel}
+    assert sorted(by_key) == sorted(row["key"] for row in serial)
+    assert all(np.isclose(by_key[row["key"]]["normal_force"], row["normal_force"], rtol=1e-10) for row in serial)
+    assert len({row["worker"] for row in parallel}) == 2
+
+
+def test_the_command_line_runs_a_grid(tmp_path, capsys):
+    scene = tmp_path / "block.toml"
+    scene.write_text('[body]\nmesh = "rectangle"\nwidth = 1.0\nheight = 0.5\nnx = 6\nny = 3\n'
+                     '[material]\nE = 1.0\nnu = 0.3\n[[dirichlet]]\nboundary = "top"\nux = 0.002\nuy = -0.01\n'
+                     '[contact]\nboundary = "bottom"\nlaw = "tresca"\nslip_bound = 0.001\n[obstacle]\nshape = "flat"\n')
+    assert cli.main(["study", "grid", str(scene), "--param", "contact.slip_bound=0.001,0.002",
+                     "--scheduler", "serial", "--out", str(tmp_path / "out")]) == 0
+    assert "2/2 cases solved" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        cli.main(["study", "grid", str(scene), "--param", "contact.nosuch=1", "--scheduler", "serial"])
