@@ -47,3 +47,21 @@ def positive_integer(value, field_name: str) -> int:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
         raise SceneError(field_name, f"expected a positive integer, got {value!r}")
     return int(value)
+
+
+def of_type(value, kinds: type | tuple[type, ...], field_name: str, fix: str = ""):
+    """Return ``value`` if it is one of ``kinds`` (booleans are not numbers), else a SceneError naming the field."""
+    kinds = kinds if isinstance(kinds, tuple) else (kinds,)
+    if not isinstance(value, kinds) or (isinstance(value, (bool, np.bool_)) and bool not in kinds):
+        expected = " or ".join(kind.__name__ for kind in kinds)
+        shown = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
+        raise SceneError(field_name, f"expected {expected}, got {type(value).__name__} {shown}", fix)
+    return value
+
+
+def sequence_of(values, kind: type, field_name: str, fix: str = "") -> tuple:
+    """``values`` as a tuple of ``kind`` items (a lone item or a string is refused, not split into characters)."""
+    if isinstance(values, (str, bytes, kind)) or not hasattr(values, "__iter__"):
+        raise SceneError(field_name, f"expected a list of {kind.__name__}, got {type(values).__name__} {values!r:.60}",
+                         fix)
+    return tuple(of_type(value, kind, f"{field_name}[{i}]", fix) for i, value in enumerate(values))

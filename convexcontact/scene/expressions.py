@@ -62,10 +62,12 @@ def compile_expression(text: str, field_name: str) -> Callable[..., np.ndarray]:
         tree = ast.parse(text.strip(), mode="eval")
         # Evaluated by walking the checked AST into closures: no eval/compile of user code.
         formula = _build(tree.body, text.strip(), field_name)
+    except SceneError:
+        raise
     except (SyntaxError, ValueError) as error:
         raise SceneError(
             field_name,
-            f"{text!r} is not a formula ({getattr(error, 'msg', error)})",
+            f"{_short(text)!r} is not a formula ({str(getattr(error, 'msg', error))[:80]})",
             "write one arithmetic expression, e.g. 'x**2/(2*0.5) - 0.01'",
         ) from None
     except RecursionError:
@@ -93,10 +95,19 @@ def compile_expression(text: str, field_name: str) -> Callable[..., np.ndarray]:
     return evaluate
 
 
+def _short(text: str, length: int = 60) -> str:
+    """The formula as quoted in an error: its start, when it is long."""
+    return text if len(text) <= length else text[: length - 1] + "…"
+
+
 def _build(node: ast.AST, text: str, field_name: str) -> Node:
     """Turn an allowed AST node into a closure over the coordinate values."""
     if isinstance(node, ast.Constant) and type(node.value) in (int, float):
-        value = np.float64(node.value)
+        try:
+            value = np.float64(node.value)
+        except OverflowError:  # an integer beyond the floats (a 400-digit literal)
+            raise SceneError(field_name, f"the number {_source(node, text)[:20]}… ({len(_source(node, text))} digits) is too large",
+                             "write numbers below 1.8e308, in scientific notation if need be") from None
         return lambda values: value
     if isinstance(node, ast.Name) and node.id in CONSTANTS:
         value = CONSTANTS[node.id]

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .checks import SceneError, finite, finite_vector, positive_integer
+from .checks import SceneError, finite, finite_vector, of_type, positive_integer, sequence_of
 from .expressions import compile_expression
 from .history import History
 
@@ -149,6 +149,10 @@ class Body:
     plane: str = "strain"
 
     def __post_init__(self):
+        import skfem
+
+        of_type(self.geometry, (Rectangle, Box, MeshFile, skfem.Mesh), "body.geometry",
+                "give cc.Rectangle(...), cc.Box(...), cc.MeshFile(path) or a scikit-fem mesh")
         if self.element not in ELEMENTS:
             raise SceneError("body.element", f"unknown element {self.element!r}", f"use one of {ELEMENTS}")
         if self.plane not in PLANES:
@@ -176,6 +180,7 @@ class Dirichlet:
     COMPONENTS = ("ux", "uy", "uz")
 
     def __post_init__(self):
+        of_type(self.boundary, str, "dirichlet.boundary", "name a boundary of the mesh, e.g. 'bottom'")
         if self.ux is None and self.uy is None and self.uz is None:
             raise SceneError(f"dirichlet[{self.boundary}]", "no component prescribed", "give ux, uy and/or uz")
         for name in self.COMPONENTS:
@@ -193,6 +198,7 @@ class Traction:
     vector: tuple[float, float] | None = None
 
     def __post_init__(self):
+        of_type(self.boundary, str, "traction.boundary", "name a boundary of the mesh, e.g. 'top'")
         where = f"traction[{self.boundary}]"
         if (self.pressure is None) == (self.vector is None):
             raise SceneError(where, "give exactly one of pressure or vector")
@@ -365,7 +371,11 @@ def evaluate_field(value, field_name: str, points: np.ndarray, minimum: float = 
     if isinstance(value, str):
         values = compile_expression(value, field_name)(**coordinates)
     elif callable(value):
-        values = np.broadcast_to(np.asarray(value(*coordinates.values()), dtype=float), shape).copy()
+        returned = np.asarray(value(*coordinates.values()), dtype=float)
+        if returned.shape not in ((), shape):
+            raise SceneError(field_name, f"the function returned shape {returned.shape} for {shape[0]} points",
+                             "return one value per point (or one number), e.g. lambda x, y: 0.3 + 0 * x")
+        values = np.broadcast_to(returned, shape).copy()
     elif np.ndim(value) == 0:
         values = np.full(shape, float(value))
     else:
@@ -432,8 +442,7 @@ class Coulomb:
             raise SceneError("contact.relaxation", f"ω must lie in (0, 1], got {self.relaxation}")
         if finite(self.tol, "contact.tol") <= 0:
             raise SceneError("contact.tol", "must be positive")
-        if not isinstance(self.max_iterations, (int, np.integer)) or self.max_iterations < 1:
-            raise SceneError("contact.max_iterations", f"expected a positive integer, got {self.max_iterations!r}")
+        positive_integer(self.max_iterations, "contact.max_iterations")
         if self.initial_pressure is not None:
             object.__setattr__(
                 self, "initial_pressure", check_field(self.initial_pressure, "contact.initial_pressure")
@@ -477,6 +486,10 @@ class Contact:
     law: ContactLaw = field(default_factory=Signorini)
 
     def __post_init__(self):
+        of_type(self.boundary, str, "contact.boundary", "name a boundary of the mesh, e.g. 'top'")
+        of_type(self.obstacle, Obstacle, "contact.obstacle", "give cc.Obstacle(shape, ...)")
+        of_type(self.law, (Signorini, NormalCompliance, Tresca, Coulomb), "contact.law",
+                "give cc.Signorini(), cc.NormalCompliance(c), cc.Tresca(s) or cc.Coulomb(F)")
         if self.obstacle.tangential_force is not None and not has_friction(self.law):
             raise SceneError("obstacle.tangential_force", "a tangential force needs friction",
                              "use law = 'tresca' or 'coulomb', or drop the tangential force")
@@ -496,8 +509,18 @@ class Scene:
     history: History | None = None  # a load history (scene/history.py); None: one static problem
 
     def __post_init__(self):
-        object.__setattr__(self, "dirichlet", tuple(self.dirichlet))
-        object.__setattr__(self, "tractions", tuple(self.tractions))
+        of_type(self.body, Body, "body", "give cc.Body(geometry, element)")
+        of_type(self.contact, Contact, "contact", "give cc.Contact(boundary, obstacle, law)")
+        of_type(self.name, str, "name")
+        if isinstance(self.materials, dict):
+            for name, material in self.materials.items():
+                of_type(material, Material, f"materials.{name}", "give cc.Material(E, nu)")
+        else:
+            of_type(self.materials, Material, "materials", "give cc.Material(E, nu) or {subdomain: cc.Material}")
+        object.__setattr__(self, "dirichlet", sequence_of(self.dirichlet, Dirichlet, "dirichlet",
+                                                          "give a list of cc.Dirichlet(boundary, ux=…, uy=…)"))
+        object.__setattr__(self, "tractions", sequence_of(self.tractions, Traction, "tractions",
+                                                          "give a list of cc.Traction(boundary, pressure=…)"))
         object.__setattr__(self, "body_force", finite_vector(self.body_force, "body_force", (2, 3)))
         if not self.dirichlet:
             raise SceneError(

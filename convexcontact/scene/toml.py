@@ -173,6 +173,9 @@ def _contact(table, obstacle) -> Contact:
     if shape not in OBSTACLES:
         Obstacle(shape=shape)  # raises, listing the shapes
     options = {key: keys[key] for key in law_keys if key in keys}
+    if law is NormalCompliance and "stiffness" not in options:
+        raise SceneError("contact.stiffness", "missing: law = 'normal_compliance' needs its stiffness c_N",
+                         "add stiffness = c_N (a pressure per length^p), e.g. stiffness = 1e4")
     if law is not NormalCompliance and "stiffness" in options:
         options["compliance"] = NormalCompliance(options.pop("stiffness"), options.pop("exponent", 1.0))
     elif law is not NormalCompliance and "exponent" in options:

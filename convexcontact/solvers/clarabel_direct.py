@@ -46,7 +46,8 @@ def settings(tol: float = 1e-10, max_iter: int = 200, verbose: bool = False, **n
     s.tol_ktratio = min(s.tol_ktratio, tol)
     for name, value in native.items():
         if not hasattr(s, name):
-            raise ValueError(f"clarabel has no setting {name!r}")
+            raise ValueError(f"{name}: clarabel has no such setting — the settings are the fields of "
+                             "clarabel.DefaultSettings (e.g. max_threads, static_regularization_constant)")
         setattr(s, name, value)
     return s
 

@@ -121,13 +121,24 @@ def solve(
     m = cvxpy_model if cvxpy_model is not None else model(program)
     options = dict(native)
     name = (solver or cp.CLARABEL).upper()
+    retry = name == cp.CLARABEL and tol is None  # a default tolerance may be loosened, a user's is not
     if name == cp.CLARABEL:
         tol = tol if tol is not None else 1e-10 if polishable(program) else 1e-12
-        options.update(tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, tol_ktratio=tol)
     start = time.perf_counter()
-    m.problem.solve(solver=name, verbose=verbose, **options)
+    while True:
+        if name == cp.CLARABEL:
+            options.update(tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, tol_ktratio=tol)
+        try:
+            m.problem.solve(solver=name, verbose=verbose, **options)
+            word = str(m.problem.status)
+            break
+        except cp.error.SolverError as error:  # a failed solve is a result that says so, as on the other paths
+            word = f"SolverError: {error}"
+            if not retry or tol >= 1e-8:  # Clarabel stalls at tight tolerances: as the direct path, up to 1e-8
+                break
+            tol *= 10.0
     elapsed = time.perf_counter() - start
-    status = _STATUS.get(m.problem.status, "failed")
+    status = _STATUS.get(word, "failed")
     if status in ("solved", "inaccurate"):
         x = np.asarray(m.x.value, dtype=float)
         z = np.concatenate([_dual(c, kind, rows) for c, kind, rows in m.cone_constraints])
@@ -140,7 +151,7 @@ def solve(
         z=z,
         s=program.b - program.A @ x,
         status=status,
-        solver_status=str(m.problem.status),
+        solver_status=word,
         iterations=int(stats.num_iters or 0) if stats is not None else 0,
         solve_time=elapsed,
         solver=f"cvxpy:{stats.solver_name if stats is not None else name}",

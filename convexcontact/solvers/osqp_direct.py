@@ -109,7 +109,11 @@ class Session:
         options = {"eps_abs": tol, "eps_rel": tol, "max_iter": max_iter, "polishing": True, "verbose": verbose}
         options.update(native)
         self._solver, self._verbose = osqp.OSQP(), options["verbose"]
-        self._solver.setup(sp.triu(program.P, format="csc"), program.q, A, lower, upper, **options)
+        try:
+            self._solver.setup(sp.triu(program.P, format="csc"), program.q, A, lower, upper, **options)
+        except ValueError as error:  # OSQP's own words for a setting it does not know
+            raise ValueError(f"solver options: OSQP refused them ({error}) — see OSQP's settings "
+                             "(eps_abs, eps_rel, max_iter, polishing, …)") from None
 
     def update(self, q: np.ndarray | None = None, b: np.ndarray | None = None):
         changes = {}
