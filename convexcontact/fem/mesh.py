@@ -90,10 +90,18 @@ def box(geometry: Box, hexes: bool) -> fe.Mesh:
 
 def load_mesh(geometry: MeshFile) -> fe.Mesh:
     """Read a mesh file with meshio (through scikit-fem); physical groups become names."""
+    import meshio
+
     try:
-        return fe.Mesh.load(str(geometry.path))
+        raw = meshio.read(geometry.path)
+        mesh = fe.Mesh.load(str(geometry.path))
     except Exception as error:  # meshio raises many types; the user needs the file and the cause
         raise SceneError("body.mesh", f"could not read {geometry.path}: {error}") from error
+    if mesh.dim() == 2 and raw.points.shape[1] == 3 and np.ptp(raw.points[:, 2]) > 0:
+        raise SceneError("body.mesh", f"{geometry.path}: 2-D cells with z from {raw.points[:, 2].min():g} to "
+                         f"{raw.points[:, 2].max():g}: the body would be flattened without a word",
+                         "put the 2-D mesh in a plane z = const, or mesh the body in 3-D (tetrahedra, hexahedra)")
+    return mesh
 
 
 def build_mesh(body: Body) -> fe.Mesh:
@@ -104,10 +112,52 @@ def build_mesh(body: Body) -> fe.Mesh:
     if isinstance(geometry, Box):
         return box(geometry, hexes=body.element in ("Q1", "Q2"))
     if isinstance(geometry, MeshFile):
-        return load_mesh(geometry)
+        return check_mesh(load_mesh(geometry), str(geometry.path))
     if isinstance(geometry, fe.Mesh):
-        return geometry
+        return check_mesh(geometry, "the mesh given")
     raise SceneError("body.mesh", f"unsupported geometry {type(geometry).__name__}")
+
+
+DEGENERATE = 1e-10
+"""Cells whose measure is below this fraction of the mean cell's are degenerate (collapsed nodes, slivers)."""
+
+
+def check_mesh(mesh: fe.Mesh, source: str) -> fe.Mesh:
+    """A user's mesh as it is, or an error saying what is wrong with it and how to fix it: nodes in no cell,
+    nodes that share coordinates (the mesh is cut there: a hidden crack), degenerate cells. Built-in meshes
+    are right by construction and not checked."""
+    nodes = mesh.p.shape[1]
+    used = np.zeros(nodes, bool)
+    used[mesh.t.ravel()] = True
+    if not used.all():
+        raise SceneError("body.mesh", f"{source}: {np.count_nonzero(~used)} of {nodes} nodes belong to no cell "
+                         f"(the first: node {np.flatnonzero(~used)[0]})",
+                         "remove them (meshio: mesh.remove_orphaned_nodes(); gmsh: Coherence Mesh)")
+    extent = np.ptp(mesh.p, axis=1).max()
+    keys = np.round(mesh.p / (1e-10 * extent)).T
+    _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        where = mesh.p[:, first[np.argmax(counts > 1)]]
+        raise SceneError("body.mesh", f"{source}: {np.count_nonzero(counts > 1)} places hold two or more nodes (the "
+                         f"first at {np.round(where, 12).tolist()}): the cells on either side are not connected — "
+                         "a crack the solver would not see", "merge duplicate nodes (gmsh: Coherence Mesh; meshio: "
+                         "merge points within a tolerance) or, if the crack is meant, model it as a contact pair")
+    measure = cell_measures(mesh)
+    small = measure <= DEGENERATE * measure.mean()
+    if small.any():
+        cell = np.flatnonzero(small)[0]
+        raise SceneError("body.mesh", f"{source}: {np.count_nonzero(small)} degenerate cells (zero or near-zero "
+                         f"area/volume; the first: cell {cell} with nodes {mesh.t[:, cell].tolist()})",
+                         "remesh, or remove collapsed nodes and slivers")
+    return mesh
+
+
+def cell_measures(mesh: fe.Mesh) -> np.ndarray:
+    """Area (2-D) or volume (3-D) of each cell, from the linear element's quadrature."""
+    linear = {fe.MeshTri: fe.ElementTriP1, fe.MeshQuad: fe.ElementQuad1, fe.MeshTet: fe.ElementTetP1,
+              fe.MeshHex: fe.ElementHex1}
+    element = next(element for kind, element in linear.items() if isinstance(mesh, kind))
+    return fe.CellBasis(mesh, element(), intorder=2).dx.sum(axis=1)
 
 
 def vector_basis(mesh: fe.Mesh, element: str, intorder: int | None = None) -> fe.Basis:
