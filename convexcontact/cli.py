@@ -88,6 +88,37 @@ EXIT = {"solved": 0, "inaccurate": 3, "not converged": 3, "not complete": 3}
 """Exit codes: 0 solved and certified, 3 an answer with a caveat (see the message), 1 no answer, 2 bad input."""
 
 
+OUTPUTS = ("summary.json", "solution.vtu", "solution.pvd", "solution_*.vtu", "solution_*", "deformed.png",
+           "contact.png", "picard.png", "history.png", "pressures.png")
+"""What a run writes into --out: the names it would replace."""
+
+
+def check_outputs(out: Path | None, json_file: Path | None, overwrite: bool) -> None:
+    """Refuse, before any work, outputs that would fail or replace a file without --overwrite."""
+    if out is not None and out.exists():
+        if not out.is_dir():
+            raise ValueError(f"--out: {out} is a file; give a folder (it is created if missing)")
+        ours = sorted({path.name for pattern in OUTPUTS for path in out.glob(pattern)})
+        if ours and not overwrite:
+            raise ValueError(f"--out: {out} already holds {', '.join(ours[:5])}{' …' if len(ours) > 5 else ''}; "
+                             "give another folder, or --overwrite to replace them (nothing else there is touched)")
+    if json_file is not None:
+        if json_file.is_dir():
+            raise ValueError(f"--json: {json_file} is a folder; give a file name, e.g. {json_file / 'summary.json'}")
+        if not json_file.parent.is_dir():
+            raise ValueError(f"--json: the folder {json_file.parent} does not exist; create it or choose another")
+        if json_file.exists() and not overwrite:
+            raise ValueError(f"--json: {json_file} exists; choose another name, or --overwrite to replace it")
+
+
+def files_in(out: Path | None, json_file: Path | None) -> set[Path]:
+    """The files a run could write, as they are now (to remove what an interrupted run wrote, and only that)."""
+    found = {json_file} if json_file is not None and json_file.exists() else set()
+    if out is not None and out.is_dir():
+        found |= {path for path in out.rglob("*") if path.is_file()}
+    return found
+
+
 def report(result, out: Path | None, json_file: Path | None) -> int:
     from .drivers.history import HistoryResult
     from .drivers.solutions import SolutionSet
@@ -121,6 +152,15 @@ def compare_scene(args) -> dict:
 
 
 def main(argv=None) -> int:
+    """The ``convexcontact`` command; Ctrl-C ends it quietly with code 130."""
+    try:
+        return commands(argv)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+def commands(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="convexcontact", description="Exact contact solves as convex programs.")
     commands = parser.add_subparsers(dest="command", required=True)
     for name, help_text in (("demo", "solve the built-in Hertz punch scene"), ("run", "solve a scene from a TOML file")):
@@ -138,6 +178,8 @@ def main(argv=None) -> int:
         command.add_argument("--out", type=Path, default=Path("out") if name == "demo" else None,
                              help="folder for summary.json, solution.vtu, PNG plots")
         command.add_argument("--json", type=Path, default=None, help="also write the JSON summary here")
+        command.add_argument("--overwrite", action="store_true",
+                             help="replace the outputs of an earlier run in --out / --json (refused otherwise)")
     study = commands.add_parser("study", help="work-precision SCENE … | sweep penalty|regularization … | stability … "
                                 "| uniqueness … | grid SCENE --param PATH=V1,V2 …", add_help=False)
     study.add_argument("kind", choices=["work-precision", "sweep", "stability", "uniqueness", "grid"])
@@ -155,6 +197,10 @@ def main(argv=None) -> int:
     compare.add_argument("--pressure", default=None, help="the peer's contact pressure point data (default: by name)")
     compare.add_argument("--out", type=Path, default=None, help="folder for the pressure overlay PNG (peer files)")
     argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["study"] and (len(argv) == 1 or argv[1] in ("-h", "--help")):
+        study.print_help()
+        print("\neach study has its own options: convexcontact study KIND --help")
+        return 0
     if argv[:1] == ["bench"]:  # its options (--dim …) belong to its own parser
         from .studies import bench, history_bench
 
@@ -178,7 +224,20 @@ def main(argv=None) -> int:
             print(f"error: {error}", file=sys.stderr)
             return 2
         return 0
+    before = files_in(args.out, args.json)
     try:
+        return run_command(args)
+    except KeyboardInterrupt:  # Ctrl-C: no traceback, and no half-written outputs of this run
+        for path in files_in(args.out, args.json) - before:
+            path.unlink(missing_ok=True)
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+def run_command(args) -> int:
+    """``demo`` or ``run``: check the outputs, solve, report."""
+    try:
+        check_outputs(args.out, args.json, args.overwrite)
         solvers.check_name(args.solver)
         if args.command == "demo":
             scene = hertz_punch(nx=args.nx)

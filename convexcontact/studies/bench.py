@@ -228,6 +228,16 @@ def main(argv=None) -> list:
     if args.case:
         print(json.dumps(measure(*json.loads(args.case))))
         return []
+    if args.sizes is not None and min(args.sizes) < 100:
+        parser.error(f"--sizes: {min(args.sizes):g} DOFs; give sizes of at least 100 free DOFs, e.g. --sizes 1e4 1e5")
+    if args.sweep < 0:
+        parser.error("--sweep: give a positive count of friction coefficients")
+    from .. import solvers
+
+    try:
+        solvers.check_name(args.solver)
+    except ValueError as error:
+        parser.error(str(error))
     if args.sweep:
         return [friction_sweep(args.dim, (args.sizes or SIZES[args.dim])[0], np.linspace(0.1, 0.5, args.sweep),
                                args.solver)]

@@ -661,6 +661,9 @@ def main(argv=None) -> list[dict]:
     parser.add_argument("--cases", nargs="+", default=None, help="case names as in docs/stability.md")
     parser.add_argument("--out", default=None, help="also write the markdown table here")
     args = parser.parse_args(argv)
+    unknown = sorted(set(args.cases or ()) - set(CASES))
+    if unknown:
+        parser.error(f"--cases: no case named {', '.join(map(repr, unknown))}; the cases are {', '.join(map(repr, CASES))}")
     rows = run(cases=args.cases, quick=args.quick)
     text = table(rows)
     print(text)
