@@ -95,13 +95,9 @@ class SolutionSet:
 
     def save(self, directory) -> list:
         """summary.json, and each solution's outputs in solution_K/."""
-        import json
-        from pathlib import Path
+        from ..results.output import begin
 
-        directory = Path(directory)
-        directory.mkdir(parents=True, exist_ok=True)
-        paths = [directory / "summary.json"]
-        paths[0].write_text(json.dumps(self.summary(), indent=1))
+        directory, paths = begin(self, directory)
         for k, solution in enumerate(self.solutions, start=1):
             paths += solution.result.save(directory / f"solution_{k}")
         return paths

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
-from .output import FORMATS, write_vtk
+from .output import FORMATS, begin, write_vtk
 
 
 def write_pvd(times, files, path: Path):
@@ -24,15 +23,7 @@ def write_pvd(times, files, path: Path):
 
 def save_history(history, directory, formats=FORMATS) -> list[Path]:
     """Write the chosen outputs of a :class:`~convexcontact.drivers.history.HistoryResult`; return the paths."""
-    unknown = set(formats) - set(FORMATS)
-    if unknown:
-        raise ValueError(f"formats: unknown {sorted(unknown)}; choose from {FORMATS}")
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    paths = []
-    if "json" in formats:
-        paths.append(directory / "summary.json")
-        paths[-1].write_text(json.dumps(history.summary(), indent=1))
+    directory, paths = begin(history, directory, formats)
     solved = [(t, s) for t, s in zip(history.times, history.steps) if s.solved]
     if "vtk" in formats and solved:
         files = []

@@ -33,8 +33,9 @@ def write_vtk(result, path: Path):
     mesh.write(str(path))
 
 
-def save(result, directory, formats=FORMATS) -> list[Path]:
-    """Write the chosen outputs of ``result`` into ``directory`` and return the paths."""
+def begin(result, directory, formats=FORMATS) -> tuple[Path, list[Path]]:
+    """The output folder (created, once ``formats`` are known ones) and, if asked for, ``result``'s
+    summary.json written into it: how every ``save`` starts."""
     unknown = set(formats) - set(FORMATS)
     if unknown:
         raise ValueError(f"formats: unknown {sorted(unknown)}; choose from {FORMATS}")
@@ -44,6 +45,12 @@ def save(result, directory, formats=FORMATS) -> list[Path]:
     if "json" in formats:
         paths.append(directory / "summary.json")
         write_json(result, paths[-1])
+    return directory, paths
+
+
+def save(result, directory, formats=FORMATS) -> list[Path]:
+    """Write the chosen outputs of ``result`` into ``directory`` and return the paths."""
+    directory, paths = begin(result, directory, formats)
     if result.solved and "vtk" in formats:
         paths.append(directory / "solution.vtu")
         write_vtk(result, paths[-1])

@@ -99,15 +99,15 @@ def at(scene: Scene, path: str, value) -> Scene:
     if body_force:
         return replace(scene, body_force=value)
     if dirichlet:
-        conditions = [c for c in scene.dirichlet if c.boundary == where]
-        if not conditions or getattr(conditions[0], component) is None:
-            raise SceneError(f"history.{path}", f"the scene prescribes no {component} on {where!r}",
-                             f"add a [[dirichlet]] boundary = {where!r} with {component} (its value at t = 0)")
-        return replace(scene, dirichlet=tuple(replace(c, **{component: value}) if c.boundary == where else c
-                                              for c in scene.dirichlet))
-    tractions = [t for t in scene.tractions if t.boundary == loaded]
-    if not tractions or getattr(tractions[0], load) is None:
-        raise SceneError(f"history.{path}", f"the scene has no {load} traction on {loaded!r}",
-                         f"add a [[traction]] boundary = {loaded!r} with {load}")
-    return replace(scene, tractions=tuple(replace(t, **{load: value}) if t.boundary == loaded else t
-                                          for t in scene.tractions))
+        return replace(scene, dirichlet=set_on(scene.dirichlet, where, component, value, path, "dirichlet"))
+    return replace(scene, tractions=set_on(scene.tractions, loaded, load, value, path, "traction"))
+
+
+def set_on(items: tuple, boundary: str, name: str, value, path: str, table: str) -> tuple:
+    """``items`` (Dirichlet conditions or tractions) with ``name`` set on the one of ``boundary``, which must
+    exist and have that field given (its value at t = 0 is then irrelevant)."""
+    matching = [item for item in items if item.boundary == boundary]
+    if not matching or getattr(matching[0], name) is None:
+        raise SceneError(f"history.{path}", f"the scene has no [[{table}]] {name} on {boundary!r}",
+                         f"add a [[{table}]] boundary = {boundary!r} with {name} (its value at t = 0)")
+    return tuple(replace(item, **{name: value}) if item.boundary == boundary else item for item in items)
