@@ -56,7 +56,7 @@ def test_the_python_api_checks_types_where_values_enter(build, field, fix):
     ("clarabel", {"tol": -1.0}, "tol"), ("clarabel", {"tol": float("nan")}, "tol"), ("osqp", {"tol": "1e-8"}, "tol"),
     ("cvxpy", {"tol": 0.0}, "tol"), ("clarabel", {"max_iter": -5}, "max_iter"), ("osqp", {"max_iter": 2.5}, "max_iter"),
     ("clarabel", {"verbose": "yes"}, "verbose"), ("clarabel", {"nosuch": 1}, "nosuch"),
-    ("osqp", {"nosuch": 1}, "solver options"), (None, {}, "solver"), ("cvxpy:NOSUCH", {}, "solver"),
+    ("osqp", {"nosuch": 1}, "nosuch"), (None, {}, "solver"), ("cvxpy:NOSUCH", {}, "solver"),
     ("gurobi", {}, "solver"),
 ])
 def test_solver_options_are_checked_before_any_work(solver, options, field):

@@ -23,7 +23,7 @@ from ..formulations import FORMULATIONS, contact_weights
 from ..formulations.dual import stick_guess
 from ..results.certificate import certify
 from ..results.result import ContactResult, contact_nodes, not_unique
-from ..scene.model import Coulomb, Scene, SceneError, Tresca, compliance_of, evaluate_field, has_friction
+from ..scene.model import Coulomb, Scene, SceneError, Tresca, compliance_of, evaluate_field, has_friction, of_type
 
 LAW_DRIVERS: dict[type, Callable] = {}
 """Drivers of the laws that are no single convex program, registered by their modules (:mod:`.picard`
@@ -256,6 +256,7 @@ def prepare(scene: Scene, formulation: str = "auto") -> Model:
     the contact multipliers with the Delassus operator) or "auto", which picks one from
     the problem's shape and records why in ``Model.reason``.
     """
+    of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
     if formulation not in (*FORMULATIONS, "auto"):
         raise SceneError("formulation", f"unknown {formulation!r}", f"use one of {sorted(FORMULATIONS)} or 'auto'")
     timings: dict = {}

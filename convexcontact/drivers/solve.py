@@ -8,7 +8,7 @@ lists every solution of a Coulomb scene (:mod:`.solutions`).
 from __future__ import annotations
 
 from .. import solvers
-from ..scene.model import Scene, SceneError
+from ..scene.model import Scene, SceneError, of_type
 from .history import run
 from .model import prepare
 from .solutions import all_solutions
@@ -22,7 +22,9 @@ def solve(scene: Scene, solver: str = "clarabel", formulation: str = "auto", sol
     :class:`~convexcontact.drivers.solutions.SolutionSet`: every solution, or as many as a search
     finds, each certified (docs/uniqueness.md).
     """
+    of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
     solvers.check_name(solver)
+    solvers.check_options(options)  # before any assembly
     if solutions not in ("one", "all"):
         raise SceneError("solutions", f"got {solutions!r}", "use 'one' (the default) or 'all'")
     if solutions == "all":

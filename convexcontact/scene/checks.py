@@ -20,16 +20,20 @@ class SceneError(ValueError):
         super().__init__(message + (f" — {fix}" if fix else ""))
 
 
-def finite(value, field_name: str) -> float:
-    """Return ``value`` as a float, refusing NaN, infinity and non-numbers (strings, booleans)."""
+def finite(value, field_name: str, fix: str = "") -> float:
+    """Return ``value`` as a float, refusing NaN, infinity, integers beyond the floats and non-numbers
+    (strings, booleans)."""
     if isinstance(value, (str, bool, np.bool_)):
-        raise SceneError(field_name, f"expected a number, got {value!r}")
+        raise SceneError(field_name, f"expected a number, got {value!r:.60}", fix)
     try:
         number = float(value)
+    except OverflowError:  # a 400-digit integer
+        raise SceneError(field_name, f"{len(str(value))}-digit number, beyond the floats",
+                         "write numbers below 1.8e308, in scientific notation if need be") from None
     except (TypeError, ValueError):
-        raise SceneError(field_name, f"expected a number, got {value!r}") from None
+        raise SceneError(field_name, f"expected a number, got {value!r:.60}", fix) from None
     if not math.isfinite(number):
-        raise SceneError(field_name, f"got {value!r}", "give a finite number")
+        raise SceneError(field_name, f"got {value!r}", fix or "give a finite number")
     return number
 
 
@@ -42,10 +46,10 @@ def finite_vector(value, field_name: str, length: int | tuple[int, ...] = 2) -> 
     return tuple(finite(v, f"{field_name}[{i}]") for i, v in enumerate(value))
 
 
-def positive_integer(value, field_name: str) -> int:
+def positive_integer(value, field_name: str, fix: str = "") -> int:
     """Return ``value`` if it is an integer ≥ 1 (booleans refused)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise SceneError(field_name, f"expected a positive integer, got {value!r}")
+        raise SceneError(field_name, f"expected a positive integer, got {value!r:.60}", fix)
     return int(value)
 
 

@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .checks import SceneError
+from .checks import SceneError, finite
 
 VARIABLES = ("x", "y", "z")
 CONSTANTS = {"pi": np.float64(math.pi), "e": np.float64(math.e)}
@@ -103,11 +103,7 @@ def _short(text: str, length: int = 60) -> str:
 def _build(node: ast.AST, text: str, field_name: str) -> Node:
     """Turn an allowed AST node into a closure over the coordinate values."""
     if isinstance(node, ast.Constant) and type(node.value) in (int, float):
-        try:
-            value = np.float64(node.value)
-        except OverflowError:  # an integer beyond the floats (a 400-digit literal)
-            raise SceneError(field_name, f"the number {_source(node, text)[:20]}… ({len(_source(node, text))} digits) is too large",
-                             "write numbers below 1.8e308, in scientific notation if need be") from None
+        value = np.float64(finite(node.value, field_name))  # refuses 400-digit integers and 1e400
         return lambda values: value
     if isinstance(node, ast.Name) and node.id in CONSTANTS:
         value = CONSTANTS[node.id]

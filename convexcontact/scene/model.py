@@ -130,7 +130,7 @@ class MeshFile:
     path: Path
 
     def __post_init__(self):
-        path = Path(self.path)
+        path = Path(of_type(self.path, (str, Path), "body.mesh", "give the mesh file's path"))
         if not path.is_file():
             raise SceneError("body.mesh", f"no mesh file at {path}", "check the path")
         object.__setattr__(self, "path", path)
@@ -259,6 +259,8 @@ class Obstacle:
         if self.shape == "expression":
             if self.expression is None:
                 raise SceneError("obstacle.expression", "missing", "give a formula in x and y, e.g. 'x**2/2 - 0.01'")
+            of_type(self.expression, (str, Callable), "obstacle.expression",
+                    "give a formula in x and y, e.g. 'x**2/2 - 0.01', or a function g(x, y)")
             if isinstance(self.expression, str):
                 compile_expression(self.expression, "obstacle.expression")
         if self.depth is not None and self.force is not None:
@@ -346,6 +348,9 @@ NodalValues = float | str | np.ndarray | Callable
 """A field on Γ_C: a constant, a formula in x, y (and z), a callable f(x, y[, z]), or nodal values."""
 
 
+FUNCTION_FIX = "return one value per point (or one number) from arrays x, y[, z], e.g. lambda x, y: 0.3 + 0 * x"
+
+
 def check_field(value, field_name: str, minimum: float = 0.0):
     """Validate a :data:`NodalValues` field (finite, ≥ ``minimum``); return it unchanged in kind."""
     if isinstance(value, str):
@@ -358,7 +363,11 @@ def check_field(value, field_name: str, minimum: float = 0.0):
         if number < minimum:
             raise SceneError(field_name, f"must be ≥ {minimum}, got {number}")
         return number
-    array = np.array(value, dtype=float)  # a copy: the user's array is never changed
+    try:
+        array = np.array(value, dtype=float)  # a copy: the user's array is never changed
+    except (TypeError, ValueError):
+        raise SceneError(field_name, f"expected numbers, got {value!r:.60}",
+                         "give a number, a formula, a function or one number per contact node") from None
     if array.ndim != 1 or not np.isfinite(array).all() or (array < minimum).any():
         raise SceneError(field_name, f"nodal values must be a 1-D array of finite numbers ≥ {minimum}")
     return array
@@ -371,10 +380,10 @@ def evaluate_field(value, field_name: str, points: np.ndarray, minimum: float = 
     if isinstance(value, str):
         values = compile_expression(value, field_name)(**coordinates)
     elif callable(value):
-        returned = np.asarray(value(*coordinates.values()), dtype=float)
+        returned = called(value, field_name, tuple(coordinates.values()))
         if returned.shape not in ((), shape):
             raise SceneError(field_name, f"the function returned shape {returned.shape} for {shape[0]} points",
-                             "return one value per point (or one number), e.g. lambda x, y: 0.3 + 0 * x")
+                             FUNCTION_FIX)
         values = np.broadcast_to(returned, shape).copy()
     elif np.ndim(value) == 0:
         values = np.full(shape, float(value))
@@ -387,6 +396,15 @@ def evaluate_field(value, field_name: str, points: np.ndarray, minimum: float = 
         raise SceneError(field_name, f"values must be finite and ≥ {minimum}" if minimum > -np.inf
                          else "the function returned NaN or infinity")
     return values
+
+
+def called(function: Callable, field_name: str, coordinates: tuple[np.ndarray, ...]) -> np.ndarray:
+    """``function(x, y[, z])`` as floats; whatever goes wrong in the user's function is named as the field's."""
+    try:
+        return np.asarray(function(*coordinates), dtype=float)
+    except Exception as error:  # the user's code: any failure is a bad field, with its own words kept
+        raise SceneError(field_name, f"the function failed when called with {len(coordinates)} coordinate arrays "
+                         f"({type(error).__name__}: {error})", FUNCTION_FIX) from error
 
 
 QUADRATURES = ("nodal", "gauss")
@@ -514,6 +532,7 @@ class Scene:
         of_type(self.name, str, "name")
         if isinstance(self.materials, dict):
             for name, material in self.materials.items():
+                of_type(name, str, "materials", "name each material by its mesh subdomain, e.g. {'steel': cc.Material(…)}")
                 of_type(material, Material, f"materials.{name}", "give cc.Material(E, nu)")
         else:
             of_type(self.materials, Material, "materials", "give cc.Material(E, nu) or {subdomain: cc.Material}")

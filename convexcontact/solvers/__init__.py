@@ -6,6 +6,11 @@ A solver never knows mechanics. Names: ``clarabel``, ``osqp``, ``cvxpy`` or
 
 from __future__ import annotations
 
+import math
+import numbers
+
+import numpy as np
+
 from ..conic import ConicProgram, ConicSolution
 from . import clarabel_direct, cvxpy_model, osqp_direct
 from .osqp_direct import ConeNotSupported
@@ -27,19 +32,27 @@ def check_name(name: str) -> str:
     return name
 
 
+def _flag(value) -> bool:
+    return isinstance(value, (bool, np.bool_))
+
+
+OPTIONS = {  # the options every path takes: test, what is expected, an example
+    "tol": (lambda v: isinstance(v, numbers.Real) and not _flag(v) and 0 < v < math.inf,
+            "a positive finite number", "tol=1e-10"),
+    "max_iter": (lambda v: isinstance(v, numbers.Integral) and not _flag(v) and v >= 1,
+                 "a positive integer", "max_iter=500"),
+    "verbose": (_flag, "True or False", "verbose=True"),
+    "polishing": (_flag, "True or False", "polishing=False"),
+    "progress": (callable, "a function, called after each step", "progress=print"),
+}
+
+
 def check_options(options: dict) -> dict:
-    """The options every adapter takes, checked where they enter: ``tol`` a positive finite number,
-    ``max_iter`` a positive integer, ``verbose`` and ``polishing`` booleans. Native settings are checked
-    by the adapter that knows them."""
-    tol = options.get("tol")
-    if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < float("inf")):
-        raise ValueError(f"tol: expected a positive finite number, got {tol!r} — e.g. tol=1e-10")
-    max_iter = options.get("max_iter")
-    if max_iter is not None and (isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1):
-        raise ValueError(f"max_iter: expected a positive integer, got {max_iter!r} — e.g. max_iter=500")
-    for flag in ("verbose", "polishing"):
-        if flag in options and not isinstance(options[flag], bool):
-            raise ValueError(f"{flag}: expected True or False, got {options[flag]!r}")
+    """The options every path takes, checked where they enter (:data:`OPTIONS`). Native settings are
+    checked by the adapter that knows them."""
+    for name, (valid, expected, example) in OPTIONS.items():
+        if options.get(name) is not None and not valid(options[name]):
+            raise ValueError(f"{name}: expected {expected}, got {options[name]!r:.60} — e.g. {example}")
     return options
 
 

@@ -48,7 +48,11 @@ def settings(tol: float = 1e-10, max_iter: int = 200, verbose: bool = False, **n
         if not hasattr(s, name):
             raise ValueError(f"{name}: clarabel has no such setting — the settings are the fields of "
                              "clarabel.DefaultSettings (e.g. max_threads, static_regularization_constant)")
-        setattr(s, name, value)
+        try:
+            setattr(s, name, value)
+        except (TypeError, ValueError, OverflowError) as error:
+            raise ValueError(f"{name}: clarabel refused {value!r:.40} ({error}) — give the type of "
+                             f"clarabel.DefaultSettings().{name}, {getattr(s, name)!r:.40}") from None
     return s
 
 

@@ -132,6 +132,11 @@ def solve(
             m.problem.solve(solver=name, verbose=verbose, **options)
             word = str(m.problem.status)
             break
+        except TypeError as error:  # cvxpy's words for a setting the solver does not take
+            if not native:
+                raise
+            raise ValueError(f"{', '.join(sorted(native))}: cvxpy:{name} refused the setting ({error}) — "
+                             "see that solver's settings in cvxpy's documentation") from None
         except cp.error.SolverError as error:  # a failed solve is a result that says so, as on the other paths
             word = f"SolverError: {error}"
             if not retry or tol >= 1e-8:  # Clarabel stalls at tight tolerances: as the direct path, up to 1e-8

@@ -108,12 +108,15 @@ class Session:
         lower, upper = _bounds(program.b, self._plan)
         options = {"eps_abs": tol, "eps_rel": tol, "max_iter": max_iter, "polishing": True, "verbose": verbose}
         options.update(native)
-        self._solver, self._verbose = osqp.OSQP(), options["verbose"]
+        self._solver, self._verbose, self._setup_error = osqp.OSQP(), options["verbose"], None
         try:
             self._solver.setup(sp.triu(program.P, format="csc"), program.q, A, lower, upper, **options)
-        except ValueError as error:  # OSQP's own words for a setting it does not know
-            raise ValueError(f"solver options: OSQP refused them ({error}) — see OSQP's settings "
-                             "(eps_abs, eps_rel, max_iter, polishing, …)") from None
+        except (ValueError, TypeError) as error:  # a name or a type OSQP's settings do not take
+            raise _refused(native, error if isinstance(error, ValueError) else "a value of the wrong type") from None
+        except osqp.OSQPException as error:
+            if error == SETTINGS_REFUSED:
+                raise _refused(native, "a value out of range; OSQP's log above says which") from None
+            self._setup_error = f"OSQPException: setup failed, {_error_name(error)}"
 
     def update(self, q: np.ndarray | None = None, b: np.ndarray | None = None):
         changes = {}
@@ -129,8 +132,13 @@ class Session:
         self._solver.warm_start(x=guess.x)
 
     def solve(self) -> ConicSolution:
-        with silenced(not self._verbose):
-            result = self._solver.solve()
+        if self._setup_error is not None:
+            return failed(self.program, self._setup_error)
+        try:
+            with silenced(not self._verbose):
+                result = self._solver.solve()
+        except osqp.OSQPException as error:
+            return failed(self.program, f"OSQPException: {_error_name(error)}")
         word = str(result.info.status)
         x = np.asarray(result.x, dtype=float)
         solution = ConicSolution(
@@ -147,6 +155,29 @@ class Session:
         # OSQP's own polish stops at its first active-set guess (and may skip rows it deems inactive);
         # ours iterates on the guess, and returns the same answer when OSQP's was exact already
         return polish(self.program, solution)
+
+
+SETTINGS_REFUSED = 2
+"""OSQP's error code for settings out of range (OSQP_SETTINGS_VALIDATION_ERROR)."""
+
+
+def _refused(native: dict, cause) -> ValueError:
+    names = ", ".join(sorted(native)) or "solver options"
+    return ValueError(f"{names}: OSQP refused the setting ({cause}) — see OSQP's settings (eps_abs, eps_rel, "
+                      "max_iter, rho, sigma, polishing, …) for their names, types and ranges")
+
+
+def _error_name(error: osqp.OSQPException) -> str:
+    code = error.args[0] if error.args else None
+    names = {int(kind): name for name, kind in osqp.OSQP().ext.osqp_error_type.__members__.items()}
+    return names.get(code, f"error {code}")
+
+
+def failed(program: ConicProgram, word: str) -> ConicSolution:
+    """A solve that ended in an exception, as a result that says so (no point, the solver's words)."""
+    x = np.full(program.n_variables, np.nan)
+    return ConicSolution(x=x, z=np.full(program.n_constraints, np.nan), s=np.full(program.n_constraints, np.nan),
+                         status="failed", solver_status=word, iterations=0, solve_time=0.0, solver="osqp")
 
 
 def solve(program: ConicProgram, **options) -> ConicSolution:
