@@ -140,8 +140,8 @@ def sliver():
 
 @pytest.mark.parametrize("mesh, problem", [
     (lambda: square(np.hstack([square().p, [[5.0], [5.0]]])), "belong to no cell"),
-    (cracked, "hold two or more nodes"),
-    (collapsed, "hold two or more nodes"),
+    (cracked, "share their place"),
+    (collapsed, "share their place"),
     (sliver, "degenerate cells"),
 ])
 def test_a_broken_mesh_is_named_with_the_fix(mesh, problem):

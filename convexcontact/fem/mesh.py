@@ -107,8 +107,10 @@ def load_mesh(geometry: MeshFile) -> fe.Mesh:
 
 
 BYTES_PER_DOF = {2: 5.5e3, 3: 6.0e4}
-"""Peak memory of a solve per free DOF, measured (issue 12): 5.5 GB at 10⁶ DOFs in 2-D, 9.1 GB at 1.6·10⁵
-in 3-D — the sparse factorization's fill-in grows faster in 3-D."""
+"""Peak memory of a solve per free DOF (Signorini, default path; peak RSS growth of the process), measured:
+2-D 4.4 kB at 2.6·10⁴ DOFs, 3.7 kB at 10⁵, 5.5 kB at 10⁶ (issue 12); 3-D 15 kB at 5.8·10³, 14 kB at 2.6·10⁴,
+57 kB at 1.6·10⁵ (issue 12) — the factorization's fill-in grows faster in 3-D. The constants are those of the
+largest sizes, where a refusal can happen."""
 
 
 def available_memory() -> float:
@@ -120,20 +122,34 @@ def available_memory() -> float:
     return next((float(line.split()[1]) * 1024 for line in lines if line.startswith("MemAvailable:")), float("inf"))
 
 
+def check_memory(dofs: float, dim: int, field_name: str, what: str, fix: str) -> None:
+    """Refuse a problem of ``dofs`` unknowns that would not fit in this machine's memory (:data:`BYTES_PER_DOF`),
+    with the estimate and the fix (nx = ny = 10⁵ died in a 74 GiB MemoryError after minutes)."""
+    need, have = dofs * BYTES_PER_DOF[dim], available_memory()
+    if need > have:
+        raise SceneError(field_name, f"{what} make about {dofs:.2g} DOFs, which need about {need / 2**30:.3g} GiB; "
+                         f"this machine has {have / 2**30:.3g} GiB available",
+                         f"{fix} (about {have / BYTES_PER_DOF[dim]:.2g} DOFs fit)")
+
+
 def check_size(body: Body) -> None:
-    """Refuse a built-in mesh too large for this machine before building it, with the estimate and the fix
-    (nx = ny = 10⁵ died in a 74 GiB MemoryError after minutes)."""
+    """Refuse a built-in mesh too large for this machine before building it."""
     geometry = body.geometry
     cells = (geometry.nx, geometry.ny) if isinstance(geometry, Rectangle) else geometry.cells
     per_cell = 2 if body.element in ("P2", "Q2") else 1
     dofs = len(cells) * float(np.prod([per_cell * n + 1 for n in cells]))
-    need, have = dofs * BYTES_PER_DOF[len(cells)], available_memory()
-    if need > have:
-        names = "nx, ny" if len(cells) == 2 else "cells"
-        fit = have / BYTES_PER_DOF[len(cells)]
-        raise SceneError(f"body.{names.split(',')[0]}", f"{names} = {list(cells)} make about {dofs:.2g} DOFs, which need "
-                         f"about {need / 2**30:.3g} GiB; this machine has {have / 2**30:.3g} GiB available",
-                         f"use fewer cells (about {fit:.2g} DOFs fit), or grading to refine only where contact is")
+    names = "nx, ny" if len(cells) == 2 else "cells"
+    check_memory(dofs, len(cells), f"body.{names.split(',')[0]}", f"{names} = {list(cells)}",
+                 "use fewer cells, or grading to refine only where contact is")
+
+
+def check_mesh_size(mesh: fe.Mesh, element: str, source: str) -> fe.Mesh:
+    """Refuse a user's mesh whose problem would not fit in memory, before anything is assembled on it."""
+    if (element, mesh.dim()) in _ELEMENTS and isinstance(mesh, _ELEMENTS[element, mesh.dim()][1]):
+        dofs = mesh.dim() * fe.Dofs(mesh, _ELEMENTS[element, mesh.dim()][0]()).N
+        check_memory(dofs, mesh.dim(), "body.mesh", f"{source}: {mesh.t.shape[1]} cells of {element}",
+                     "use a coarser mesh, refined only where contact is")
+    return mesh
 
 
 def build_mesh(body: Body) -> fe.Mesh:
@@ -145,45 +161,103 @@ def build_mesh(body: Body) -> fe.Mesh:
         return rectangle(geometry, quads=body.element in ("Q1", "Q2"))
     if isinstance(geometry, Box):
         return box(geometry, hexes=body.element in ("Q1", "Q2"))
-    if isinstance(geometry, MeshFile):
-        return check_mesh(load_mesh(geometry), str(geometry.path))
-    if isinstance(geometry, fe.Mesh):
-        return check_mesh(geometry, "the mesh given")
+    if isinstance(geometry, (MeshFile, fe.Mesh)):
+        mesh, source = (load_mesh(geometry), str(geometry.path)) if isinstance(geometry, MeshFile) else \
+            (geometry, "the mesh given")
+        return check_mesh_size(check_mesh(mesh, source), body.element, source)
     raise SceneError("body.mesh", f"unsupported geometry {type(geometry).__name__}")
 
 
 DEGENERATE = 1e-10
-"""Cells whose measure is below this fraction of the mean cell's are degenerate (collapsed nodes, slivers)."""
+"""Cells whose measure is below this fraction of the mean cell's are degenerate (collapsed nodes, slivers);
+nodes closer than this fraction of the mesh's size are one place."""
 
 
 def check_mesh(mesh: fe.Mesh, source: str) -> fe.Mesh:
-    """A user's mesh as it is, or an error saying what is wrong with it and how to fix it: nodes in no cell,
-    nodes that share coordinates (the mesh is cut there: a hidden crack), degenerate cells. Built-in meshes
-    are right by construction and not checked."""
-    nodes = mesh.p.shape[1]
-    used = np.zeros(nodes, bool)
-    used[mesh.t.ravel()] = True
+    """A user's mesh as it is, or a SceneError saying what is wrong with it and how to fix it (the first of
+    :data:`MESH_CHECKS` that fails). Built-in meshes are right by construction and not checked."""
+    for check in MESH_CHECKS:
+        found = check(mesh)
+        if found is not None:
+            problem, fix = found
+            raise SceneError("body.mesh", f"{source}: {problem}", fix)
+    return mesh
+
+
+def out_of_plane(mesh: fe.Mesh):
+    """Nodes with more coordinates than the cells have dimensions (triangles in 3-D space)."""
+    if mesh.p.shape[0] != mesh.dim():
+        problem = f"{mesh.dim()}-D cells with {mesh.p.shape[0]} coordinates per node"
+        return problem, "give a 2-D body's nodes as x and y only (rows of mesh.p), or mesh the body in 3-D"
+
+
+def orphan_nodes(mesh: fe.Mesh):
+    """Nodes (vertices or, on quadratic meshes, edge and face nodes) that no cell uses."""
+    used = np.zeros(mesh.p.shape[1], bool)
+    used[mesh.dofs.element_dofs.ravel()] = True
     if not used.all():
-        raise SceneError("body.mesh", f"{source}: {np.count_nonzero(~used)} of {nodes} nodes belong to no cell "
-                         f"(the first: node {np.flatnonzero(~used)[0]})",
-                         "remove them (meshio: mesh.remove_orphaned_nodes(); gmsh: Coherence Mesh)")
-    extent = np.ptp(mesh.p, axis=1).max()
-    keys = np.round(mesh.p / (1e-10 * extent)).T
-    _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
-    if (counts > 1).any():
-        where = mesh.p[:, first[np.argmax(counts > 1)]]
-        raise SceneError("body.mesh", f"{source}: {np.count_nonzero(counts > 1)} places hold two or more nodes (the "
-                         f"first at {np.round(where, 12).tolist()}): the cells on either side are not connected — "
-                         "a crack the solver would not see", "merge duplicate nodes (gmsh: Coherence Mesh; meshio: "
-                         "merge points within a tolerance) or, if the crack is meant, model it as a contact pair")
+        problem = f"{np.count_nonzero(~used)} of {used.size} nodes belong to no cell (the first: node " \
+                  f"{np.flatnonzero(~used)[0]})"
+        return problem, "remove them (meshio: mesh.remove_orphaned_nodes(); gmsh: Coherence Mesh)"
+
+
+def coincident_nodes(mesh: fe.Mesh):
+    """Nodes at one place: the cells on either side of them are not connected (a hidden crack)."""
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(mesh.p.T).query_pairs(DEGENERATE * np.ptp(mesh.p, axis=1).max(), output_type="ndarray")
+    if len(pairs):
+        where = np.round(mesh.p[:, pairs[0, 0]], 12).tolist()
+        problem = f"{len(np.unique(pairs))} nodes share their place with another (the first: nodes " \
+                  f"{pairs[0].tolist()} at {where}): the cells on either side are not connected — a crack the " \
+                  "solver would not see"
+        return problem, ("merge duplicate nodes (gmsh: Coherence Mesh; meshio: merge points within a tolerance) "
+                         "or, if the crack is meant, model it as a contact pair")
+
+
+def degenerate_cells(mesh: fe.Mesh):
+    """Cells of (near) zero area or volume: collapsed nodes, slivers."""
     measure = cell_measures(mesh)
     small = measure <= DEGENERATE * measure.mean()
     if small.any():
         cell = np.flatnonzero(small)[0]
-        raise SceneError("body.mesh", f"{source}: {np.count_nonzero(small)} degenerate cells (zero or near-zero "
-                         f"area/volume; the first: cell {cell} with nodes {mesh.t[:, cell].tolist()})",
-                         "remesh, or remove collapsed nodes and slivers")
-    return mesh
+        problem = f"{np.count_nonzero(small)} degenerate cells (zero or near-zero area/volume; the first: cell " \
+                  f"{cell} with nodes {mesh.t[:, cell].tolist()})"
+        return problem, "remesh, or remove collapsed nodes and slivers"
+
+
+def inverted_cells(mesh: fe.Mesh):
+    """Cells turned inside out: a Jacobian that changes sign inside a cell (a twisted quadrilateral or hexahedron),
+    or two neighbours on the same side of the facet they share (a fold). Neither depends on the orientation the
+    mesh numbers its cells in, which scikit-fem leaves free."""
+    jacobian = mesh._mapping().detDF(mesh.refdom.p)
+    twisted = (jacobian.min(axis=1) < 0) & (jacobian.max(axis=1) > 0)
+    folded = np.zeros(mesh.t.shape[1], bool)
+    folded[mesh.f2t[:, folded_facets(mesh)].ravel()] = True
+    bad = twisted | folded
+    if bad.any():
+        cell = np.flatnonzero(bad)[0]
+        problem = f"{np.count_nonzero(bad)} inverted cells (turned inside out, overlapping a neighbour; the first: " \
+                  f"cell {cell} with nodes {mesh.t[:, cell].tolist()})"
+        return problem, ("remesh, or move the nodes back so that no cell folds over its neighbour "
+                         "(quadrilaterals and hexahedra must be convex)")
+
+
+def folded_facets(mesh: fe.Mesh) -> np.ndarray:
+    """Interior facets whose two cells lie on the same side of the facet (centroids of the cells' vertices)."""
+    interior = np.flatnonzero(mesh.f2t[1] >= 0)
+    corners = mesh.p[:, mesh.facets[:, interior]]  # (dim, nodes per facet, facets)
+    a = corners[:, 0]
+    if mesh.dim() == 2:
+        normal = np.array([corners[1, 1] - a[1], a[0] - corners[0, 1]])
+    else:
+        normal = np.cross(corners[:, 1] - a, corners[:, 2] - a, axis=0)
+    centroid = mesh.p[:, mesh.t].mean(axis=1)
+    side = [np.einsum("ij,ij->j", normal, centroid[:, mesh.f2t[k, interior]] - a) for k in (0, 1)]
+    return interior[side[0] * side[1] > 0]
+
+
+MESH_CHECKS = (out_of_plane, orphan_nodes, coincident_nodes, degenerate_cells, inverted_cells)
 
 
 def cell_measures(mesh: fe.Mesh) -> np.ndarray:
