@@ -9,6 +9,7 @@ from pathlib import Path
 
 from . import solvers
 from .drivers.solve import solve
+from .results.output import check_file_target, check_folder_target, staged, write_text
 from .scene.library import hertz_punch
 from .scene.model import SceneError
 
@@ -95,41 +96,29 @@ OUTPUTS = ("summary.json", "solution.vtu", "solution.pvd", "solution_*.vtu", "so
 
 def check_outputs(out: Path | None, json_file: Path | None, overwrite: bool) -> None:
     """Refuse, before any work, outputs that would fail or replace a file without --overwrite."""
-    if out is not None and out.exists():
-        if not out.is_dir():
-            raise ValueError(f"--out: {out} is a file; give a folder (it is created if missing)")
-        ours = sorted({path.name for pattern in OUTPUTS for path in out.glob(pattern)})
+    if out is not None:
+        check_folder_target(out, "--out")
+        ours = sorted({path.name for pattern in OUTPUTS for path in out.glob(pattern)}) if out.is_dir() else []
         if ours and not overwrite:
             raise ValueError(f"--out: {out} already holds {', '.join(ours[:5])}{' …' if len(ours) > 5 else ''}; "
                              "give another folder, or --overwrite to replace them (nothing else there is touched)")
     if json_file is not None:
-        if json_file.is_dir():
-            raise ValueError(f"--json: {json_file} is a folder; give a file name, e.g. {json_file / 'summary.json'}")
-        if not json_file.parent.is_dir():
-            raise ValueError(f"--json: the folder {json_file.parent} does not exist; create it or choose another")
+        check_file_target(json_file, "--json")
         if json_file.exists() and not overwrite:
             raise ValueError(f"--json: {json_file} exists; choose another name, or --overwrite to replace it")
 
 
-def files_in(out: Path | None, json_file: Path | None) -> set[Path]:
-    """The files a run could write, as they are now (to remove what an interrupted run wrote, and only that)."""
-    found = {json_file} if json_file is not None and json_file.exists() else set()
-    if out is not None and out.is_dir():
-        found |= {path for path in out.rglob("*") if path.is_file()}
-    return found
-
-
 def report(result, out: Path | None, json_file: Path | None) -> int:
+    """Print ``result``, write its files (each output whole or not at all) and return the exit code."""
     from .drivers.history import HistoryResult
     from .drivers.solutions import SolutionSet
 
     print(history_table(result) if isinstance(result, HistoryResult) else solutions_table(result)
           if isinstance(result, SolutionSet) else table(result))
     if out is not None:
-        paths = result.save(out)
-        print("wrote", ", ".join(str(p) for p in paths))
+        print("wrote", ", ".join(str(p) for p in staged(out, result.save)))
     if json_file is not None:
-        json_file.write_text(json.dumps(result.summary(), indent=1))
+        write_text(json_file, json.dumps(result.summary(), indent=1))
     return EXIT.get(result.status, 1)
 
 
@@ -152,7 +141,8 @@ def compare_scene(args) -> dict:
 
 
 def main(argv=None) -> int:
-    """The ``convexcontact`` command; Ctrl-C ends it quietly with code 130."""
+    """The ``convexcontact`` command; Ctrl-C ends it quietly with code 130 (outputs are written whole or not
+    at all: see :func:`~convexcontact.results.output.staged`)."""
     try:
         return commands(argv)
     except KeyboardInterrupt:
@@ -204,8 +194,8 @@ def commands(argv=None) -> int:
     if argv[:1] == ["bench"]:  # its options (--dim …) belong to its own parser
         from .studies import bench, history_bench
 
-        (history_bench if "--history" in argv else bench).main(argv[1:])
-        return 0
+        rows = (history_bench if "--history" in argv else bench).main(argv[1:])
+        return 0 if rows else 1  # every case failed (each said why)
     args = parser.parse_args(argv)
     if args.command == "study":
         from .studies import grid, stability, sweeps, uniqueness, work_precision
@@ -224,14 +214,7 @@ def commands(argv=None) -> int:
             print(f"error: {error}", file=sys.stderr)
             return 2
         return 0
-    before = files_in(args.out, args.json)
-    try:
-        return run_command(args)
-    except KeyboardInterrupt:  # Ctrl-C: no traceback, and no half-written outputs of this run
-        for path in files_in(args.out, args.json) - before:
-            path.unlink(missing_ok=True)
-        print("interrupted", file=sys.stderr)
-        return 130
+    return run_command(args)
 
 
 def run_command(args) -> int:

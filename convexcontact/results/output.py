@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -66,3 +70,48 @@ def save(result, directory, formats=FORMATS) -> list[Path]:
             paths.append(directory / "picard.png")
             plots.picard_convergence(result, paths[-1])
     return paths
+
+
+def check_folder_target(folder: Path, option: str) -> None:
+    """Refuse, before any work, an output folder that is a file."""
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"{option}: {folder} is a file; give a folder (it is created if missing)")
+
+
+def check_file_target(path: Path, option: str, example: str = "summary.json") -> None:
+    """Refuse, before any work, an output file that is a folder or whose folder does not exist."""
+    if path.is_dir():
+        raise ValueError(f"{option}: {path} is a folder; give a file's name, e.g. {path / example}")
+    if not path.parent.is_dir():
+        raise ValueError(f"{option}: the folder {path.parent} does not exist; create it or choose another")
+
+
+def staged(directory, write: Callable[[Path], list]) -> list[Path]:
+    """``write(folder)`` into a fresh folder beside ``directory``, its files moved in only once all are written:
+    a run interrupted or failing on the way leaves ``directory`` as it was. Returns the paths in ``directory``."""
+    directory = Path(directory).absolute()
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{directory.name}-unfinished-", dir=directory.parent))
+    try:
+        paths = write(staging)
+        directory.mkdir(exist_ok=True)
+        for path in sorted(staging.rglob("*")):  # a folder before what it holds
+            target = directory / path.relative_to(staging)
+            if path.is_dir():
+                target.mkdir(exist_ok=True)
+            else:
+                os.replace(path, target)
+        return [directory / Path(path).relative_to(staging) for path in paths]
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def write_text(path: Path, text: str) -> Path:
+    """``text`` into ``path`` whole or not at all (written beside it, then renamed)."""
+    staging = path.with_name(f".{path.name}.unfinished")
+    try:
+        staging.write_text(text)
+        os.replace(staging, path)
+    finally:
+        staging.unlink(missing_ok=True)
+    return path

@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..results.output import check_folder_target
+
 LAWS = ("signorini", "tresca", "coulomb")
 SIZES = {2: (1e4, 1e5, 1e6), 3: (1e4, 1e5, 3e5)}
 COLUMNS = ("dim", "law", "dofs", "contact_nodes", "unknowns", "formulation", "solver", "status", "iterations",
@@ -210,6 +212,19 @@ def plot(rows: list, path) -> Path:
     return save_figure(fig, path)
 
 
+def check_arguments(args) -> None:
+    """The solver, formulation, output folder and sizes, before any case runs."""
+    from .. import solvers
+    from ..fem.mesh import check_size
+
+    solvers.check_name(args.solver)
+    if args.formulation not in ("auto", "primal", "dual"):
+        raise ValueError(f"--formulation: unknown {args.formulation!r}; use auto, primal or dual")
+    check_folder_target(Path(args.out), "--out")
+    for dofs in args.sizes or SIZES[args.dim]:
+        check_size(punch_scene(args.dim, "signorini", dofs).body)
+
+
 def main(argv=None) -> list:
     """``convexcontact bench [--dim 2|3] [--sizes N …]``: contact against linear solve, per size."""
     parser = argparse.ArgumentParser(prog="convexcontact bench", description=main.__doc__)
@@ -232,11 +247,9 @@ def main(argv=None) -> list:
         parser.error(f"--sizes: {min(args.sizes):g} DOFs; give sizes of at least 100 free DOFs, e.g. --sizes 1e4 1e5")
     if args.sweep < 0:
         parser.error("--sweep: give a positive count of friction coefficients")
-    from .. import solvers
-
     try:
-        solvers.check_name(args.solver)
-    except ValueError as error:
+        check_arguments(args)
+    except ValueError as error:  # SceneError too: a size too large for the memory
         parser.error(str(error))
     if args.sweep:
         return [friction_sweep(args.dim, (args.sizes or SIZES[args.dim])[0], np.linspace(0.1, 0.5, args.sweep),

@@ -34,6 +34,7 @@ from scipy.optimize import brentq
 import convexcontact as cc
 from convexcontact.analytic import hertz_plane_strain, hild_one_triangle_solutions
 from convexcontact.fem.mesh import graded, tensor_mesh
+from convexcontact.results.output import check_file_target
 from convexcontact.scene.library import HERTZ_FORCE, frictional_punch, punch_mesh
 from convexcontact.scene.model import Coulomb, SceneError
 
@@ -664,6 +665,11 @@ def main(argv=None) -> list[dict]:
     unknown = sorted(set(args.cases or ()) - set(CASES))
     if unknown:
         parser.error(f"--cases: no case named {', '.join(map(repr, unknown))}; the cases are {', '.join(map(repr, CASES))}")
+    if args.out:
+        try:
+            check_file_target(Path(args.out), "--out", "stability.md")
+        except ValueError as error:
+            parser.error(str(error))
     rows = run(cases=args.cases, quick=args.quick)
     text = table(rows)
     print(text)
