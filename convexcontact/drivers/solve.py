@@ -24,7 +24,7 @@ def solve(scene: Scene, solver: str = "clarabel", formulation: str = "auto", sol
     """
     of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
     solvers.check_name(solver)
-    solvers.check_options(options)  # before any assembly
+    solvers.check_options(options, solver)  # before any assembly
     if solutions not in ("one", "all"):
         raise SceneError("solutions", f"got {solutions!r}", "use 'one' (the default) or 'all'")
     if solutions == "all":

@@ -47,12 +47,15 @@ OPTIONS = {  # the options every path takes: test, what is expected, an example
 }
 
 
-def check_options(options: dict) -> dict:
-    """The options every path takes, checked where they enter (:data:`OPTIONS`). Native settings are
-    checked by the adapter that knows them."""
+def check_options(options: dict, solver: str = "cvxpy") -> dict:
+    """The options every path takes, checked where they enter (:data:`OPTIONS`), and the names of the
+    ``solver``'s native settings (Clarabel's and OSQP's; cvxpy's solvers name theirs when they solve)."""
     for name, (valid, expected, example) in OPTIONS.items():
         if options.get(name) is not None and not valid(options[name]):
             raise ValueError(f"{name}: expected {expected}, got {options[name]!r:.60} — e.g. {example}")
+    adapter = {"clarabel": clarabel_direct, "osqp": osqp_direct}.get(solver)
+    if adapter is not None:
+        adapter.check_settings(set(options) - set(OPTIONS))
     return options
 
 
@@ -62,7 +65,7 @@ def session(program: ConicProgram, solver: str = "clarabel", **options):
     Clarabel keeps its setup, OSQP its factorization and warm start; cvxpy rebuilds.
     """
     base, _, sub = check_name(solver).partition(":")
-    check_options(options)
+    check_options(options, solver)
     if base == "clarabel":
         return clarabel_direct.Session(program, **options)
     if base == "osqp":

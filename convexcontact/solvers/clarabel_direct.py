@@ -29,6 +29,14 @@ _STATUS = {
 }
 
 
+def check_settings(names) -> None:
+    """Refuse a name that is no field of clarabel.DefaultSettings."""
+    unknown = sorted(set(names) - set(dir(clarabel.DefaultSettings())))
+    if unknown:
+        raise ValueError(f"{unknown[0]}: clarabel has no such setting — the settings are the fields of "
+                         "clarabel.DefaultSettings (e.g. max_threads, static_regularization_constant)")
+
+
 def settings(tol: float = 1e-10, max_iter: int = 200, verbose: bool = False, **native) -> clarabel.DefaultSettings:
     """Clarabel settings with gap and feasibility tolerances set to ``tol``.
 
@@ -44,10 +52,8 @@ def settings(tol: float = 1e-10, max_iter: int = 200, verbose: bool = False, **n
     s.max_iter = max_iter
     s.tol_gap_abs = s.tol_gap_rel = s.tol_feas = tol
     s.tol_ktratio = min(s.tol_ktratio, tol)
+    check_settings(native)
     for name, value in native.items():
-        if not hasattr(s, name):
-            raise ValueError(f"{name}: clarabel has no such setting — the settings are the fields of "
-                             "clarabel.DefaultSettings (e.g. max_threads, static_regularization_constant)")
         try:
             setattr(s, name, value)
         except (TypeError, ValueError, OverflowError) as error:

@@ -161,7 +161,14 @@ SETTINGS_REFUSED = 2
 """OSQP's error code for settings out of range (OSQP_SETTINGS_VALIDATION_ERROR)."""
 
 
-def _refused(native: dict, cause) -> ValueError:
+def check_settings(names) -> None:
+    """Refuse a name that is no field of OSQP's settings."""
+    unknown = sorted(set(names) - set(dir(osqp.OSQP().ext.OSQPSettings())))
+    if unknown:
+        raise _refused(unknown[:1], "a name it does not know")
+
+
+def _refused(native, cause) -> ValueError:
     names = ", ".join(sorted(native)) or "solver options"
     return ValueError(f"{names}: OSQP refused the setting ({cause}) — see OSQP's settings (eps_abs, eps_rel, "
                       "max_iter, rho, sigma, polishing, …) for their names, types and ranges")
