@@ -236,7 +236,11 @@ def run_command(args) -> int:
     except (SceneError, ValueError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    return report(result, args.out, args.json)
+    try:
+        return report(result, args.out, args.json)
+    except OSError as error:  # a full disk, a folder without write permission: --out is left as it was
+        print(f"error: could not write the outputs: {error}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

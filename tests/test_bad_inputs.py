@@ -23,6 +23,10 @@ def replaced(**fields):
     return lambda: dataclasses.replace(BASE, **fields)
 
 
+def with_obstacle(obstacle: cc.Obstacle) -> cc.Scene:
+    return dataclasses.replace(BASE, contact=dataclasses.replace(BASE.contact, obstacle=obstacle))
+
+
 def raises(build, field: str, fix: str):
     """``build()`` raises a SceneError or ValueError whose message starts with the field and carries a fix."""
     with pytest.raises(ValueError) as error:
@@ -47,6 +51,18 @@ def raises(build, field: str, fix: str):
     (lambda: cc.Coulomb(friction=0.3, max_iterations=True), "contact.max_iterations", "positive integer"),
     (lambda: cc.solve(BASE.with_law(cc.Tresca(slip_bound=lambda x, y: np.ones(3)))), "contact.slip_bound",
      "one value per point"),
+    (lambda: cc.solve(BASE.with_law(cc.Tresca(slip_bound=lambda x, y: 1 / 0))), "contact.slip_bound",
+     "one value per point"),
+    (lambda: cc.solve(BASE.with_law(cc.Tresca(slip_bound=lambda x, y: "high"))), "contact.slip_bound",
+     "one value per point"),
+    (lambda: cc.Tresca(slip_bound=["a", "b"]), "contact.slip_bound", "one number per contact node"),
+    (lambda: cc.solve(with_obstacle(cc.Obstacle("expression", expression=lambda x: x))), "obstacle.expression",
+     "one value per point"),
+    (lambda: cc.Obstacle("expression", expression=42), "obstacle.expression", "a function g(x, y)"),
+    (lambda: cc.MeshFile(None), "body.mesh", "the mesh file's path"),
+    (replaced(materials={1: cc.Material(1.0, 0.3)}), "materials", "by its mesh subdomain"),
+    (lambda: cc.solve("scene.toml"), "scene", "cc.load_scene(path)"),
+    (lambda: cc.prepare(["scene"]), "scene", "cc.load_scene(path)"),
 ])
 def test_the_python_api_checks_types_where_values_enter(build, field, fix):
     raises(build, field, fix)
@@ -57,12 +73,41 @@ def test_the_python_api_checks_types_where_values_enter(build, field, fix):
     ("cvxpy", {"tol": 0.0}, "tol"), ("clarabel", {"max_iter": -5}, "max_iter"), ("osqp", {"max_iter": 2.5}, "max_iter"),
     ("clarabel", {"verbose": "yes"}, "verbose"), ("clarabel", {"nosuch": 1}, "nosuch"),
     ("osqp", {"nosuch": 1}, "nosuch"), (None, {}, "solver"), ("cvxpy:NOSUCH", {}, "solver"),
-    ("gurobi", {}, "solver"),
+    ("gurobi", {}, "solver"), ("clarabel", {"progress": "print"}, "progress"),
 ])
-def test_solver_options_are_checked_before_any_work(solver, options, field):
+def test_solver_options_are_checked_before_any_work(solver, options, field, monkeypatch):
+    """Refused before the scene is assembled (assembling here would fail the test)."""
+    monkeypatch.setattr("convexcontact.drivers.model.assemble", lambda scene: pytest.fail("assembled"))
     with pytest.raises(ValueError) as error:
         cc.solve(BASE, solver, **options)
     assert str(error.value).startswith(field), str(error.value)
+
+
+@pytest.mark.parametrize("solver, setting", [
+    ("clarabel", {"max_threads": "two"}), ("osqp", {"rho": "a"}), ("osqp", {"rho": -1.0}), ("osqp", {"nosuch": 1}),
+    ("cvxpy", {"nosuch": 1}), ("cvxpy:SCS", {"nosuch": 1}),
+])
+def test_a_native_setting_the_solver_refuses_is_named(solver, setting):
+    """A setting of a wrong name, type or range: the solver's own refusal, under the setting's name."""
+    with pytest.raises(ValueError, match=f"^{next(iter(setting))}: .* refused") as error:
+        cc.solve(BASE, solver, **setting)
+    assert " — " in str(error.value)
+
+
+def test_numpy_scalars_are_options_like_any_number():
+    assert cc.solve(BASE, tol=np.float32(1e-8), max_iter=np.int64(100)).status == "solved"
+
+
+def test_an_osqp_exception_is_a_failed_result():
+    """OSQP refuses a non-convex program at setup: a result with status failed and OSQP's error, no traceback."""
+    import scipy.sparse as sp
+
+    from convexcontact.conic import Cone, ConicProgram
+
+    concave = ConicProgram(P=sp.csc_matrix(-np.eye(2)), q=np.zeros(2), A=sp.csc_matrix(np.eye(2)), b=np.ones(2),
+                           cones=(Cone("nonnegative", 2),))
+    solution = cc.solvers.solve(concave, "osqp")
+    assert solution.status == "failed" and solution.solver_status == "OSQPException: setup failed, OSQP_NONCVX_ERROR"
 
 
 @given(st.one_of(st.floats(allow_nan=True, allow_infinity=True).filter(lambda t: not 0 < t < float("inf")),
@@ -70,6 +115,12 @@ def test_solver_options_are_checked_before_any_work(solver, options, field):
 def test_no_bad_tolerance_reaches_a_solver(tol):
     with pytest.raises(ValueError, match="^tol"):
         cc.solvers.check_options({"tol": tol})
+
+
+@given(st.one_of(st.integers(max_value=0), st.floats(), st.text(max_size=3), st.booleans()))
+def test_no_bad_iteration_limit_reaches_a_solver(max_iter):
+    with pytest.raises(ValueError, match="^max_iter: expected a positive integer"):
+        cc.solvers.check_options({"max_iter": max_iter})
 
 
 def test_a_failing_cvxpy_solve_is_a_failed_result():
@@ -97,9 +148,43 @@ TOML = {"body": {"mesh": "rectangle", "nx": 3, "ny": 3}, "material": {"E": 1.0, 
     ({"contact": {"boundary": "top", "law": "tresca", "slip_bound": "1" + "0" * 400}}, "contact.slip_bound",
      "below 1.8e308"),
     ({"material": {"E": 1.0, "nu": 0.3, "viscosity": -1.0}}, "material.viscosity", "≥ 0"),
+    ({"material": {"E": 10**400, "nu": 0.3}}, "material.E", "below 1.8e308"),
+    ({"obstacle": {"shape": "expression", "expression": "x + 1e400"}}, "obstacle.expression", "finite"),
 ])
 def test_the_toml_loader_names_the_key(edit, field, fix):
     raises(lambda: cc.solve(scene_from_dict({**TOML, **edit})), field, fix)
+
+
+def leaves(table: dict, path=()):
+    """Every value's key path in a scene table (arrays of tables by index)."""
+    for key, value in table.items():
+        if isinstance(value, dict):
+            yield from leaves(value, (*path, key))
+        elif isinstance(value, list) and value and isinstance(value[0], dict):
+            for i, entry in enumerate(value):
+                yield from leaves(entry, (*path, key, i))
+        else:
+            yield (*path, key)
+
+
+def test_no_bad_value_in_a_scene_file_ends_in_a_traceback():
+    """Every key of a frictional scene given every wrong kind of value: a SceneError, or a scene."""
+    import copy
+
+    table = {**TOML, "contact": {"boundary": "top", "law": "coulomb", "friction": 0.3, "max_iterations": 20},
+             "obstacle": {"shape": "parabolic", "radius": 1.0, "depth": 0.01},
+             "traction": [{"boundary": "top", "pressure": 0.1}]}
+    for path in list(leaves(table)) + [(key,) for key in table]:
+        for wrong in ("abc", -1, 0, 2.5, True, [], {}, [1, "a"], 10**400, "9" * 400, {"x": 1}, [[1.0]]):
+            edited = copy.deepcopy(table)
+            holder = edited
+            for key in path[:-1]:
+                holder = holder[key]
+            holder[path[-1]] = wrong
+            try:
+                scene_from_dict(edited)
+            except cc.SceneError:
+                pass
 
 
 def square(points=None, cells=None) -> fe.MeshTri:
@@ -138,16 +223,68 @@ def sliver():
     return square(points)
 
 
+def folded():
+    """Interior node 5 pulled across the row of nodes above it: its triangles overlap their neighbours."""
+    points = square().p.copy()
+    points[:, 5] = [0.5, 0.9]
+    return square(points)
+
+
+def twisted():
+    """A quadrilateral mesh whose interior node crosses its neighbours: a bow-tie cell."""
+    mesh = fe.MeshQuad.init_tensor(np.linspace(0, 1, 4), np.linspace(0, 1, 4))
+    points = mesh.p.copy()
+    points[:, 5] = [0.9, 0.9]
+    return fe.MeshQuad(points, mesh.t)
+
+
 @pytest.mark.parametrize("mesh, problem", [
     (lambda: square(np.hstack([square().p, [[5.0], [5.0]]])), "belong to no cell"),
     (cracked, "share their place"),
     (collapsed, "share their place"),
     (sliver, "degenerate cells"),
+    (folded, "inverted cells"),
+    (twisted, "inverted cells"),
+    (lambda: fe.MeshTri(np.vstack([square().p, 0.1 * square().p[0]]), square().t), "3 coordinates per node"),
 ])
 def test_a_broken_mesh_is_named_with_the_fix(mesh, problem):
     with pytest.raises(cc.SceneError, match=problem) as error:
         cc.solve(on(mesh()))
     assert error.value.field == "body.mesh" and " — " in str(error.value)
+
+
+def graded_builtins():
+    from convexcontact.fem.mesh import build_mesh
+    from convexcontact.scene.model import Box
+
+    for element in ("P1", "P2", "Q1", "Q2"):
+        yield build_mesh(cc.Body(cc.Rectangle(nx=4, ny=3, grading=(6.0, 6.0)), element))
+        yield build_mesh(cc.Body(Box(cells=(2, 3, 2), grading=(4.0, 4.0, 4.0)), element))
+
+
+SOUND = [
+    *(kind().refined(1) for kind in (fe.MeshTri, fe.MeshQuad, fe.MeshTet, fe.MeshHex, fe.MeshTri2, fe.MeshQuad2,
+                                     fe.MeshTet2, fe.MeshHex2)),
+    fe.MeshTri.init_circle(2), fe.MeshTri2.init_circle(1), fe.MeshTet.init_ball(1),
+    cc.library.punch_mesh(0.1), cc.library.punch_mesh(0.1, quads=True),
+]
+
+
+@pytest.mark.parametrize("mesh", [*SOUND, *graded_builtins()], ids=lambda mesh: type(mesh).__name__)
+def test_every_sound_mesh_passes_the_checks(mesh):
+    """scikit-fem numbers simplices in either orientation and keeps quadratic meshes' edge nodes outside t:
+    none of that is a defect."""
+    from convexcontact.fem.mesh import check_mesh
+
+    assert check_mesh(mesh, "sound") is mesh
+
+
+def test_a_quadratic_mesh_file_is_read_whole(tmp_path):
+    path = tmp_path / "disk.msh"
+    fe.MeshTri2.init_circle(1).save(path, file_format="gmsh22")
+    from convexcontact.fem.mesh import build_mesh
+
+    assert type(build_mesh(cc.Body(cc.MeshFile(path), "P2"))).__name__ == "MeshTri2"
 
 
 def test_a_2d_mesh_file_with_z_is_not_flattened(tmp_path):
@@ -163,6 +300,14 @@ def test_a_mesh_too_large_for_the_machine_is_refused_before_it_is_built():
     with pytest.raises(cc.SceneError, match=r"GiB available — use fewer cells") as error:
         cc.prepare(dataclasses.replace(BASE, body=cc.Body(cc.Rectangle(nx=100000, ny=100000))))
     assert error.value.field == "body.nx"
+
+
+def test_a_users_mesh_too_large_is_refused_before_assembly(monkeypatch):
+    monkeypatch.setattr("convexcontact.fem.mesh.available_memory", lambda: 1e5)
+    monkeypatch.setattr("convexcontact.fem.assembly.vector_basis", lambda *args: pytest.fail("assembled"))
+    with pytest.raises(cc.SceneError, match=r"18 cells of P1 make about 32 DOFs, .* use a coarser mesh") as error:
+        cc.prepare(on(square()))
+    assert error.value.field == "body.mesh"
 
 
 def digest(folder: Path) -> dict:
@@ -201,18 +346,33 @@ def test_output_paths_are_checked_before_the_solve(tmp_path, capsys, arguments, 
     assert digest(tmp_path) == before
 
 
-def test_ctrl_c_exits_quietly_and_leaves_no_partial_files(tmp_path, capsys, monkeypatch):
-    out = tmp_path / "out"
-
-    def interrupted_save(result, directory, formats=("json", "vtk", "png")):
+def half_written(exception):
+    """A save that dies half-way through summary.json with ``exception``."""
+    def save(result, directory, formats=("json", "vtk", "png")):
         Path(directory).mkdir(parents=True, exist_ok=True)
-        (Path(directory) / "summary.json").write_text("{")  # half written when Ctrl-C came
-        raise KeyboardInterrupt
+        (Path(directory) / "summary.json").write_text("{")
+        raise exception
+    return save
 
-    monkeypatch.setattr(cc.ContactResult, "save", interrupted_save)
-    assert cli.main(["run", str(SCENE), "--out", str(out)]) == 130
-    assert capsys.readouterr().err.strip() == "interrupted"
-    assert not (out / "summary.json").exists()
+
+@pytest.mark.parametrize("exception, code, text", [(KeyboardInterrupt, 130, "interrupted"),
+                                                   (OSError("No space left on device"), 1, "No space left")])
+@pytest.mark.parametrize("overwrite", [False, True])
+def test_an_interrupted_or_failed_write_leaves_the_folder_as_it_was(tmp_path, capsys, monkeypatch, exception, code,
+                                                                   text, overwrite):
+    """Ctrl-C (quietly, code 130) or a full disk while writing: --out and --json hold what they held before —
+    nothing half-written, an earlier run's outputs intact under --overwrite — and no scratch folder is left."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    if overwrite:
+        (out / "summary.json").write_text('{"earlier": "run"}')
+    before = digest(tmp_path)
+    monkeypatch.setattr(cc.ContactResult, "save", half_written(exception))
+    arguments = ["run", str(SCENE), "--out", str(out), "--json", str(tmp_path / "s.json")]
+    assert cli.main(arguments + ["--overwrite"] * overwrite) == code
+    assert text in capsys.readouterr().err
+    assert digest(tmp_path) == before and sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
 @pytest.mark.parametrize("arguments, code, text", [
@@ -221,6 +381,11 @@ def test_ctrl_c_exits_quietly_and_leaves_no_partial_files(tmp_path, capsys, monk
     (["bench", "--sizes", "-5"], 2, "at least 100 free DOFs"),
     (["run", str(SCENE), "--solver", "cvxpy:NOSUCH"], 2, "cvxpy has no solver"),
     (["run", str(SCENE), "--tol", "-1"], 2, "tol: expected a positive"),
+    (["bench", "--sizes", "1e13"], 2, "GiB available"),
+    (["bench", "--formulation", "nosuch"], 2, "--formulation: unknown 'nosuch'"),
+    (["bench", "--out", str(SCENE)], 2, "--out: " + str(SCENE) + " is a file"),
+    (["study", "stability", "--out", str(SCENE.parent)], 2, "is a folder; give a file's name"),
+    (["study", "stability", "--out", "/nonexistent/stability.md"], 2, "does not exist"),
 ])
 def test_the_command_line_gives_a_clear_error_and_its_code(arguments, code, text, capsys):
     try:
