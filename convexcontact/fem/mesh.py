@@ -161,10 +161,11 @@ def build_mesh(body: Body) -> fe.Mesh:
         return rectangle(geometry, quads=body.element in ("Q1", "Q2"))
     if isinstance(geometry, Box):
         return box(geometry, hexes=body.element in ("Q1", "Q2"))
-    if isinstance(geometry, (MeshFile, fe.Mesh)):
-        mesh, source = (load_mesh(geometry), str(geometry.path)) if isinstance(geometry, MeshFile) else \
-            (geometry, "the mesh given")
-        return check_mesh_size(check_mesh(mesh, source), body.element, source)
+    if isinstance(geometry, MeshFile):
+        source = str(geometry.path)
+        return check_mesh_size(check_mesh(load_mesh(geometry), source), body.element, source)
+    if isinstance(geometry, fe.Mesh):
+        return check_mesh_size(check_mesh(geometry, "the mesh given"), body.element, "the mesh given")
     raise SceneError("body.mesh", f"unsupported geometry {type(geometry).__name__}")
 
 
@@ -230,7 +231,7 @@ def inverted_cells(mesh: fe.Mesh):
     """Cells turned inside out: a Jacobian that changes sign inside a cell (a twisted quadrilateral or hexahedron),
     or two neighbours on the same side of the facet they share (a fold). Neither depends on the orientation the
     mesh numbers its cells in, which scikit-fem leaves free."""
-    jacobian = mesh._mapping().detDF(mesh.refdom.p)
+    jacobian = mesh.mapping().detDF(mesh.refdom.p)  # at the corners of each cell
     twisted = (jacobian.min(axis=1) < 0) & (jacobian.max(axis=1) > 0)
     folded = np.zeros(mesh.t.shape[1], bool)
     folded[mesh.f2t[:, folded_facets(mesh)].ravel()] = True
