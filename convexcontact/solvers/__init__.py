@@ -47,7 +47,7 @@ OPTIONS = {  # the options every path takes: test, what is expected, an example
 }
 
 
-def check_options(options: dict, solver: str = "cvxpy") -> dict:
+def check_options(options: dict, solver: str | None = None) -> dict:
     """The options every path takes, checked where they enter (:data:`OPTIONS`), and the names of the
     ``solver``'s native settings (Clarabel's and OSQP's; cvxpy's solvers name theirs when they solve)."""
     for name, (valid, expected, example) in OPTIONS.items():
