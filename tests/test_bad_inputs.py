@@ -63,6 +63,7 @@ def raises(build, field: str, fix: str):
     (replaced(materials={1: cc.Material(1.0, 0.3)}), "materials", "by its mesh subdomain"),
     (lambda: cc.solve("scene.toml"), "scene", "cc.load_scene(path)"),
     (lambda: cc.prepare(["scene"]), "scene", "cc.load_scene(path)"),
+    (lambda: cc.prepare(BASE).solve(progress="print"), "progress", "e.g. progress=print"),
 ])
 def test_the_python_api_checks_types_where_values_enter(build, field, fix):
     raises(build, field, fix)

@@ -91,6 +91,7 @@ class Model:
         native settings; ``cvxpy_model`` for an extended cvxpy model). Coulomb laws
         run the Picard map; ``progress(iteration, change)`` is called after each step.
         """
+        solvers.check_options({**options, "progress": progress}, solvers.check_name(solver))
         driver = LAW_DRIVERS.get(type(self.law))
         if driver is not None:
             return driver(self, solver, progress, **options)
