@@ -107,7 +107,9 @@ def test_an_osqp_exception_is_a_failed_result():
 
     concave = ConicProgram(P=sp.csc_matrix(-np.eye(2)), q=np.zeros(2), A=sp.csc_matrix(np.eye(2)), b=np.ones(2),
                            cones=(Cone("nonnegative", 2),))
-    solution = cc.solvers.solve(concave, "osqp")
+    session = cc.solvers.session(concave, "osqp")
+    session.update(q=np.ones(2))  # a re-solve (a Picard step) of the failed setup says the same
+    solution = session.solve()
     assert solution.status == "failed" and solution.solver_status == "OSQPException: setup failed, OSQP_NONCVX_ERROR"
 
 

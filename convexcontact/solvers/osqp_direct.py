@@ -125,7 +125,11 @@ class Session:
         if b is not None:
             changes["l"], changes["u"] = _bounds(b, self._plan)
         self.program = replace(self.program, q=self.program.q if q is None else q, b=self.program.b if b is None else b)
-        self._solver.update(**changes)
+        if self._setup_error is None:  # a solver that failed its setup has nothing to update: it says so again
+            try:
+                self._solver.update(**changes)
+            except osqp.OSQPException as error:
+                self._setup_error = f"OSQPException: update failed, {_error_name(error)}"
 
     def seed(self, guess: ConicSolution):
         """Start OSQP's iterations from ``guess``'s primal point."""
