@@ -1,0 +1,190 @@
+"""FClib (Siconos' frictional-contact problem library): the format, the mapping of our dual onto its local
+problem, fclib's merit function, and solving imported problems (docs/fclib.md)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import convexcontact as cc
+from convexcontact.scene.library import frictional_punch, punch_3d
+
+h5py = pytest.importorskip("h5py")
+
+from convexcontact.interop import fclib, fclib_scene
+from convexcontact.interop.fclib_cli import main
+from convexcontact.interop.fclib_solve import condense, merit, natural_residuals, solve_global, solve_local
+
+SHIPPED = Path(__file__).parent / "data" / "fclib" / "local_problem_test.hdf5"
+
+
+def punch_2d():
+    return frictional_punch(h=0.02, depth=0.02, element="Q1", law=cc.Coulomb(friction=0.6, tol=1e-12))
+
+
+def punch_3d_small():
+    return punch_3d(cells=4, law=cc.Coulomb(friction=0.3, tol=1e-12))
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    """Each scene exported as a local and a global problem, and read back."""
+    folder, files = tmp_path_factory.mktemp("fclib"), {}
+    for name, scene in (("2d", punch_2d()), ("3d", punch_3d_small())):
+        for kind in ("local", "global"):
+            path = folder / f"{name}_{kind}.hdf5"
+            problem, solution, result = fclib_scene.export(scene, path, kind)
+            files[name, kind] = (path, problem, solution, result, fclib.read(path))
+    return files
+
+
+def one_contact(mu=0.3):
+    """W = I, q = (−1, ½, 0): the contact closes and slides, r = (1, −μ, 0), u = (0, ½ − μ, 0)."""
+    return fclib.LocalProblem(sp.identity(3, format="csr"), np.array([-1.0, 0.5, 0.0]), np.array([mu]), 3)
+
+
+def test_merit_is_zero_at_a_closed_form_answer_and_uses_fclibs_normalization():
+    problem = one_contact()
+    assert merit(problem, np.array([1.0, -0.3, 0.0])) == pytest.approx(0.0, abs=1e-15)
+    # r = 0: ‖Π_C(−û)‖ with û = q + (μ‖q_T‖, 0, 0), over 1 + √‖q‖ (fclib: sqrt(error)/(1 + sqrt(dnrm2(q))))
+    projection = np.hypot(1.0, 0.3) / 1.09
+    assert merit(problem, np.zeros(3)) == pytest.approx(projection / (1 + 1.25**0.25), rel=1e-12)
+    answer = solve_local(problem)
+    np.testing.assert_allclose(answer.r, [1.0, -0.3, 0.0], atol=1e-9)
+    np.testing.assert_allclose(answer.u, [0.0, 0.2, 0.0], atol=1e-9)
+
+
+def test_merit_of_a_perturbed_answer_is_about_the_perturbation(exported):
+    _, problem, solution, _, _ = exported["2d", "local"]
+    """The merit is a natural-map residual: Lipschitz in r (constant ~ 1 + ‖W‖), and not smaller than a
+    fraction of the error (unlike a product of complementary quantities, which squares it)."""
+    normalization = 1 + np.sqrt(np.linalg.norm(problem.q))
+    lipschitz = 3 * (1 + np.linalg.norm(problem.W.toarray(), 2))
+    for size in (1e-3, 1e-6):
+        delta = size * np.random.default_rng(1).standard_normal(solution.r.size)
+        value = merit(problem, solution.r + delta) * normalization
+        assert 0.1 * np.linalg.norm(delta) < value < lipschitz * np.linalg.norm(delta)
+
+
+@pytest.mark.parametrize("name", ["2d", "3d"])
+def test_our_certified_answer_satisfies_fclibs_law(exported, name):
+    """The exported /solution: fclib's merit ~1e-13, u = W r + q, and u_N ≥ 0 ⊥ r_N ≥ 0 in FClib's signs."""
+    _, problem, _, result, (read_back, stored, guesses) = exported[name, "local"]
+    assert result.status == "solved" and guesses == []
+    d = problem.spacedim
+    assert d == (2 if name == "2d" else 3) and problem.W.shape == (d * problem.mu.size,) * 2
+    assert merit(read_back, stored.r) < 1e-10
+    assert max(natural_residuals(read_back, stored.r).values()) < 1e-10
+    u, r = stored.u.reshape(-1, d), stored.r.reshape(-1, d)
+    scale = np.abs(u).max()
+    assert u[:, 0].min() > -1e-10 * scale and np.abs(u[:, 0] * r[:, 0]).max() < 1e-10 * scale * r[:, 0].max()
+
+
+def test_the_file_holds_what_was_written(exported):
+    path, problem, solution, _, (read_back, stored, _) = exported["3d", "local"]
+    with h5py.File(path) as file:
+        assert int(file["fclib_local/spacedim"][0]) == 3 and int(file["fclib_local/W/nz"][0]) == -1
+        assert file["fclib_local/W/p"].dtype == np.int32 and "Scaled units" in file["fclib_local/info/description"][
+            ()].decode()
+    assert abs(read_back.W - problem.W).max() == 0 and np.array_equal(read_back.q, problem.q)
+    assert np.array_equal(read_back.mu, problem.mu) and np.array_equal(stored.r, solution.r)
+
+
+def test_the_mapping_of_unknowns_and_signs():
+    """Π puts contact k's (λ_N, λ_T) at [N, T]; q = our linear cost = −h; u_T is the slip, r_T opposes it."""
+    model = cc.prepare(punch_2d(), "dual")
+    problem, order = fclib_scene.local_problem(model)
+    m = model.fem.contact.m
+    np.testing.assert_array_equal(order[:4], [0, m, 1, m + 1])
+    result = model.solve()
+    r = fclib_scene.multipliers(model, result)[order]
+    u = (problem.W @ r + problem.q).reshape(-1, 2)
+    sliding = np.char.startswith(result.contact.status.astype(str), "slip")
+    assert sliding.sum() >= 4
+    assert np.all(np.sign(u[sliding, 1]) == np.sign(result.contact.slip[sliding]))
+    assert np.all(np.sign(r.reshape(-1, 2)[sliding, 1]) == -np.sign(result.contact.slip[sliding]))
+
+
+@pytest.mark.parametrize("name", ["2d", "3d"])
+def test_round_trip_gives_our_answer(exported, name):
+    _, _, _, _, (problem, stored, _) = exported[name, "local"]
+    answer = solve_local(problem)
+    assert answer.status == "solved" and answer.merit < 1e-8
+    np.testing.assert_allclose(answer.r, stored.r, atol=1e-8 * np.abs(stored.r).max())
+    np.testing.assert_allclose(answer.u, stored.u, atol=1e-8 * np.abs(stored.u).max())
+
+
+@pytest.mark.parametrize("name", ["2d", "3d"])
+def test_global_problem_condenses_to_the_local_one(exported, name):
+    _, local, _, _, _ = exported[name, "local"]
+    _, _, _, _, (problem, stored, _) = exported[name, "global"]
+    assert problem.M.shape[0] > problem.H.shape[1] and problem.G is None
+    condensed, _ = condense(problem)
+    np.testing.assert_allclose(condensed.W.toarray(), local.W.toarray(), atol=1e-10 * abs(local.W).max())
+    np.testing.assert_allclose(condensed.q, local.q, atol=1e-10 * np.abs(local.q).max())
+    answer = solve_global(problem)
+    assert answer.status == "solved" and answer.residuals["equilibrium"] < 1e-10
+    np.testing.assert_allclose(answer.r, stored.r, atol=1e-8 * np.abs(stored.r).max())
+    np.testing.assert_allclose(answer.v, stored.v, atol=1e-8 * np.abs(stored.v).max())
+
+
+def test_fclibs_own_test_problem():
+    """src/tests/data/local_problem_test.hdf5 of fclib: 48 contacts of stacked boxes, W of rank 72."""
+    problem, stored, guesses = fclib.read(SHIPPED)
+    assert problem.spacedim == 3 and problem.mu.size == 48 and np.all(problem.mu == 0.7)
+    assert problem.info["title"] == "Boxes Stack" and len(guesses) == 1
+    assert abs(problem.W - problem.W.T).max() < 1e-9 * abs(problem.W).max()
+    # its /solution is r = 0 (u is not W r + q): fclib's own merit rejects it
+    assert np.all(stored.r == 0) and merit(problem, stored.r) > 1e-3
+    answer = solve_local(problem)
+    assert answer.status == "solved" and answer.merit < 1e-10
+    assert max(natural_residuals(problem, answer.r).values()) < 1e-8
+
+
+def test_refused_problems_say_why(tmp_path):
+    with pytest.raises(cc.SceneError, match="contact.law"):
+        fclib_scene.export(cc.library.tresca_punch(nx=8), tmp_path / "t.hdf5")
+    gauss = cc.Coulomb(friction=0.3, quadrature="gauss")
+    with pytest.raises(cc.SceneError, match="contact.quadrature"):
+        fclib_scene.local_problem(cc.prepare(punch_3d(cells=2, law=gauss), "dual"))
+    mixed = one_contact()
+    mixed.V, mixed.R, mixed.s = sp.csr_matrix(np.ones((3, 1))), sp.csr_matrix(np.ones((1, 1))), np.zeros(1)
+    with pytest.raises(ValueError, match="fclib_local/V"):
+        solve_local(mixed)
+    with pytest.raises(ValueError, match="contacts"):
+        fclib.LocalProblem(sp.identity(4, format="csr"), np.zeros(4), np.ones(1), 3)
+
+
+def test_matrices_in_all_three_storages(tmp_path):
+    A = sp.random(5, 4, density=0.5, random_state=2, format="csr")
+    coo = A.tocoo()
+    stored = {
+        "triplet": (coo.nnz, coo.row, coo.col, coo.data),
+        "csc": (-1, A.tocsc().indptr, A.tocsc().indices, A.tocsc().data),
+        "csr": (-2, A.indptr, A.indices, A.data),
+    }
+    with h5py.File(tmp_path / "m.hdf5", "w") as file:
+        for name, (nz, p, i, x) in stored.items():
+            group = file.create_group(name)
+            for key, value in {"nzmax": A.nnz, "m": 5, "n": 4, "nz": nz}.items():
+                group.create_dataset(key, data=np.array([value], dtype=np.int32))
+            group.create_dataset("p", data=np.asarray(p, dtype=np.int32))
+            group.create_dataset("i", data=np.asarray(i, dtype=np.int32))
+            group.create_dataset("x", data=x)
+        for name in stored:
+            assert abs(fclib.read_matrix(file[name]) - A).max() == 0
+
+
+def test_command_line(tmp_path, capsys):
+    assert main(["solve", str(SHIPPED), "--json", str(tmp_path / "s.json"), "--out", str(tmp_path / "s.hdf5")]) == 0
+    report = capsys.readouterr().out
+    assert "Boxes Stack" in report and "stored /solution" in report
+    _, ours, _ = fclib.read(tmp_path / "s.hdf5")
+    assert merit(fclib.read(SHIPPED)[0], ours.r) < 1e-10
+    scene = Path(__file__).parents[1] / "examples" / "scenes" / "frictional_punch.toml"
+    out = tmp_path / "punch.hdf5"
+    assert main(["export", str(scene), "--out", str(out)]) == 0
+    assert "fclib merit" in capsys.readouterr().out
+    assert main(["export", str(scene), "--out", str(out)]) == 2  # exists: --overwrite to replace
+    assert "--overwrite" in capsys.readouterr().err
