@@ -115,6 +115,16 @@ def test_round_trip_gives_our_answer(exported, name):
     np.testing.assert_allclose(answer.u, stored.u, atol=1e-8 * np.abs(stored.u).max())
 
 
+def test_weak_non_penetration_exports_the_same_law(tmp_path):
+    """Hild's continuous P1 multipliers (C = M): W and h change, the law at the nodes does not."""
+    law = cc.Coulomb(friction=0.6, tol=1e-12, non_penetration="weak")
+    *_, result = fclib_scene.export(frictional_punch(h=0.02, depth=0.02, element="Q1", law=law), tmp_path / "weak.hdf5")
+    problem, stored, _ = fclib.read(tmp_path / "weak.hdf5")
+    assert result.status == "solved" and merit(problem, stored.r) < 1e-10
+    answer = solve_local(problem)
+    np.testing.assert_allclose(answer.r, stored.r, atol=1e-8 * np.abs(stored.r).max())
+
+
 @pytest.mark.parametrize("name", ["2d", "3d"])
 def test_global_problem_condenses_to_the_local_one(exported, name):
     _, local, _, _, _ = exported[name, "local"]
