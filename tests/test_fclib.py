@@ -125,6 +125,20 @@ def test_weak_non_penetration_exports_the_same_law(tmp_path):
     np.testing.assert_allclose(answer.r, stored.r, atol=1e-8 * np.abs(stored.r).max())
 
 
+def test_a_prescribed_obstacle_force_is_fclibs_mixed_problem(tmp_path):
+    """Hertz under force control: a_ᵀ λ_N = P is Vᵀ r + R λ + s = 0 (R = 0, s = −P), λ = −(obstacle advance)."""
+    scene = cc.library.hertz_punch(nx=40, law=cc.Coulomb(friction=0.3, tol=1e-12))
+    *_, result = fclib_scene.export(scene, tmp_path / "hertz.hdf5")
+    problem, stored, _ = fclib.read(tmp_path / "hertz.hdf5")
+    assert problem.V.shape == (problem.q.size, 1) and problem.R.count_nonzero() == 0
+    assert stored.l == pytest.approx([-result.obstacle_advance / result.fem.scaling.displacement])
+    assert merit(problem, stored.r, stored.l) < 1e-10
+    answer = solve_local(problem)
+    assert answer.status == "solved" and answer.merit < 1e-10
+    np.testing.assert_allclose(answer.r, stored.r, atol=1e-8 * np.abs(stored.r).max())
+    np.testing.assert_allclose(answer.l, stored.l, rtol=1e-8)
+
+
 @pytest.mark.parametrize("name", ["2d", "3d"])
 def test_global_problem_condenses_to_the_local_one(exported, name):
     _, local, _, _, _ = exported[name, "local"]
@@ -160,8 +174,13 @@ def test_refused_problems_say_why(tmp_path):
         fclib_scene.local_problem(cc.prepare(punch_3d(cells=2, law=gauss), "dual"))
     mixed = one_contact()
     mixed.V, mixed.R, mixed.s = sp.csr_matrix(np.ones((3, 1))), sp.csr_matrix(np.ones((1, 1))), np.zeros(1)
-    with pytest.raises(ValueError, match="fclib_local/V"):
+    with pytest.raises(ValueError, match="fclib_local/R"):
         solve_local(mixed)
+    with pytest.raises(ValueError, match="needs their multipliers"):
+        merit(mixed, np.zeros(3))
+    force = cc.library.hertz_punch(nx=8, law=cc.Coulomb(friction=0.3))
+    with pytest.raises(cc.SceneError, match="obstacle.force"):
+        fclib_scene.global_problem(cc.prepare(force, "dual"))
     with pytest.raises(ValueError, match="contacts"):
         fclib.LocalProblem(sp.identity(4, format="csr"), np.zeros(4), np.ones(1), 3)
 

@@ -50,6 +50,11 @@ class LocalProblem:
         check_contacts(self.W.shape[0], self.spacedim, self.mu, "fclib_local/W")
         if self.W.shape != (self.q.size, self.q.size):
             raise ValueError(f"fclib_local: W is {self.W.shape} but q has {self.q.size} entries")
+        if self.V is not None or self.R is not None or self.s is not None:
+            p = -1 if self.s is None else self.s.size
+            if self.V is None or self.R is None or self.V.shape != (self.q.size, p) or self.R.shape != (p, p):
+                raise ValueError("fclib_local/V, R, vectors/s: the equalities Vᵀ r + R λ + s = 0 need all three, "
+                                 f"V ({self.q.size} × p), R (p × p), s (p)")
 
 
 @dataclass

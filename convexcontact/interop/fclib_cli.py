@@ -63,7 +63,7 @@ def solve_file(args) -> int:
             ("natural-map residual", f"{max(answer.residuals.values()):.3e} (worst of {len(answer.residuals)})"),
             ("time", f"{answer.timings['total']:.3f} s")]
     if stored is not None and stored.r is not None:
-        stored_merit = merit(problem if local else condense(problem)[0], stored.r)
+        stored_merit = merit(problem if local else condense(problem)[0], stored.r, stored.l)
         difference = np.abs(answer.r - stored.r).max() / max(np.abs(stored.r).max(), np.abs(answer.r).max(), 1e-300)
         answer.extra["stored_solution"] = {"fclib_merit": stored_merit, "relative_difference_r": float(difference)}
         rows.append(("stored /solution", f"merit {stored_merit:.3e}, ‖r − ours‖∞/‖r‖∞ = {difference:.3e}"))
@@ -71,7 +71,7 @@ def solve_file(args) -> int:
     if args.json is not None:
         args.json.write_text(json.dumps(answer.summary(), indent=2, default=float))
     if args.out is not None:
-        write(args.out, problem, Solution(r=answer.r, u=answer.u, v=answer.v))
+        write(args.out, problem, Solution(r=answer.r, u=answer.u, v=answer.v, l=answer.l))
     return 0 if answer.status == "solved" else 1
 
 
@@ -88,7 +88,7 @@ def export_scene(args) -> int:
         return 1
     local = problem if args.kind == "local" else condense(problem)[0]
     print(f"/solution: our answer ({result.status}, certificate {result.certificate.worst:.2e}), "
-          f"fclib merit {merit(local, solution.r):.3e}")
+          f"fclib merit {merit(local, solution.r, solution.l):.3e}")
     return 0 if result.status == "solved" else 1
 
 

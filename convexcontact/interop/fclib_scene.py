@@ -19,8 +19,10 @@ Tresca programs, hence their Picard maps and Coulomb solutions, are the same. Th
 w = −Π c; then Hᵀ M⁻¹ H = W_FClib and Hᵀ M⁻¹ f + w = q_FClib.
 
 The law must be FClib's: local Coulomb at the contact nodes (quadrature "nodal", no smoothing, no
-ε, no normal compliance) with the obstacle's position given (a prescribed obstacle force adds an
-equality FClib writes with V and R, not supported here). Contacts whose displacement is all
+ε, no normal compliance). A prescribed obstacle force (and, in 2-D, tangential force) is an equality
+a_jᵀ r = P_j of our dual: FClib's mixed local problem Vᵀ r + R λ + s = 0, û = W r + V λ + q + …,
+with V = Π a_j, R = 0, s = −P_j and λ = our multipliers = minus the obstacle's advance (and shift),
+scaled; the global problem has no place for the obstacle's motion and is refused then. Contacts whose displacement is all
 prescribed carry nothing (zero rows of W) and are left out. Values are in our scaled units; the
 factors back to the user's are written in the problem's ``info``.
 """
@@ -38,7 +40,7 @@ from .fclib import GlobalProblem, LocalProblem, Solution, write
 
 def check_exportable(model: Model) -> None:
     """Refuse, naming the field, a model whose problem is not FClib's local Coulomb problem."""
-    law, contact = model.law, model.fem.contact
+    law = model.law
     checks = [
         (isinstance(law, Coulomb), "contact.law", "FClib stores Coulomb problems (W, q, μ)", "use a Coulomb law"),
         (model.formulation == "dual", "formulation", "the FClib problem is the condensed dual",
@@ -49,9 +51,6 @@ def check_exportable(model: Model) -> None:
          "the nonlocal law is not FClib's local Coulomb law", "use smoothing_radius = 0"),
         (model.epsilon is None, "contact.regularization", "FClib's law is exact", "drop the regularization"),
         (model.compliance is None, "contact.compliance", "FClib's law is non-penetration", "drop the compliance"),
-        (contact.obstacle_coupling is None and contact.tangential_coupling is None, "obstacle.force",
-         "a prescribed obstacle force is an equality FClib writes with V and R (not supported here)",
-         "prescribe the obstacle's depth instead"),
     ]
     for ok, name, why, fix in checks:
         if not ok:
@@ -83,18 +82,33 @@ def info(model: Model, kind: str) -> dict:
     }
 
 
+def equalities(model: Model) -> int:
+    """How many force equalities open our dual program (the obstacle's normal, [tangential] force)."""
+    contact = model.fem.contact
+    return (contact.obstacle_coupling is not None) + (contact.tangential_coupling is not None)
+
+
 def local_problem(model: Model) -> tuple[LocalProblem, np.ndarray]:
-    """FC(W, q, μ) of ``model`` and Π (:func:`ordering`)."""
+    """FC(W, q, μ) of ``model`` — with V, R = 0, s for prescribed obstacle forces — and Π (:func:`ordering`)."""
     check_exportable(model)
     order = ordering(model)
-    d = model.fem.dim
+    d, program, p = model.fem.dim, model.program, equalities(model)
     mu = field_at_points(model.law.friction, "contact.friction", model.fem, model.friction)
-    W = model.program.P.tocsr()[order][:, order]
-    return LocalProblem(sp.csr_matrix(W), model.program.q[order], mu[order[::d]], d, info(model, "local")), order
+    W = program.P.tocsr()[order][:, order]
+    mixed = {}
+    if p:  # our rows a_jᵀ r = P_j are FClib's Vᵀ r + R λ + s = 0 with V = [a_j], R = 0, s = −P
+        mixed = {"V": sp.csr_matrix(program.A.tocsr()[:p][:, order].T), "R": sp.csr_matrix((p, p)),
+                 "s": -program.b[:p]}
+    problem = LocalProblem(sp.csr_matrix(W), program.q[order], mu[order[::d]], d, info(model, "local"), **mixed)
+    return problem, order
 
 
 def global_problem(model: Model) -> tuple[GlobalProblem, np.ndarray]:
     """FClib's global problem of ``model`` (M = K, H = −(Π B)ᵀ, f, w = −Π c) and Π."""
+    if equalities(model):
+        raise SceneError("obstacle.force", "cannot be exported as FClib's global problem: the obstacle's motion is "
+                         "an unknown beside the displacements (the local problem holds it as V, R, s)",
+                         "export the local problem, or prescribe the obstacle's depth")
     local, order = local_problem(model)
     fem, C, friction = model.fem, model.C, model.friction
     contact = fem.contact
@@ -116,7 +130,14 @@ def solution(model: Model, result: ContactResult, problem, order: np.ndarray) ->
     """Our certified answer in FClib's terms: r = Π r_ours, u = W r + q (local) or Hᵀ v + w with v = u."""
     r = multipliers(model, result)[order]
     if isinstance(problem, LocalProblem):
-        return Solution(r=r, u=problem.W @ r + problem.q)
+        if problem.V is None:
+            return Solution(r=r, u=problem.W @ r + problem.q)
+        # our dual's equality multipliers are minus the obstacle's advance and shift (formulations/dual.py)
+        contact = model.fem.contact
+        motion = ([result.obstacle_advance] if contact.obstacle_coupling is not None else []) + \
+            ([result.obstacle_shift] if contact.tangential_coupling is not None else [])
+        l = -np.array(motion, dtype=float) / model.fem.scaling.displacement
+        return Solution(r=r, u=problem.W @ r + problem.V @ l + problem.q, l=l)
     v = result.displacement[model.fem.free] / model.fem.scaling.displacement
     return Solution(r=r, u=problem.H.T @ v + problem.w, v=v)
 

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .. import solvers
-from ..conic import ConicProgram, nonnegative, soc
+from ..conic import ConicProgram, nonnegative, soc, zero
 from .fclib import GlobalProblem, LocalProblem
 
 CERTIFIED = 1e-8
@@ -55,32 +55,53 @@ def project_on_cone(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
     return out
 
 
-def merit(problem: LocalProblem, r: np.ndarray) -> float:
+def velocity(problem: LocalProblem, r: np.ndarray, l: np.ndarray | None = None) -> np.ndarray:
+    """u = W r + q (+ V λ for a mixed problem)."""
+    u = problem.W @ r + problem.q
+    if problem.V is None:
+        return u
+    if l is None:
+        raise ValueError("fclib_local/V: a problem with equalities needs their multipliers l (λ) as well as r")
+    return u + problem.V @ l
+
+
+def equality_residual(problem: LocalProblem, r: np.ndarray, l: np.ndarray | None) -> np.ndarray:
+    """Vᵀ r + R λ + s (empty without equalities)."""
+    if problem.V is None:
+        return np.zeros(0)
+    residual = problem.V.T @ r + problem.s
+    return residual if problem.R is None else residual + problem.R @ l
+
+
+def merit(problem: LocalProblem, r: np.ndarray, l: np.ndarray | None = None) -> float:
     """FClib's merit function MERIT_1 (``fclib_merit_local``), for spacedim 2 and 3.
 
-    ‖r − Π_C_μ(r − û)‖ / (1 + √‖q‖), û = W r + q + [μ‖u_T‖, 0, 0] per contact. The normalization is
-    fclib's as coded, ``sqrt(error)/(1.0 + sqrt(dnrm2(q)))``: 1 + the square root of ‖q‖ (not 1 + ‖q‖).
-    fclib itself computes it for spacedim 3 only; the formula is the same in 2-D.
+    ‖r − Π_C_μ(r − û)‖ / (1 + √‖q‖), û = W r + V λ + q + [μ‖u_T‖, 0, 0] per contact, plus, with
+    equalities, ‖Vᵀ r + R λ + s‖ / (1 + ‖s‖). The normalization is fclib's as coded,
+    ``sqrt(error)/(1.0 + sqrt(dnrm2(q)))``: 1 + the square root of ‖q‖ (not 1 + ‖q‖). fclib itself
+    computes it for spacedim 3 only; the formula is the same in 2-D.
     """
-    if problem.V is not None:
-        raise ValueError("fclib_local/V: problems with equality constraints (V, R, s) are not supported here")
     d = problem.spacedim
-    u = per_contact(problem.W @ r + problem.q, d)
+    u = per_contact(velocity(problem, r, l), d)
     z = per_contact(r, d)
     shifted = u.copy()
     shifted[:, 0] += problem.mu * np.linalg.norm(u[:, 1:], axis=1)
     error = z - project_on_cone(z - shifted, problem.mu)
-    return float(np.linalg.norm(error) / (1.0 + np.sqrt(np.linalg.norm(problem.q))))
+    value = np.linalg.norm(error) / (1.0 + np.sqrt(np.linalg.norm(problem.q)))
+    if problem.V is not None:
+        value += np.linalg.norm(equality_residual(problem, r, l)) / (1.0 + np.linalg.norm(problem.s))
+    return float(value)
 
 
-def natural_residuals(problem: LocalProblem, r: np.ndarray) -> dict[str, float]:
+def natural_residuals(problem: LocalProblem, r: np.ndarray, l: np.ndarray | None = None) -> dict[str, float]:
     """Our certificate of the answer: the largest violation of each condition, by natural maps.
 
     Forces are measured against p_ref = max(‖r‖∞, ‖q‖∞/max|W|), velocities against u_ref = max(‖u‖∞,
-    ‖q‖∞); friction by ‖r_T − Π_B(μ r_N)(r_T − ρ u_T)‖ with ρ = p_ref/u_ref (DESIGN.md, discrete certificate).
+    ‖q‖∞); friction by ‖r_T − Π_B(μ r_N)(r_T − ρ u_T)‖ with ρ = p_ref/u_ref (DESIGN.md, discrete certificate);
+    equalities against max(‖s‖∞, ‖Vᵀ r‖∞).
     """
     d, mu = problem.spacedim, problem.mu
-    u = per_contact(problem.W @ r + problem.q, d)
+    u = per_contact(velocity(problem, r, l), d)
     z = per_contact(r, d)
     scale_W = abs(problem.W).max() if problem.W.nnz else 0.0
     q_max = np.abs(problem.q).max(initial=0.0)
@@ -96,12 +117,16 @@ def natural_residuals(problem: LocalProblem, r: np.ndarray) -> dict[str, float]:
         "friction_bound": np.maximum(np.linalg.norm(z[:, 1:], axis=1) - bound, 0.0).max(initial=0.0) / p_ref,
         "friction_law": np.linalg.norm(z[:, 1:] - shrink[:, None] * trial, axis=1).max(initial=0.0) / p_ref,
     }
+    if problem.V is not None:
+        size = max(np.abs(problem.s).max(initial=0.0), np.abs(problem.V.T @ r).max(initial=0.0), TINY)
+        values["equalities"] = np.abs(equality_residual(problem, r, l)).max(initial=0.0) / size
     return {k: float(v) for k, v in values.items()}
 
 
-def tresca_program(problem: LocalProblem) -> tuple[ConicProgram, np.ndarray, np.ndarray]:
-    """min ½rᵀWr + qᵀr s.t. r_N ≥ 0, (s_k, r_T,k) ∈ SOC, in FClib's order, scaled; the rows of b holding
-    s (in the program's units: s_k / scale_k) and the scale of each unknown (r = scale · x).
+def tresca_program(problem: LocalProblem) -> tuple[ConicProgram, np.ndarray, np.ndarray, float]:
+    """min ½rᵀWr + qᵀr s.t. [Vᵀ r + s = 0], r_N ≥ 0, (s_k, r_T,k) ∈ SOC, in FClib's order, scaled; the rows
+    of b holding the slip bounds (in the program's units: s_k / scale_k), the scale of each unknown
+    (r = scale · x) and β (the equalities' multipliers are λ = β² z).
 
     Scaling: contact k's unknowns by d_k = 1/√(largest diagonal entry of its block of W) (a scalar per
     contact keeps its cone), then all by ‖D q‖∞, so that the solver sees a unit diagonal and a unit q:
@@ -120,10 +145,15 @@ def tresca_program(problem: LocalProblem) -> tuple[ConicProgram, np.ndarray, np.
     normal_rows = -sp.csr_matrix((np.ones(count), (np.arange(count), np.arange(count) * d)), shape=(count, n))
     tangent = np.arange(n)[np.arange(n) % d != 0]  # unknown k·d + j, j ≥ 1, sits at SOC row count + k·d + j
     cone_rows = -sp.csr_matrix((np.ones(tangent.size), (tangent, tangent)), shape=(n, n))
-    A = sp.vstack([normal_rows, cone_rows]).tocsc()
-    program = ConicProgram(sp.csc_matrix(W), q / beta, A, np.zeros(count + n),
-                           (nonnegative(count),) + (soc(d),) * count)
-    return program, count + np.arange(count) * d, scale
+    equalities = 0 if problem.V is None else problem.V.shape[1]
+    if problem.R is not None and problem.R.count_nonzero():
+        raise ValueError("fclib_local/R: a nonzero R (λ in its own equations) is not supported; R = 0 is")
+    rows = [normal_rows, cone_rows] if not equalities else [sp.csr_matrix(problem.V.T) @ sp.diags(scale),
+                                                             normal_rows, cone_rows]
+    cones = ((zero(equalities),) if equalities else ()) + (nonnegative(count),) + (soc(d),) * count
+    b = np.concatenate([-problem.s if equalities else np.zeros(0), np.zeros(count + n)])
+    program = ConicProgram(sp.csc_matrix(W), q / beta, sp.vstack(rows).tocsc(), b, cones)
+    return program, equalities + count + np.arange(count) * d, scale, beta
 
 
 @dataclass
@@ -140,6 +170,7 @@ class Answer:
     history: list[dict] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     v: np.ndarray | None = None
+    l: np.ndarray | None = None  # multipliers λ of the equalities (FClib's name)
     extra: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
@@ -164,17 +195,14 @@ def solve_local(problem: LocalProblem, solver: str = "clarabel", merit_tol: floa
     4e-9 → 2e-13); a polish that raises (on a 3-D punch the cone polish met NaNs once slip bounds were 0
     at open contacts) leaves the first answer, and ``extra["polish"]`` says so.
     """
-    if problem.V is not None or problem.R is not None:
-        raise ValueError("fclib_local/V, R: equality constraints (FClib's mixed local problem) are not supported; "
-                         "only FC(W, q, μ)")
     if not 0 < relaxation <= 1:
         raise ValueError(f"relaxation: ω must lie in (0, 1], got {relaxation}")
     start = time.perf_counter()
-    program, bound_rows, scale = tresca_program(problem)
+    program, bound_rows, scale, beta = tresca_program(problem)
     mu, d = problem.mu, problem.spacedim
     s = np.zeros(mu.size) if guess is None else mu * np.maximum(per_contact(guess, d)[:, 0], 0.0)
-    settings = (merit_tol, max_iterations, relaxation)
-    (value, r), history, outcome = picard(problem, program, bound_rows, scale, s, settings,
+    settings = (merit_tol, max_iterations, relaxation, beta)
+    (value, r, l), history, outcome = picard(problem, program, bound_rows, scale, s, settings,
                                           solvers.session(program, solver, **{"polishing": False, **options}))
     extra = {}
     if "polishing" not in options and value > merit_tol and outcome != "solver failed":
@@ -185,22 +213,24 @@ def solve_local(problem: LocalProblem, solver: str = "clarabel", merit_tol: floa
             extra["polish"] = f"rerun with the polish: {how}, merit {polished[0]:.1e}"
             history += [{**step, "polished": True} for step in more]
             if polished[0] < value:
-                (value, r), outcome = polished, how
+                (value, r, l), outcome = polished, how
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
             extra["polish"] = f"rerun with the polish failed: {error}"
     if not np.isfinite(value):
-        value = merit(problem, r)
+        value = merit(problem, r, l)
     status = "failed" if outcome == "solver failed" and len(history) == 1 else \
         "solved" if value <= CERTIFIED else "inaccurate"
-    return Answer(r, problem.W @ r + problem.q, value, natural_residuals(problem, r), status, outcome, len(history),
-                  history, {"total": time.perf_counter() - start}, extra=extra)
+    return Answer(r, velocity(problem, r, l), value, natural_residuals(problem, r, l), status, outcome, len(history),
+                  history, {"total": time.perf_counter() - start}, l=l, extra=extra)
 
 
 def picard(problem: LocalProblem, program: ConicProgram, bound_rows, scale, s, settings, session):
-    """Run the map from slip bounds ``s``; (least merit, its r), the history and the outcome."""
-    merit_tol, max_iterations, relaxation = settings
+    """Run the map from slip bounds ``s``; (least merit, its r and λ), the history and the outcome."""
+    merit_tol, max_iterations, relaxation, beta = settings
     mu, d = problem.mu, problem.spacedim
-    history, outcome, best, last_better = [], "not converged", (np.inf, np.zeros(program.n_variables)), 0
+    equalities = 0 if problem.V is None else problem.V.shape[1]
+    zero_l = np.zeros(equalities) if equalities else None
+    history, outcome, best, last_better = [], "not converged", (np.inf, np.zeros(program.n_variables), zero_l), 0
     for k in range(1, max_iterations + 1):
         b = program.b.copy()
         b[bound_rows] = s / scale[::d]
@@ -210,9 +240,10 @@ def picard(problem: LocalProblem, program: ConicProgram, bound_rows, scale, s, s
             history.append({"iteration": k, "solver_status": solution.solver_status})
             return best, history, "solver failed"
         r = scale * solution.x
-        value = merit(problem, r)
+        l = beta**2 * solution.z[:equalities] if equalities else None
+        value = merit(problem, r, l)
         if value < best[0]:
-            best, last_better = (value, r), k
+            best, last_better = (value, r, l), k
         target = mu * np.maximum(per_contact(r, d)[:, 0], 0.0)
         change = float(np.abs(target - s).max(initial=0.0) / max(np.abs(target).max(initial=0.0), TINY))
         history.append({"iteration": k, "change": change, "merit": value,
