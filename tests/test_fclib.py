@@ -1,6 +1,7 @@
 """FClib (Siconos' frictional-contact problem library): the format, the mapping of our dual onto its local
 problem, fclib's merit function, and solving imported problems (docs/fclib.md)."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +10,7 @@ import scipy.sparse as sp
 
 import convexcontact as cc
 from convexcontact.scene.library import frictional_punch, punch_3d
+from convexcontact.scene.toml import load_scene
 
 h5py = pytest.importorskip("h5py")
 
@@ -125,13 +127,19 @@ def test_weak_non_penetration_exports_the_same_law(tmp_path):
     np.testing.assert_allclose(answer.r, stored.r, atol=1e-8 * np.abs(stored.r).max())
 
 
-def test_a_prescribed_obstacle_force_is_fclibs_mixed_problem(tmp_path):
-    """Hertz under force control: a_ᵀ λ_N = P is Vᵀ r + R λ + s = 0 (R = 0, s = −P), λ = −(obstacle advance)."""
+@pytest.mark.parametrize("pull", [None, 0.1])
+def test_a_prescribed_obstacle_force_is_fclibs_mixed_problem(tmp_path, pull):
+    """Hertz under force control: a_ᵀ r = P is Vᵀ r + R λ + s = 0 (R = 0, s = −P), λ = −(obstacle advance);
+    a tangential force Q = 0.1 P pulling the obstacle adds a second column (and an all-stick start)."""
     scene = cc.library.hertz_punch(nx=40, law=cc.Coulomb(friction=0.3, tol=1e-12))
+    force = cc.library.HERTZ_FORCE
+    obstacle = cc.Obstacle("parabolic", radius=1.0, force=force, tangential_force=pull and pull * force)
+    scene = dataclasses.replace(scene, contact=dataclasses.replace(scene.contact, obstacle=obstacle))
     *_, result = fclib_scene.export(scene, tmp_path / "hertz.hdf5")
     problem, stored, _ = fclib.read(tmp_path / "hertz.hdf5")
-    assert problem.V.shape == (problem.q.size, 1) and problem.R.count_nonzero() == 0
-    assert stored.l == pytest.approx([-result.obstacle_advance / result.fem.scaling.displacement])
+    motion = [result.obstacle_advance] + ([result.obstacle_shift] if pull else [])
+    assert problem.V.shape == (problem.q.size, len(motion)) and problem.R.count_nonzero() == 0
+    assert stored.l == pytest.approx(-np.array(motion) / result.fem.scaling.displacement)
     assert merit(problem, stored.r, stored.l) < 1e-10
     answer = solve_local(problem)
     assert answer.status == "solved" and answer.merit < 1e-10
@@ -169,6 +177,9 @@ def test_fclibs_own_test_problem():
 def test_refused_problems_say_why(tmp_path):
     with pytest.raises(cc.SceneError, match="contact.law"):
         fclib_scene.export(cc.library.tresca_punch(nx=8), tmp_path / "t.hdf5")
+    history = load_scene(Path(__file__).parents[1] / "examples" / "scenes" / "sliding_block.toml")
+    with pytest.raises(cc.SceneError, match="history"):
+        fclib_scene.export(history, tmp_path / "h.hdf5")
     gauss = cc.Coulomb(friction=0.3, quadrature="gauss")
     with pytest.raises(cc.SceneError, match="contact.quadrature"):
         fclib_scene.local_problem(cc.prepare(punch_3d(cells=2, law=gauss), "dual"))

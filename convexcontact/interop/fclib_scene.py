@@ -22,9 +22,9 @@ The law must be FClib's: local Coulomb at the contact nodes (quadrature "nodal",
 ε, no normal compliance). A prescribed obstacle force (and, in 2-D, tangential force) is an equality
 a_jᵀ r = P_j of our dual: FClib's mixed local problem Vᵀ r + R λ + s = 0, û = W r + V λ + q + …,
 with V = Π a_j, R = 0, s = −P_j and λ = our multipliers = minus the obstacle's advance (and shift),
-scaled; the global problem has no place for the obstacle's motion and is refused then. Contacts whose displacement is all
-prescribed carry nothing (zero rows of W) and are left out. Values are in our scaled units; the
-factors back to the user's are written in the problem's ``info``.
+scaled; the global problem has no place for the obstacle's motion and is refused then. Contacts whose
+displacement is all prescribed carry nothing (zero rows of W) and are left out. Values are in our
+scaled units; the factors back to the user's are written in the problem's ``info``.
 """
 
 from __future__ import annotations
@@ -150,6 +150,9 @@ def export(scene: Scene, path, kind: str = "local", solver: str = "clarabel", **
     if not isinstance(scene.contact.law, Coulomb):
         raise SceneError("contact.law", "cannot be exported to FClib: FClib stores Coulomb problems",
                          "use a Coulomb law")
+    if scene.history is not None:
+        raise SceneError("history", "cannot be exported to FClib: a file holds one static problem",
+                         "export one step (the scene without its history, under that step's data)")
     model = prepare(scene, "dual")
     problem, order = (local_problem if kind == "local" else global_problem)(model)
     result = model.solve(solver, **options)

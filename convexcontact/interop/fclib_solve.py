@@ -31,6 +31,9 @@ CERTIFIED = 1e-8
 TINY = 1e-300
 STILL = 1e-14
 """A relative change of the slip bounds below this is a fixed point of the Picard map (round-off)."""
+STICK = 1e3
+"""Slip bounds, in the scaled program's units (r ~ 1), that hold no friction back: the all-stick start of a
+problem whose equalities involve r_T (s = 0 would leave Vᵀ r + s = 0 infeasible)."""
 PATIENCE = 8
 """Picard steps without a better merit after which the map has gone as far as the inner solves' accuracy
 lets it (Clarabel at tol 1e-12 on the condensed 2-D punch: merits wander between 1e-10 and 1e-8)."""
@@ -182,7 +185,8 @@ def solve_local(problem: LocalProblem, solver: str = "clarabel", merit_tol: floa
                 relaxation: float = 1.0, guess: np.ndarray | None = None, **options) -> Answer:
     """Coulomb's law on FC(W, q, μ) by the Picard map over Tresca programs (module docstring).
 
-    Starts from the frictionless answer (s = 0), or from the slip bounds μ r_N of ``guess``. Stops when
+    Starts from the frictionless answer (s = 0; all-stick when equalities involve r_T), or from the slip
+    bounds μ r_N of ``guess``. Stops when
     an iterate's FClib merit is at most ``merit_tol`` (converged), when s stops changing (a fixed point: the
     merit is then what the inner solves reach), when the merit has not improved for ``PATIENCE`` steps
     (stagnated), or after ``max_iterations``; returns the iterate of least merit. The change of s alone
@@ -201,6 +205,8 @@ def solve_local(problem: LocalProblem, solver: str = "clarabel", merit_tol: floa
     program, bound_rows, scale, beta = tresca_program(problem)
     mu, d = problem.mu, problem.spacedim
     s = np.zeros(mu.size) if guess is None else mu * np.maximum(per_contact(guess, d)[:, 0], 0.0)
+    if guess is None and problem.V is not None and problem.V.tocsr()[np.arange(mu.size * d) % d != 0].count_nonzero():
+        s = STICK * scale[::d]  # a tangential equality (a force pulling the obstacle) has no frictionless answer
     settings = (merit_tol, max_iterations, relaxation, beta)
     (value, r, l), history, outcome = picard(problem, program, bound_rows, scale, s, settings,
                                           solvers.session(program, solver, **{"polishing": False, **options}))
