@@ -185,18 +185,18 @@ def solve_local(problem: LocalProblem, solver: str = "clarabel", merit_tol: floa
                 relaxation: float = 1.0, guess: np.ndarray | None = None, **options) -> Answer:
     """Coulomb's law on FC(W, q, μ) by the Picard map over Tresca programs (module docstring).
 
-    Starts from the frictionless answer (s = 0; all-stick when equalities involve r_T), or from the slip
-    bounds μ r_N of ``guess``. Stops when
-    an iterate's FClib merit is at most ``merit_tol`` (converged), when s stops changing (a fixed point: the
-    merit is then what the inner solves reach), when the merit has not improved for ``PATIENCE`` steps
-    (stagnated), or after ``max_iterations``; returns the iterate of least merit. The change of s alone
-    is no test: where W is singular (rigid bodies) r_N is not unique and s may wander among solutions,
-    each with a merit of 1e-13 (the fclib test file). ``options`` go to the solver (:func:`solvers.session`).
+    Starts from the frictionless answer (s = 0; all-stick when equalities involve r_T), or from the
+    slip bounds μ r_N of ``guess``. Stops when an iterate's FClib merit is at most ``merit_tol``
+    (converged), when s stops changing (a fixed point: the merit is then what the inner solves reach),
+    when the merit has not improved for ``PATIENCE`` steps (stagnated), or after ``max_iterations``;
+    returns the iterate of least merit. The change of s alone is no test: where W is singular (rigid
+    bodies) r_N is not unique and s may wander among solutions, each with a merit of 1e-13 (the fclib
+    test file). ``options`` go to the solver (:func:`solvers.session`).
 
     Unless ``polishing`` is given, the map runs without Clarabel's polish first (on the fclib test file
     the polish made every step 20× slower and ended less accurate, 5e-9 against 4e-13) and, if that
     stops above ``merit_tol``, again with it from the best answer, keeping the better one (the 2-D punch:
-    4e-9 → 2e-13); a polish that raises (on a 3-D punch the cone polish met NaNs once slip bounds were 0
+    4e-9 → 5e-14); a polish that raises (on a 3-D punch the cone polish met NaNs once slip bounds were 0
     at open contacts) leaves the first answer, and ``extra["polish"]`` says so.
     """
     if not 0 < relaxation <= 1:
