@@ -1,4 +1,4 @@
-"""Command line: ``convexcontact demo``, ``run SCENE.toml``, ``compare``, ``study …`` and ``bench``."""
+"""Command line: ``convexcontact demo``, ``run SCENE.toml``, ``compare``, ``study …``, ``fclib …`` and ``bench``."""
 
 from __future__ import annotations
 
@@ -174,6 +174,8 @@ def commands(argv=None) -> int:
                                 "| uniqueness … | grid SCENE --param PATH=V1,V2 …", add_help=False)
     study.add_argument("kind", choices=["work-precision", "sweep", "stability", "uniqueness", "grid"])
     study.add_argument("arguments", nargs=argparse.REMAINDER)
+    commands.add_parser("fclib", help="FClib HDF5 problems: solve FILE.hdf5 | export SCENE.toml --out FILE.hdf5 "
+                        "[--global] (docs/fclib.md)", add_help=False)
     commands.add_parser("bench", help="contact solve ÷ one linear solve per size (--dim 2|3 --sizes …, --sweep N, "
                         "--history N)")
     compare = commands.add_parser(
@@ -191,6 +193,10 @@ def commands(argv=None) -> int:
         study.print_help()
         print("\neach study has its own options: convexcontact study KIND --help")
         return 0
+    if argv[:1] == ["fclib"]:  # its subcommands belong to its own parser
+        from .interop.fclib_cli import main as fclib_main
+
+        return fclib_main(argv[1:])
     if argv[:1] == ["bench"]:  # its options (--dim …) belong to its own parser
         from .studies import bench, history_bench
 

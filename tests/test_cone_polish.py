@@ -104,6 +104,30 @@ def test_warm_started_resolves_after_changed_slip_bounds_equal_cold_solves():
         assert kkt_violation(session.program, warm.x, warm.z) < 1e-12
 
 
+def test_a_warm_start_from_zero_slip_bounds_lands_on_the_cold_answer():
+    """Balls of radius 0 hold their answer at the centre; when the radii become positive (a Picard map's first
+    step from s = 0) the warm start's guess puts some of those answers on their spheres, where the centre has
+    no direction: the polish starts them where the cost pulls instead of on NaN (found through FClib)."""
+    model = tresca_dual()
+    form = bound_form(model.program)
+    radius = model.program.b[form.ball_radius_rows]
+    session = clarabel_direct.Session(dataclasses.replace(model.program, b=_with_radius(model.program, form, 0.0)))
+    assert session.solve().solved
+    b = _with_radius(model.program, form, 1e-4 * radius)  # small beside the pull on the centres: on the spheres
+    session.update(b=b)
+    warm = session.solve()
+    cold = clarabel_direct.Session(dataclasses.replace(model.program, b=b)).solve()
+    assert warm.info.get("warm_start") and warm.solved
+    assert np.abs(warm.x - cold.x).max() < 1e-10 * np.abs(cold.x).max()
+    assert kkt_violation(session.program, warm.x, warm.z) < 1e-12
+
+
+def _with_radius(program, form, radius):
+    b = program.b.copy()
+    b[form.ball_radius_rows] = radius
+    return b
+
+
 def test_roller_directions_give_empty_friction_rows():
     """On the quarter model's symmetry planes one tangential direction is a roller: the friction rows of
     those nodes must be empty (not round-off), or the dual's W is rank-deficient instead of having an

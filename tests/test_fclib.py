@@ -15,6 +15,7 @@ from convexcontact.scene.toml import load_scene
 h5py = pytest.importorskip("h5py")
 
 from convexcontact.interop import fclib, fclib_scene
+from convexcontact.cli import main as cli_main
 from convexcontact.interop.fclib_cli import main
 from convexcontact.interop.fclib_solve import condense, merit, natural_residuals, solve_global, solve_local
 
@@ -217,7 +218,7 @@ def test_matrices_in_all_three_storages(tmp_path):
 
 
 def test_command_line(tmp_path, capsys):
-    assert main(["solve", str(SHIPPED), "--json", str(tmp_path / "s.json"), "--out", str(tmp_path / "s.hdf5")]) == 0
+    assert cli_main(["fclib", "solve", str(SHIPPED), "--json", str(tmp_path / "s.json"), "--out", str(tmp_path / "s.hdf5")]) == 0
     report = capsys.readouterr().out
     assert "Boxes Stack" in report and "stored /solution" in report
     _, ours, _ = fclib.read(tmp_path / "s.hdf5")

@@ -3,7 +3,6 @@
 from pathlib import Path
 
 import meshio
-import numpy as np
 import pytest
 
 import convexcontact as cc

@@ -100,4 +100,5 @@ def test_a_load_of_round_off_size_does_not_set_the_scale(formulation):
                                 contact=cc.Contact("bottom", cc.Obstacle("flat", gap=1e-3), cc.Signorini()))
     result = cc.solve(scene, formulation=formulation)
     assert result.status == "solved" and result.certificate.passes(1e-12)
-    assert np.abs(result.displacement).max() <= 4e-290 and not result.closed.any()
+    # the body translates rigidly by 4e-290; its free nodes come from a factorization, to round-off
+    assert np.abs(result.displacement).max() <= 4e-290 * (1.0 + 1e-12) and not result.closed.any()

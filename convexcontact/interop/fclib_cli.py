@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..results.output import check_file_target
 from ..scene.model import SceneError
 
 
@@ -39,10 +40,10 @@ def parser() -> argparse.ArgumentParser:
 
 
 def check_target(path: Path | None, overwrite: bool, option: str) -> None:
+    """Refuse, before any work, an output file that is a folder, lacks its folder, or exists without --overwrite."""
     if path is None:
         return
-    if path.is_dir() or not path.parent.is_dir():
-        raise ValueError(f"{option}: {path} is a folder or its folder does not exist; give a file, e.g. out.hdf5")
+    check_file_target(path, option, example="problem.hdf5")
     if path.exists() and not overwrite:
         raise ValueError(f"{option}: {path} exists; pass --overwrite to replace it")
 

@@ -102,8 +102,9 @@ def centre(radius: np.ndarray, scale: float) -> np.ndarray:
 
 def unit_rows(w: np.ndarray) -> np.ndarray:
     """The rows of w scaled to unit length, without under- or overflow (a slip bound of 1e-259 gave
-    ‖w‖² = 0 and NaN directions)."""
-    scaled = w / np.abs(w).max(axis=1, keepdims=True)
+    ‖w‖² = 0 and NaN directions). A zero row, which has no direction, becomes e₁."""
+    largest = np.abs(w).max(axis=1, keepdims=True)
+    scaled = np.where(largest > 0, w, np.eye(1, w.shape[1])) / np.where(largest > 0, largest, 1.0)
     return scaled / np.linalg.norm(scaled, axis=1, keepdims=True)
 
 
@@ -188,7 +189,12 @@ def _newton(P, q, b, A, form: BoundForm, x0, z0, active, on_sphere, unused):
         x[sphere_vars] = (sphere_b - w) / sphere_coef
         return w
 
-    w = retract(sphere_b - sphere_coef * x[sphere_vars])
+    # a guess that puts the answer on a sphere while it is at the centre (a warm start from a slip bound of
+    # 0, now positive) has no direction there: start it where the cost pulls, x − ∇f, i.e. w + a ⊙ ∇f
+    w = sphere_b - sphere_coef * x[sphere_vars]
+    at_centre = ~np.abs(w).any(axis=1)
+    w[at_centre] = (sphere_coef * (P @ x + q)[sphere_vars])[at_centre]
+    w = retract(w)
     scale = max(np.abs(q).max(initial=0.0), np.abs(P @ x).max(initial=0.0), 1.0)
     y = z0[form.equality]
     nu = z0[form.ball_radius_rows[sphere]]  # the guess's ν: a stationarity estimate is off after a change of radius
