@@ -14,8 +14,8 @@ from convexcontact.scene.toml import load_scene
 
 h5py = pytest.importorskip("h5py")
 
-from convexcontact.interop import fclib, fclib_scene
 from convexcontact.cli import main as cli_main
+from convexcontact.interop import fclib, fclib_scene
 from convexcontact.interop.fclib_cli import main
 from convexcontact.interop.fclib_solve import condense, merit, natural_residuals, solve_global, solve_local
 

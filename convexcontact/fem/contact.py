@@ -9,7 +9,7 @@ import scipy.sparse as sp
 import skfem as fe
 from skfem.helpers import dot
 
-from ..scene.model import Contact, SceneError
+from ..scene.model import COVERED, Contact, SceneError
 from .mesh import check_boundary
 from .scaling import Scaling
 
@@ -103,28 +103,41 @@ def tangent_frame(normals: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray,
     return tangents, np.cross(normals, tangents), mean / np.linalg.norm(mean)
 
 
-def axis_distance(obstacle, coords: np.ndarray, coordinate: np.ndarray, mean_normal: np.ndarray) -> np.ndarray:
-    """r of the shaped obstacles: the coordinate along Γ_C minus the centre in 2-D, the distance from
-    the punch axis (through ``obstacle.center`` along the mean normal) in 3-D (user units)."""
+def axis_offset(obstacle, coords: np.ndarray, coordinate: np.ndarray, mean_normal: np.ndarray,
+                mean_tangent: np.ndarray) -> np.ndarray:
+    """Each node's offset (m × d, user units) from the punch axis in Γ_C's mean plane: along the mean
+    tangent from ``obstacle.center`` in 2-D; from the axis through the point ``center`` along the mean
+    normal in 3-D. Its length is the r of the shaped obstacles, signed in 2-D (the coordinate minus the
+    centre)."""
     if coords.shape[1] == 2:
         obstacle.axis(2)
-        return coordinate - obstacle.center
+        return np.outer(coordinate - obstacle.center, mean_tangent)
     offset = coords - obstacle.axis(3)
-    return np.linalg.norm(offset - np.outer(offset @ mean_normal, mean_normal), axis=1)
+    return offset - np.outer(offset @ mean_normal, mean_normal)
 
 
-def contact_trace(
-    contact: Contact, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray, prescribed: np.ndarray
-) -> ContactTrace:
-    """Build the trace of Γ_C from the named boundary and the obstacle."""
-    facets = check_boundary(mesh, contact.boundary, "contact.boundary")
+def axis_distance(offset: np.ndarray, mean_tangent: np.ndarray) -> np.ndarray:
+    """r from :func:`axis_offset`: signed along the mean tangent in 2-D, the distance in 3-D."""
+    return offset @ mean_tangent if offset.shape[1] == 2 else np.linalg.norm(offset, axis=1)
+
+
+@dataclass
+class _Nodes:
+    """The nodes of a set of facets of Γ_C: DOFs, scaled coordinates, normals, boundary mass, weights."""
+
+    dofs: np.ndarray
+    coords: np.ndarray
+    normals: np.ndarray
+    mass: sp.csr_matrix
+    weights: np.ndarray
+
+
+def _nodes(facets: np.ndarray, mesh: fe.Mesh, basis: fe.Basis, boundary: str) -> _Nodes:
     dim = mesh.dim()
     view = basis.get_dofs(facets)
     dofs = np.column_stack([view.all(f"u^{i + 1}") for i in range(dim)])
     if dofs.shape[0] == 0:
-        raise SceneError("contact.boundary", f"{contact.boundary!r} carries no nodes")
-    coords = basis.doflocs[:, dofs[:, 0]].T
-
+        raise SceneError("contact.boundary", f"{boundary!r} carries no nodes")
     facet_basis = fe.FacetBasis(mesh, basis.elem, facets=facets)
     # n_i ∝ ∫ ψ_i n ds: the outward normal averaged with the shape function's weight,
     # well defined for any Lagrange element and for curved facets
@@ -137,19 +150,54 @@ def contact_trace(
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     mass = fe.asm(fe.BilinearForm(lambda u, v, w: u[0] * v[0]), facet_basis).tocsr()[dofs[:, 0]][:, dofs[:, 0]]
     weights = np.asarray(mass.sum(axis=1)).ravel()  # partition of unity: Σ_j ∫ψ_iψ_j = ∫ψ_i
+    return _Nodes(dofs, basis.doflocs[:, dofs[:, 0]].T, normals, mass, weights)
 
-    tangents, bitangents, mean_tangent = tangent_frame(normals, weights)
+
+def _mean_frame(nodes: _Nodes) -> tuple[np.ndarray, np.ndarray]:
+    """Γ_C's mean normal and mean (first) tangent."""
+    mean_normal = nodes.weights @ nodes.normals
+    return mean_normal / np.linalg.norm(mean_normal), tangent_frame(nodes.normals, nodes.weights)[2]
+
+
+def under_punch(contact: Contact, facets: np.ndarray, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling):
+    """The facets of Γ_C whose vertices all lie under a flat punch (within round-off of its edge)."""
+    mean_normal, mean_tangent = _mean_frame(_nodes(facets, mesh, basis, contact.boundary))
+    vertices = mesh.p[:, mesh.facets[:, facets]].T * scaling.length  # (facets, vertices, d)
+    flat = vertices.reshape(-1, mesh.dim())
+    offset = axis_offset(contact.obstacle, flat, flat @ mean_tangent, mean_normal, mean_tangent)
+    r = np.abs(axis_distance(offset, mean_tangent)).reshape(vertices.shape[:2])
+    kept = facets[(r <= contact.obstacle.radius * (1.0 + COVERED)).all(axis=1)]
+    if kept.size == 0:
+        raise SceneError("obstacle.radius", f"no facet of {contact.boundary!r} lies entirely under the flat punch "
+                         f"(radius {contact.obstacle.radius})", "use a larger radius or a finer mesh under the punch")
+    return kept
+
+
+def contact_trace(
+    contact: Contact, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray, prescribed: np.ndarray
+) -> ContactTrace:
+    """Build the trace of Γ_C from the named boundary and the obstacle."""
+    facets = check_boundary(mesh, contact.boundary, "contact.boundary")
+    obstacle = contact.obstacle
+    if obstacle.shape == "flat_punch":
+        facets = under_punch(contact, facets, mesh, basis, scaling)
+    nodes = _nodes(facets, mesh, basis, contact.boundary)
+    dim = mesh.dim()
+    dofs, coords, normals, weights = nodes.dofs, nodes.coords, nodes.normals, nodes.weights
+    mean_normal, mean_tangent = _mean_frame(nodes)
     coordinate = coords @ mean_tangent
+    user_coords = coords * scaling.length
+    offset = axis_offset(obstacle, user_coords, coordinate * scaling.length, mean_normal, mean_tangent)
+    if obstacle.normal == "obstacle":
+        gap, normals = obstacle.closest_point(offset, mean_normal)
+    else:
+        gap = obstacle.shape_gap(user_coords, axis_distance(offset, mean_tangent)) - (obstacle.depth or 0.0)
+    gap = gap / scaling.displacement
+    tangents, bitangents, _ = tangent_frame(normals, weights)
     frame = [tangents] if bitangents is None else [tangents, bitangents]
     N_full = _rows(normals, dofs, basis.N)
     T_full = sp.vstack([_rows(t, dofs, basis.N) for t in frame]).tocsr()
 
-    obstacle = contact.obstacle
-    mean_normal = (weights @ normals) / np.linalg.norm(weights @ normals)
-    user_coords = coords * scaling.length
-    r = axis_distance(obstacle, user_coords, coordinate * scaling.length, mean_normal)
-    gap = obstacle.shape_gap(user_coords, r)
-    gap = (gap - (obstacle.depth or 0.0)) / scaling.displacement
     coupling = normals @ mean_normal if obstacle.force_controlled else None
     tangential = None
     if obstacle.tangential_force is not None:
@@ -166,7 +214,7 @@ def contact_trace(
         tangents=tangents,
         coordinate=coordinate,
         weights=weights,
-        mass=mass,
+        mass=nodes.mass,
         N=N_full[:, free],
         T=T_full[:, free],
         normal_offset=N_full @ prescribed,

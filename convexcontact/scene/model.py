@@ -211,6 +211,11 @@ class Traction:
 GapFunction = Callable[..., np.ndarray]
 
 
+COVERED = 1e-12
+"""Relative round-off by which a node may lie beyond a cylinder's or sphere's radius (a radius equal to
+the half-width of Γ_C: the gap there is R, along a vertical tangent)."""
+
+
 @dataclass(frozen=True)
 class Obstacle:
     """Rigid obstacle, described by the initial gap g along the outward normal of Γ_C.
@@ -224,6 +229,14 @@ class Obstacle:
         g = R − sqrt(R² − r²) − d, exact;
       - ``"expression"``: g = ``expression``(x, y[, z]), a formula string or a callable.
 
+      - ``"flat_punch"``: a rigid flat punch with sharp edges, of half-width ``radius`` (2-D) or
+        circular of that radius (3-D): g = −d under it; the contact boundary is cut to the
+        facets entirely under the punch (nothing outside can touch it).
+
+    ``normal``: what the gap and the non-penetration are measured along — ``"body"`` (default),
+    the outward normal of Γ_C at each node, or ``"obstacle"``, the obstacle's normal at the
+    node's closest point: g = the distance to a cylinder or sphere, whatever the node's distance
+    from the axis (flat and flat punch: the obstacle's face normal, the mean normal of Γ_C).
     ``center``: a number in 2-D, a point (x, y, z) in 3-D (the default 0 is the origin).
     Exactly one of ``depth`` (indentation d, displacement control) and ``force``
     (resultant P, per unit thickness in 2-D, pressing the obstacle on the body; force
@@ -241,8 +254,12 @@ class Obstacle:
     force: float | None = None
     expression: str | GapFunction | None = None
     tangential_force: float | None = None
+    normal: str = "body"
 
-    SHAPES = ("flat", "parabolic", "cylinder", "sphere", "expression")
+    SHAPES = ("flat", "parabolic", "cylinder", "sphere", "flat_punch", "expression")
+    NORMALS = ("body", "obstacle")
+    CLOSEST_POINT = ("flat", "cylinder", "sphere", "flat_punch")
+    """The shapes whose closest point is known (``normal = "obstacle"``)."""
 
     def __post_init__(self):
         if self.shape not in self.SHAPES:
@@ -254,8 +271,13 @@ class Obstacle:
         center = finite(self.center, "obstacle.center") if np.ndim(self.center) == 0 else \
             finite_vector(self.center, "obstacle.center", 3)
         object.__setattr__(self, "center", center)
-        if self.shape in ("parabolic", "cylinder", "sphere") and (self.radius is None or self.radius <= 0):
+        if self.shape in ("parabolic", "cylinder", "sphere", "flat_punch") and (self.radius is None or self.radius <= 0):
             raise SceneError("obstacle.radius", "a punch needs a positive radius")
+        if self.normal not in self.NORMALS:
+            raise SceneError("obstacle.normal", f"got {self.normal!r}", f"use one of {self.NORMALS}")
+        if self.normal == "obstacle" and self.shape not in self.CLOSEST_POINT:
+            raise SceneError("obstacle.normal", f"the {self.shape} obstacle has no closest point to measure along",
+                             f"use normal = 'body', or a shape among {self.CLOSEST_POINT}")
         if self.shape == "expression":
             if self.expression is None:
                 raise SceneError("obstacle.expression", "missing", "give a formula in x and y, e.g. 'x**2/2 - 0.01'")
@@ -289,20 +311,39 @@ class Obstacle:
         dim = points.shape[1]
         if self.shape == "flat":
             return np.full(r.shape, self.gap)
+        if self.shape == "flat_punch":  # Γ_C is cut to the punch (fem/contact.py)
+            return np.zeros(r.shape)
         if self.shape == "expression":
             return evaluate_field(self.expression, "obstacle.expression", points, minimum=-np.inf)
         if dim == 3 and self.shape == "cylinder":
             raise SceneError("obstacle.shape", "a cylinder is a 2-D punch", "use 'sphere' or 'parabolic' in 3-D")
         if self.shape == "parabolic":
             return r**2 / (2.0 * self.radius)
-        outside = np.abs(r) >= self.radius
+        outside = np.abs(r) > self.radius * (1.0 + COVERED)
         if outside.any():
             raise SceneError(
                 "obstacle.radius",
                 f"the {self.shape} (radius {self.radius}) does not cover the contact boundary",
-                "use a larger radius, the parabolic shape, or a smaller contact boundary",
+                "use a larger radius, normal = 'obstacle' (the distance to the obstacle, defined everywhere), "
+                "the parabolic shape, or a smaller contact boundary",
             )
-        return self.radius - np.sqrt(self.radius**2 - r**2)
+        return self.radius - np.sqrt(np.maximum(self.radius**2 - r**2, 0.0))
+
+    def closest_point(self, offset: np.ndarray, mean_normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(gap, unit normals) along the obstacle's normal (``normal = "obstacle"``), in user units, the
+        indentation included. ``offset`` (m × d) is each node's offset from the axis in Γ_C's mean plane.
+
+        A cylinder or sphere touching that plane on the axis and advanced by d has its centre at
+        (R − d) n̄ from the axis point: node i sees it at c_i = (R − d) n̄ − o_i, at the distance ‖c_i‖ − R
+        along c_i / ‖c_i‖ (moving towards the centre closes the gap). Under force control d is an
+        unknown: the frame is taken at d = 0 and the advance enters linearly, as for ``"body"``.
+        """
+        depth = self.depth or 0.0
+        if self.shape in ("flat", "flat_punch"):
+            return self.shape_gap(offset, np.zeros(len(offset))) - depth, np.tile(mean_normal, (len(offset), 1))
+        to_centre = (self.radius - depth) * mean_normal - offset
+        distance = np.linalg.norm(to_centre, axis=1)
+        return distance - self.radius, to_centre / distance[:, None]
 
 
 @dataclass(frozen=True)

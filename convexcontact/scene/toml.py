@@ -56,13 +56,14 @@ DIRICHLET = {"boundary": TEXT, "ux": NUMBER, "uy": NUMBER, "uz": NUMBER}
 TRACTION = {"boundary": TEXT, "pressure": NUMBER, "vector": VECTOR}
 CONTACT = {"boundary": TEXT, "law": TEXT}
 MOTION = {"depth": NUMBER, "force": NUMBER, "tangential_force": NUMBER}
-PUNCH = {"shape": TEXT, "radius": NUMBER, "center": POINT, **MOTION}
+PUNCH = {"shape": TEXT, "radius": NUMBER, "center": POINT, **MOTION, "normal": TEXT}
 OBSTACLES = {
-    "flat": {"shape": TEXT, "gap": NUMBER, **MOTION},
+    "flat": {"shape": TEXT, "gap": NUMBER, **MOTION, "normal": TEXT},
     "parabolic": PUNCH,
     "cylinder": PUNCH,
     "sphere": PUNCH,
-    "expression": {"shape": TEXT, "expression": TEXT, **MOTION},
+    "flat_punch": PUNCH,
+    "expression": {"shape": TEXT, "expression": TEXT, **MOTION, "normal": TEXT},
 }
 
 COMPLIANCE = {"stiffness": NUMBER, "exponent": NUMBER}
