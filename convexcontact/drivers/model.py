@@ -243,11 +243,9 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
 
 
 def contact_columns(fem: FEModel) -> np.ndarray:
-    """Free DOFs of the contact nodes: the columns of N, T and R, where K is condensed to."""
-    position = np.full(fem.K_full.shape[0], -1)
-    position[fem.free] = np.arange(fem.n_free)
-    columns = position[fem.contact.dofs.ravel()]
-    return np.unique(columns[columns >= 0])
+    """Free DOFs the contact rows touch (the contact nodes; a pair's master nodes too): the columns of
+    N, T and R, where K is condensed to. Their stored entries, zeros included, cover every free DOF of a node."""
+    return np.unique(sp.vstack([fem.contact.N, fem.contact.T]).tocsr().indices)
 
 
 def prepare(scene: Scene, formulation: str = "auto") -> Model:
