@@ -171,8 +171,8 @@ def commands(argv=None) -> int:
         command.add_argument("--overwrite", action="store_true",
                              help="replace the outputs of an earlier run in --out / --json (refused otherwise)")
     study = commands.add_parser("study", help="work-precision SCENE … | sweep penalty|regularization … | stability … "
-                                "| uniqueness … | grid SCENE --param PATH=V1,V2 …", add_help=False)
-    study.add_argument("kind", choices=["work-precision", "sweep", "stability", "uniqueness", "grid"])
+                                "| uniqueness … | grid SCENE --param PATH=V1,V2 … | sfepy …", add_help=False)
+    study.add_argument("kind", choices=["work-precision", "sweep", "stability", "uniqueness", "grid", "sfepy"])
     study.add_argument("arguments", nargs=argparse.REMAINDER)
     commands.add_parser("fclib", help="FClib HDF5 problems: solve FILE.hdf5 | export SCENE.toml --out FILE.hdf5 "
                         "[--global] (docs/fclib.md)", add_help=False)
@@ -204,10 +204,10 @@ def commands(argv=None) -> int:
         return 0 if rows else 1  # every case failed (each said why)
     args = parser.parse_args(argv)
     if args.command == "study":
-        from .studies import grid, stability, sweeps, uniqueness, work_precision
+        from .studies import grid, sfepy_peer, stability, sweeps, uniqueness, work_precision
 
         studies = {"work-precision": work_precision, "sweep": sweeps, "stability": stability, "uniqueness": uniqueness,
-                   "grid": grid}
+                   "grid": grid, "sfepy": sfepy_peer}
         studies[args.kind].main(args.arguments)
         return 0
     if args.command == "compare":
