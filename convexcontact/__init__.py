@@ -15,7 +15,8 @@ from .drivers.model import Model, prepare
 from .drivers.solutions import SolutionSet, all_solutions
 from .drivers.solve import solve
 from .results.result import ContactResult
-from .scene import library
+from .scene import bodies_library, library
+from .scene.bodies import Pair, Part, bodies_scene
 from .scene.history import History
 from .scene.model import (
     Body,
@@ -36,8 +37,8 @@ from .scene.model import (
 
 __all__ = [
     "Body", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Coulomb", "Dirichlet", "History",
-    "HistoryResult", "Material", "MeshFile", "Model", "NormalCompliance", "Obstacle", "Rectangle", "Scene",
-    "SceneError", "Signorini", "SolutionSet", "Traction", "Tresca", "all_solutions", "library", "prepare",
-    "run_history", "solve",
+    "HistoryResult", "Material", "MeshFile", "Model", "NormalCompliance", "Obstacle", "Pair", "Part", "Rectangle",
+    "Scene", "SceneError", "Signorini", "SolutionSet", "Traction", "Tresca", "all_solutions", "bodies_library",
+    "bodies_scene", "library", "prepare", "run_history", "solve",
 ]
 __version__ = "0.1.0"

@@ -11,9 +11,11 @@ import skfem as fe
 from skfem.helpers import ddot, div, dot, eye, sym_grad, trace
 from skfem.models.elasticity import lame_parameters
 
-from ..scene.model import Dirichlet, Material, Scene, SceneError, check_plane
+from ..scene.bodies import Bodies, Pair
+from ..scene.model import Contact, Dirichlet, Material, Scene, SceneError, check_plane
 from .contact import ContactTrace, contact_trace
 from .mesh import build_mesh, check_boundary, vector_basis
+from .mortar import PairTrace, pair_trace
 from .scaling import Scaling
 
 
@@ -61,7 +63,7 @@ class FEModel:
         if not np.array_equal(free, self.free):
             raise SceneError("history", "a step prescribes other displacement components than the scene",
                              "keep the same Dirichlet components at every step (only their values change)")
-        contact = contact_trace(scene.contact, self.mesh, self.basis, self.scaling, free, prescribed)
+        contact = build_trace(scene.contact, self.mesh, self.basis, self.scaling, free, prescribed)
         copy = replace(self, scene=scene, f_full=load_vector(scene, self.mesh, self.basis, self.scaling),
                        prescribed=prescribed, contact=contact)
         copy.__dict__.update({"K": self.__dict__["K"]} if "K" in self.__dict__ else {})  # K is the same
@@ -232,9 +234,18 @@ def characteristic_pressure(scene: Scene, length: float, stress: float, overlap:
     return max(candidates)
 
 
+def build_trace(contact: Contact, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray,
+                prescribed: np.ndarray) -> ContactTrace:
+    """The contact trace: of Γ_C against the obstacle, or of a pair of bodies (:mod:`.mortar`)."""
+    build = pair_trace if isinstance(contact, Pair) else contact_trace
+    return build(contact, mesh, basis, scaling, free, prescribed)
+
+
 def assemble(scene: Scene) -> FEModel:
     """Assemble the scene's finite element model in scaled units."""
-    user_mesh = build_mesh(scene.body)
+    # several bodies come with their mesh concatenated, each part checked on its own (touching bodies
+    # have coincident nodes, which the check of one mesh would take for a crack)
+    user_mesh = scene.body.geometry if isinstance(scene.body, Bodies) else build_mesh(scene.body)
     check_plane(scene.body.plane, user_mesh.dim())
     extent = user_mesh.p.max(axis=1) - user_mesh.p.min(axis=1)
     length = float(extent.max())
@@ -246,8 +257,8 @@ def assemble(scene: Scene) -> FEModel:
     # taken with displacements in user units (it is cheap: boundary integrals only)
     free, prescribed = dirichlet(scene, mesh, basis, 1.0)
     dim = mesh.dim()
-    trace = contact_trace(scene.contact, mesh, basis, Scaling(length, E_max, 1.0, dim), free, prescribed)
-    overlap = max(-(trace.gap - trace.normal_offset).min(initial=0.0), 0.0)
+    unscaled = build_trace(scene.contact, mesh, basis, Scaling(length, E_max, 1.0, dim), free, prescribed)
+    overlap = max(-(unscaled.gap - unscaled.normal_offset).min(initial=0.0), 0.0)
     pressure = characteristic_pressure(scene, length, E_max, overlap, dim)
     # zero load and zero gap: any displacement scale will do, the answer is u = 0. The scale is at least
     # MIN_STRAIN × length: a lone imposed 4e-290 made the scaled obstacle gap 1e287 and W's program overflow
@@ -258,6 +269,7 @@ def assemble(scene: Scene) -> FEModel:
     K_full = stiffness(basis, lame)
     f_full = load_vector(scene, mesh, basis, scaling)
     prescribed = prescribed / scaling.displacement
-    contact = contact_trace(scene.contact, mesh, basis, scaling, free, prescribed)
+    contact = build_trace(scene.contact, mesh, basis, scaling, free, prescribed)
+    pair_warnings = contact.warnings if isinstance(contact, PairTrace) else ()
     return FEModel(scene, scaling, mesh, basis, lame, K_full, f_full, free, prescribed, contact,
-                   locking_warnings(scene, mesh.dim()))
+                   locking_warnings(scene, mesh.dim()) + pair_warnings)

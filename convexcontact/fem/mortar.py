@@ -1,0 +1,211 @@
+"""The contact trace of a pair of bodies in 2-D: mortar (segment-to-segment) or node-to-segment.
+
+Slave node i (non-mortar side, which carries the multipliers), its averaged outward normal n_i and
+tangent t_i; master nodes k:
+
+    u_N,i = n_i·(u_i − Σ_k Π_ik u_k),   u_T,i = t_i·(u_i − Σ_k Π_ik u_k),   g_i = n_i·(Σ_k Π_ik x_k − x_i).
+
+- ``mortar``: Π = D⁻¹M with the dual (biorthogonal) multiplier basis of the slave facets (on a facet
+  A→B, φ*_A = 2ψ_A − ψ_B): D_ij = ∫φ*_i ψ_j = δ_ij w_i with w_i = ∫ψ_i, and M_ik = ∫φ*_i (φ_k∘π)
+  over the intersections of each slave facet with the master facets projected on it along its
+  normal (two Gauss points per intersection: the integrand is quadratic). C(u_N − g) ≤ 0 with
+  C = diag(w) is then ∫φ*_i ([u]·n_i − g) ds ≤ 0, a weak non-penetration; the slave nodes get
+  the forces w_i λ_i n_i, the master nodes −Σ_i M_ik λ_i n_i. As Σ_k M_ik = w_i the resultants
+  balance, and a linear field is reproduced exactly: the contact patch test passes.
+- ``node_to_segment``: Π_ik = φ_k(π(x_i)), x_i projected on the master along n_i.
+
+Slave nodes whose facets are not all covered by the master are left out (with a warning).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import skfem as fe
+
+from ..scene.bodies import Pair
+from ..scene.model import SceneError
+from .contact import ContactTrace, tangent_frame
+from .mesh import check_boundary
+from .scaling import Scaling
+
+COVERED = 1e-9
+"""Relative round-off by which the master's projections may fall short of (or exceed) a slave facet."""
+
+GAUSS = np.array([-1.0, 1.0]) / np.sqrt(3.0)
+
+
+@dataclass
+class PairTrace(ContactTrace):
+    """A trace whose rows couple the slave nodes ``dofs`` to the master nodes ``master_dofs`` through
+    ``transfer`` Π (m × master nodes); ``N_full`` and ``T_full`` are N and T on every DOF."""
+
+    master_dofs: np.ndarray | None = None
+    master_coords: np.ndarray | None = None
+    transfer: sp.csr_matrix | None = None
+    N_full: sp.csr_matrix | None = None
+    T_full: sp.csr_matrix | None = None
+    warnings: tuple[str, ...] = ()
+
+    def forces(self, normal: np.ndarray, tangential: np.ndarray | None = None) -> np.ndarray:
+        """Contact forces on the bodies at every DOF, from the weighted multipliers Cλ_N and w·λ_T."""
+        force = -(self.N_full.T @ normal)
+        return force if tangential is None else force + self.T_full.T @ tangential
+
+    def resultants(self, force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(slave, master) resultants of a DOF vector of ``forces`` (per unit thickness)."""
+        return force[self.dofs].sum(axis=0), force[self.master_dofs].sum(axis=0)
+
+
+@dataclass
+class Segments:
+    """Straight boundary facets, oriented so that the outward normal is the tangent turned clockwise."""
+
+    nodes: np.ndarray  # (facets, 2) vertex indices, start → end
+    start: np.ndarray  # (facets, 2)
+    end: np.ndarray
+    length: np.ndarray
+    tangent: np.ndarray
+    normal: np.ndarray
+
+
+def segments(mesh: fe.Mesh, facets: np.ndarray) -> Segments:
+    nodes = mesh.facets[:, facets].T.copy()
+    centroid = mesh.p[:, mesh.t[:, mesh.f2t[0, facets]]].mean(axis=1).T
+    start, end = mesh.p[:, nodes[:, 0]].T, mesh.p[:, nodes[:, 1]].T
+    turned = np.column_stack([end[:, 1] - start[:, 1], start[:, 0] - end[:, 0]])
+    inward = ((centroid - start) * turned).sum(axis=1) > 0
+    nodes[inward] = nodes[inward, ::-1]
+    start, end = mesh.p[:, nodes[:, 0]].T, mesh.p[:, nodes[:, 1]].T
+    length = np.linalg.norm(end - start, axis=1)
+    tangent = (end - start) / length[:, None]
+    return Segments(nodes, start, end, length, tangent, np.column_stack([tangent[:, 1], -tangent[:, 0]]))
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+
+
+def overlapping(lo_s, hi_s, lo_m, hi_m, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (slave, master) of intervals along Γ_C's mean tangent that overlap within ``margin``:
+    the masters sorted once, each slave's candidates a contiguous run found by bisection."""
+    order = np.argsort(lo_m)
+    first = np.searchsorted(lo_m[order], lo_s - (hi_m - lo_m).max() - margin)
+    counts = np.maximum(np.searchsorted(lo_m[order], hi_s + margin, side="right") - first, 0)
+    slave = np.repeat(np.arange(lo_s.size), counts)
+    master = order[np.repeat(first, counts) + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)]
+    keep = (hi_m[master] >= lo_s[slave] - margin) & (lo_m[master] <= hi_s[slave] + margin)
+    return slave[keep], master[keep]
+
+
+def mortar(slave: Segments, master: Segments, along: np.ndarray, margin: float):
+    """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a φ_b) and each slave facet's covered
+    fraction."""
+    ends = [np.column_stack([s.start @ along, s.end @ along]) for s in (slave, master)]
+    e, f = overlapping(ends[0].min(1), ends[0].max(1), ends[1].min(1), ends[1].max(1), margin)
+    t, length = slave.tangent[e], slave.length[e]
+    xi_start = ((master.start[f] - slave.start[e]) * t).sum(axis=1) / length
+    xi_end = ((master.end[f] - slave.start[e]) * t).sum(axis=1) / length
+    lo = np.maximum(np.minimum(xi_start, xi_end), 0.0)
+    hi = np.minimum(np.maximum(xi_start, xi_end), 1.0)
+    keep = ((slave.normal[e] * master.normal[f]).sum(axis=1) < 0) & (hi > lo + COVERED)
+    e, f, lo, hi, xi_start, xi_end, length = (a[keep] for a in (e, f, lo, hi, xi_start, xi_end, length))
+    xi = (lo + hi)[:, None] / 2 + np.outer(hi - lo, GAUSS) / 2
+    eta = (xi - xi_start[:, None]) / (xi_end - xi_start)[:, None]
+    weight = ((hi - lo) * length / 2)[:, None]
+    dual = (2 - 3 * xi, 3 * xi - 1)
+    shape = (1 - eta, eta)
+    entries = [(e, np.full_like(e, a), f, np.full_like(f, b), (weight * dual[a] * shape[b]).sum(axis=1))
+               for a in (0, 1) for b in (0, 1)]
+    covered = np.bincount(e, weights=hi - lo, minlength=slave.length.size)
+    return [np.concatenate(parts) for parts in zip(*entries)], covered
+
+
+def node_to_segment(coords, normals, master: Segments, along: np.ndarray, margin: float):
+    """Entries (slave node, master facet, its node b, φ_b(π(x_i))): x_i projected along n_i on the nearest
+    facing master facet; each node once at most."""
+    s = coords @ along
+    ends = np.column_stack([master.start @ along, master.end @ along])
+    i, f = overlapping(s, s, ends.min(1), ends.max(1), margin)
+    n, chord = normals[i], master.end[f] - master.start[f]
+    eta = cross(coords[i] - master.start[f], n) / cross(chord, n)
+    distance = cross(master.start[f] - coords[i], chord) / cross(n, chord)
+    keep = ((n * master.normal[f]).sum(axis=1) < 0) & (eta >= -COVERED) & (eta <= 1 + COVERED)
+    i, f, eta, distance = i[keep], f[keep], np.clip(eta[keep], 0.0, 1.0), distance[keep]
+    nearest = np.lexsort((np.abs(distance), i))
+    first = nearest[np.r_[True, i[nearest][1:] != i[nearest][:-1]]]
+    i, f, eta = i[first], f[first], eta[first]
+    return [np.concatenate(parts) for parts in zip((i, f, np.zeros_like(f), 1 - eta), (i, f, np.ones_like(f), eta))]
+
+
+def relative_rows(vectors, dofs, transfer: sp.coo_matrix, master_dofs, ndofs: int) -> sp.csr_matrix:
+    """Rows v_i·(u_i − Σ_k Π_ik u_k) on every DOF."""
+    m, dim = dofs.shape
+    rows = np.concatenate([np.repeat(np.arange(m), dim), np.repeat(transfer.row, dim)])
+    cols = np.concatenate([dofs.ravel(), master_dofs[transfer.col].ravel()])
+    values = np.concatenate([vectors.ravel(), -(transfer.data[:, None] * vectors[transfer.row]).ravel()])
+    return sp.csr_matrix((values, (rows, cols)), shape=(m, ndofs))
+
+
+def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray,
+               prescribed: np.ndarray) -> PairTrace:
+    """The trace of a contact pair: slave nodes, their normals and weights, N, T and the gap from geometry."""
+    if mesh.dim() != 2 or basis.N != 2 * mesh.p.shape[1]:
+        raise SceneError("contact.master", "contact pairs are built in 2-D for P1 and Q1 elements (straight "
+                         "facets, nodes at the vertices)", "use 2-D bodies of P1 or Q1 elements")
+    slave = segments(mesh, check_boundary(mesh, pair.boundary, "contact.boundary"))
+    master = segments(mesh, check_boundary(mesh, pair.master, "contact.master"))
+    vertices, local = np.unique(slave.nodes, return_inverse=True)
+    local = local.reshape(-1, 2)
+    weights = np.bincount(local.ravel(), weights=np.repeat(slave.length / 2, 2))
+    summed = np.column_stack([np.bincount(local.ravel(), np.repeat(slave.length / 2 * slave.normal[:, j], 2))
+                              for j in range(2)])
+    normals = summed / np.linalg.norm(summed, axis=1, keepdims=True)
+    mean_normal = weights @ normals / np.linalg.norm(weights @ normals)
+    along = np.array([mean_normal[1], -mean_normal[0]])
+    margin = 2.0 * max(slave.length.max(), master.length.max())
+    masters, master_local = np.unique(master.nodes, return_inverse=True)
+    master_local = master_local.reshape(-1, 2)
+    coords = mesh.p[:, vertices].T
+
+    if pair.method == "mortar":
+        (e, a, f, b, values), covered = mortar(slave, master, along, margin)
+        if (covered > 1 + COVERED).any():
+            raise SceneError("contact.master", f"{pair.master!r} is met twice along the normals of {pair.boundary!r} "
+                             "(it folds over, or faces the slave from both sides)",
+                             "name only the part of the master boundary that faces the slave")
+        rows, ok = local[e, a], np.ones(len(vertices), bool)
+        ok[local[covered < 1 - COVERED].ravel()] = False  # a node keeps its row only when its facets are covered
+        mass = sp.coo_matrix((values, (rows, master_local[f, b])), shape=(len(vertices), len(masters))).tocsr()
+        transfer = sp.diags(1.0 / weights) @ mass
+    else:
+        i, f, b, values = node_to_segment(coords, normals, master, along, margin)
+        ok = np.zeros(len(vertices), bool)
+        ok[i] = True
+        transfer = sp.coo_matrix((values, (i, master_local[f, b])), shape=(len(vertices), len(masters))).tocsr()
+    if not ok.any():
+        raise SceneError("contact.master", f"no facet of {pair.master!r} faces {pair.boundary!r} (they lie side by "
+                         "side or back to back)", "pair boundaries that face each other: the slave's outward normal "
+                         "must point at the master")
+    left_out = (f"{np.count_nonzero(~ok)} of {ok.size} nodes of {pair.boundary!r} have no master facet under their "
+                "whole support: they are left out of the contact (make the larger boundary the master)")
+    warnings = () if ok.all() else (left_out,)
+    transfer = sp.coo_matrix(transfer[ok])
+    dofs = basis.nodal_dofs[:, vertices[ok]].T
+    master_dofs = basis.nodal_dofs[:, masters].T
+    normals, weights, coords = normals[ok], weights[ok], coords[ok]
+    master_coords = mesh.p[:, masters].T
+    tangents, _, mean_tangent = tangent_frame(normals, weights)
+    N_full = relative_rows(normals, dofs, transfer, master_dofs, basis.N)
+    T_full = relative_rows(tangents, dofs, transfer, master_dofs, basis.N)
+    gap = ((transfer @ master_coords - coords) * normals).sum(axis=1) * scaling.length / scaling.displacement
+    return PairTrace(
+        facets=np.asarray(mesh.boundaries[pair.boundary]), dofs=dofs, coords=coords, normals=normals,
+        tangents=tangents, coordinate=coords @ mean_tangent, weights=weights, mass=sp.diags(weights, format="csr"),
+        N=N_full[:, free], T=T_full[:, free], normal_offset=N_full @ prescribed, tangent_offset=T_full @ prescribed,
+        gap=gap, obstacle_coupling=None, obstacle_force=0.0,
+        master_dofs=master_dofs, master_coords=master_coords, transfer=transfer.tocsr(), N_full=N_full,
+        T_full=T_full, warnings=warnings,
+    )

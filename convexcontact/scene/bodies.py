@@ -1,0 +1,196 @@
+"""Several elastic bodies in one scene: the parts, their placement, and contact pairs between them.
+
+:func:`bodies_scene` concatenates the parts' meshes into one scikit-fem mesh with disjoint node sets
+(no node is shared, even where two bodies touch), boundaries and subdomains named ``<part>.<name>``
+and one material per part, and returns an ordinary :class:`Scene`: K is block diagonal by
+construction and every formulation, solver and driver applies unchanged. A :class:`Pair` is the
+contact between a slave boundary (the non-mortar side, which carries the multipliers) and a master
+boundary of another part (docs/bodies.md).
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import numpy as np
+import skfem as fe
+
+from ..fem.mesh import build_mesh
+from .checks import SceneError, finite_vector, of_type, sequence_of
+from .model import ELEMENTS, Body, Box, Contact, Dirichlet, Material, MeshFile, Obstacle, Rectangle, Scene, Traction
+
+METHODS = ("mortar", "node_to_segment")
+
+
+@dataclass(frozen=True)
+class Part:
+    """One elastic body: geometry (moved by ``offset``), element, 2-D hypothesis and material.
+
+    Its boundaries are named ``"<name>.<boundary>"`` in the scene, e.g. ``"punch.bottom"``.
+    """
+
+    name: str
+    geometry: Rectangle | Box | MeshFile | fe.Mesh
+    material: Material
+    element: str = "P1"
+    plane: str = "strain"
+    offset: tuple[float, ...] | None = None
+
+    def __post_init__(self):
+        of_type(self.name, str, "parts.name", "name each body, e.g. 'punch'")
+        if not self.name or "." in self.name:
+            raise SceneError("parts.name", f"{self.name!r} is empty or holds a '.'",
+                             "use a plain word: boundaries are named 'body.boundary'")
+        of_type(self.material, Material, f"parts[{self.name}].material", "give cc.Material(E, nu)")
+        if self.offset is not None:
+            object.__setattr__(self, "offset", finite_vector(self.offset, f"parts[{self.name}].offset", (2, 3)))
+        with self.named():
+            Body(self.geometry, self.element, self.plane)  # checks the geometry, element and hypothesis
+
+    @contextmanager
+    def named(self):
+        """The body's errors ("body.element: …") named as this part's ("parts[punch].element: …")."""
+        try:
+            yield
+        except SceneError as error:
+            field_name = f"parts[{self.name}]." + error.field.removeprefix("body.")
+            raise SceneError(field_name, str(error)[len(error.field) + 2:]) from None
+
+    def mesh(self) -> fe.Mesh:
+        """The part's mesh in user units, checked and placed."""
+        with self.named():
+            mesh = build_mesh(Body(self.geometry, self.element, self.plane))
+        if self.offset is None:
+            return mesh
+        if len(self.offset) != mesh.dim():
+            raise SceneError(f"parts[{self.name}].offset", f"{len(self.offset)} numbers for a {mesh.dim()}-D body",
+                             f"give {mesh.dim()} numbers")
+        return mesh.translated(self.offset)
+
+
+@dataclass(frozen=True)
+class Bodies(Body):
+    """The parts as one Body: ``geometry`` is their concatenated mesh (built by :func:`bodies_scene`)."""
+
+    parts: tuple[Part, ...] = ()
+
+    def body_ids(self, mesh: fe.Mesh) -> np.ndarray:
+        """The index in ``parts`` of each cell's body."""
+        ids = np.empty(mesh.t.shape[1], dtype=int)
+        for index, part in enumerate(self.parts):
+            ids[mesh.subdomains[part.name]] = index
+        return ids
+
+
+@dataclass(frozen=True)
+class Pair(Contact):
+    """Contact between the slave boundary ``boundary`` and the ``master`` boundary of another part.
+
+    ``method``: ``"mortar"`` (segment-to-segment, dual multipliers: passes the contact patch test) or
+    ``"node_to_segment"`` (each slave node projected on the master: fails it, kept to compare).
+    The gap comes from the geometry; there is no obstacle.
+    """
+
+    master: str = ""
+    method: str = "mortar"
+
+    def __post_init__(self):
+        super().__post_init__()
+        of_type(self.master, str, "contact.master", "name the master boundary, e.g. 'foundation.top'")
+        if not self.master:
+            raise SceneError("contact.master", "missing", "name the master boundary, e.g. 'foundation.top'")
+        if self.method not in METHODS:
+            raise SceneError("contact.method", f"unknown method {self.method!r}", f"use one of {METHODS}")
+        if self.obstacle != Obstacle():
+            raise SceneError("contact.obstacle", "a pair of bodies has no rigid obstacle",
+                             "drop the obstacle (the gap comes from the two boundaries), or use cc.Contact")
+        law = self.law
+        if law.non_penetration != "nodal" or getattr(law, "quadrature", "nodal") != "nodal":
+            raise SceneError("contact.non_penetration", "a pair is posed with dual (biorthogonal) mortar "
+                             "multipliers: its node-wise law is already the weak, integral non-penetration",
+                             "use non_penetration = 'nodal' and quadrature = 'nodal'")
+        if getattr(law, "smoothing_radius", 0.0):
+            raise SceneError("contact.smoothing_radius", "nonlocal Coulomb is not built for pairs",
+                             "drop smoothing_radius (the local law)")
+
+
+def body_of(boundary: str, names: list[str], field_name: str) -> str:
+    """The part a ``"<part>.<boundary>"`` name belongs to, or an error naming the parts there are."""
+    part = boundary.split(".", 1)[0] if isinstance(boundary, str) else None
+    if part not in names or "." not in boundary:
+        raise SceneError(field_name, f"{boundary!r} names no body", f"the bodies are {names}; name boundaries as "
+                         f"'body.boundary', e.g. '{names[0]}.top'")
+    return part
+
+
+def concatenate(parts: tuple[Part, ...], meshes: list[fe.Mesh]) -> fe.Mesh:
+    """One mesh of all parts, node sets disjoint, boundaries and subdomains prefixed by the part's name."""
+    shifts = np.cumsum([0] + [m.p.shape[1] for m in meshes[:-1]])
+    cells = np.cumsum([0] + [m.t.shape[1] for m in meshes])
+    merged = type(meshes[0])(np.hstack([m.p for m in meshes]), np.hstack([m.t + s for m, s in zip(meshes, shifts)]))
+    boundaries, subdomains = {}, {}
+    for part, mesh, shift, first in zip(parts, meshes, shifts, cells):
+        for name, facets in (mesh.boundaries or {}).items():
+            boundaries[f"{part.name}.{name}"] = facet_index(merged, np.sort(mesh.facets[:, facets], axis=0) + shift)
+        subdomains[part.name] = first + np.arange(mesh.t.shape[1])
+        subdomains.update({f"{part.name}.{name}": first + np.asarray(c) for name, c in (mesh.subdomains or {}).items()})
+    return merged.with_boundaries(boundaries).with_subdomains(subdomains)
+
+
+def facet_index(mesh: fe.Mesh, vertices: np.ndarray) -> np.ndarray:
+    """Indices in ``mesh.facets`` of the facets given by their sorted vertices (one column each)."""
+    def keys(columns):
+        rows = np.ascontiguousarray(columns.T.astype(np.int64))
+        return rows.view([("", np.int64)] * rows.shape[1]).ravel()
+
+    table = keys(np.sort(mesh.facets, axis=0))
+    order = np.argsort(table)
+    return order[np.searchsorted(table[order], keys(vertices))]
+
+
+def bodies_scene(
+    parts,
+    contact: Contact,
+    dirichlet,
+    tractions=(),
+    name: str = "bodies",
+) -> Scene:
+    """A scene of several bodies (see the module's docstring); every body needs a support of its own."""
+    parts = sequence_of(parts, Part, "parts", "give a list of cc.Part(name, geometry, material)")
+    names = [part.name for part in parts]
+    if not parts or len(set(names)) != len(names):
+        raise SceneError("parts", f"expected distinct names, got {names}", "give each body its own name")
+    for field_name in ("element", "plane"):
+        kinds = {getattr(part, field_name) for part in parts}
+        if len(kinds) > 1:
+            used = ", ".join(f"{part.name}: {getattr(part, field_name)}" for part in parts)
+            raise SceneError(f"parts.{field_name}", f"mixed {field_name}s ({used})",
+                             f"give every body the same {field_name}, e.g. {ELEMENTS[0]} with {ELEMENTS[0]}")
+    meshes = [part.mesh() for part in parts]
+    if len({m.dim() for m in meshes}) > 1:
+        raise SceneError("parts.geometry", "2-D and 3-D bodies mixed", "give every body the same dimension")
+    dirichlet = sequence_of(dirichlet, Dirichlet, "dirichlet", "give a list of cc.Dirichlet(boundary, ux=…, uy=…)")
+    tractions = sequence_of(tractions, Traction, "tractions", "give a list of cc.Traction(boundary, pressure=…)")
+    of_type(contact, Contact, "contact", "give cc.Pair(slave, master=…, law=…) or cc.Contact(boundary, obstacle)")
+    supported = {body_of(d.boundary, names, f"dirichlet[{d.boundary}].boundary") for d in dirichlet}
+    for traction in tractions:
+        body_of(traction.boundary, names, f"traction[{traction.boundary}].boundary")
+    slave = body_of(contact.boundary, names, "contact.boundary")
+    if isinstance(contact, Pair) and body_of(contact.master, names, "contact.master") == slave:
+        raise SceneError("contact.master", f"{contact.master!r} and {contact.boundary!r} are boundaries of one body",
+                         "pair a boundary of one body with a boundary of another (self-contact is not built)")
+    floating = [name for name in names if name not in supported]
+    if floating:
+        raise SceneError("dirichlet", f"body {floating[0]!r} has no Dirichlet boundary: it can move rigidly "
+                         "(contact alone does not hold a body)",
+                         f"fix at least a component on one of its boundaries, e.g. boundary = '{floating[0]}.top', ux = 0")
+    merged = concatenate(parts, meshes)
+    return Scene(
+        body=Bodies(merged, parts[0].element, parts[0].plane, parts=parts),
+        materials={part.name: part.material for part in parts},
+        dirichlet=dirichlet,
+        tractions=tractions,
+        contact=contact,
+        name=name,
+    )
