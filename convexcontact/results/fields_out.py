@@ -33,14 +33,19 @@ def vertex_displacement(result) -> np.ndarray:
     return result.displacement[result.fem.basis.nodal_dofs].T
 
 
-def vertex_contact(result, values: np.ndarray) -> np.ndarray:
+def vertex_of_dof(fem) -> np.ndarray:
+    """The mesh vertex of each DOF (−1 for mid-side nodes)."""
+    vertex = np.full(fem.basis.N, -1)
+    vertex[fem.basis.nodal_dofs[0]] = np.arange(fem.mesh.p.shape[1])
+    return vertex
+
+
+def vertex_contact(result, values: np.ndarray, dofs: np.ndarray | None = None) -> np.ndarray:
     """A contact-node field (scalar or per-node vectors) spread onto all mesh vertices (zero off Γ_C
-    and at mid-side nodes)."""
+    and at mid-side nodes); ``dofs`` (default: the contact nodes') say where the values sit."""
     fem = result.fem
     out = np.zeros((fem.mesh.p.shape[1],) + values.shape[1:])
-    vertex_of_dof = np.full(fem.basis.N, -1)
-    vertex_of_dof[fem.basis.nodal_dofs[0]] = np.arange(fem.mesh.p.shape[1])
-    vertices = vertex_of_dof[fem.contact.dofs[:, 0]]
+    vertices = vertex_of_dof(fem)[(fem.contact.dofs if dofs is None else dofs)[:, 0]]
     on_vertex = vertices >= 0
     out[vertices[on_vertex]] = values[on_vertex]
     return out

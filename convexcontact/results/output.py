@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from skfem.io.meshio import to_meshio
 
+from ..scene.bodies import Bodies
 from .fields_out import element_stress, vertex_contact, vertex_displacement
 
 FORMATS = ("json", "vtk", "png")
@@ -31,6 +32,11 @@ def write_vtk(result, path: Path):
     if result.contact.friction is not None:
         point_data["friction_traction"] = vertex_contact(result, result.contact.friction)
     cell_data = {name: [values] for name, values in element_stress(result).items()}
+    if isinstance(fem.scene.body, Bodies):
+        cell_data["body"] = [fem.scene.body.body_ids(fem.mesh)]
+    if result.contact.master_forces is not None:  # on the slave nodes and, transferred, on the master's
+        point_data["contact_force"] = vertex_contact(result, result.contact.forces) + vertex_contact(
+            result, result.contact.master_forces, fem.contact.master_dofs)
     mesh = to_meshio(fem.mesh.scaled(fem.scaling.length), point_data=point_data, cell_data=cell_data)
     if mesh.points.shape[1] == 2:
         mesh.points = np.column_stack([mesh.points, np.zeros(len(mesh.points))])  # VTU wants 3-D points

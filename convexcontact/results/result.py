@@ -9,8 +9,9 @@ import scipy.sparse as sp
 
 from ..fem.assembly import FEModel
 from ..fem.friction import FrictionPoints
+from ..fem.mortar import PairTrace
 from ..formulations.fields import ContactFields
-from .certificate import Certificate, normal_gap
+from .certificate import Certificate, normal_gap, pair_forces
 
 CLOSED_PRESSURE = 1e-6
 """A node is closed when its pressure exceeds this fraction of the largest pressure, and of the
@@ -48,6 +49,8 @@ class ContactNodes:
     slip: np.ndarray | None = None
     radius: np.ndarray | None = None  # distance from the punch axis (see radius_from_axis)
     bitangents: np.ndarray | None = None
+    master_coords: np.ndarray | None = None  # a pair's master nodes and the contact forces on them
+    master_forces: np.ndarray | None = None
 
     @property
     def friction_magnitude(self) -> np.ndarray | None:
@@ -172,6 +175,10 @@ class ContactResult:
             out["obstacle_advance"] = self.obstacle_advance
         if self.obstacle_shift is not None:
             out["obstacle_shift"] = self.obstacle_shift
+        if c.master_forces is not None:
+            out["master_force"] = c.master_forces.sum(axis=0).tolist()
+            out["master_nodes"] = {**{axis: c.master_coords[:, i].tolist() for i, axis in enumerate("xy")},
+                                   **{f"f_{axis}": c.master_forces[:, i].tolist() for i, axis in enumerate("xy")}}
         if c.friction is not None:
             out["tangential_force"] = self.tangential_force
             out["n_stick"] = int((c.status == "stick").sum())
@@ -215,6 +222,10 @@ def contact_nodes(
         sliding = np.where(slip[:, 0] > 0, "slip+", "slip-") if friction.dim == 1 else "slip"
         status = np.where(~closed, "open", np.where(~moving, "stick", sliding))
         slip = (slip[:, 0] if friction.dim == 1 else slip) * scaling.displacement
+    master = {}
+    if isinstance(contact, PairTrace):
+        master = {"master_coords": contact.master_coords * scaling.length,
+                  "master_forces": pair_forces(contact, C, fields, friction)[contact.master_dofs] * scaling.force}
     return ContactNodes(
         coords=contact.coords * scaling.length,
         coordinate=contact.coordinate * scaling.length,
@@ -229,6 +240,7 @@ def contact_nodes(
         slip=slip,
         bitangents=contact.bitangents,
         radius=radius_from_axis(fem) * scaling.length,
+        **master,
     )
 
 
