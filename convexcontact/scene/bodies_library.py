@@ -1,0 +1,72 @@
+"""Built-in scenes of two bodies: the verification cases of docs/bodies.md."""
+
+from __future__ import annotations
+
+import numpy as np
+import skfem as fe
+
+from .bodies import Pair, Part, bodies_scene, facet_index
+from .library import punch_mesh
+from .model import Dirichlet, Material, Rectangle, Scene, Signorini, Traction
+
+
+def patch_pair(slave_cells: int = 5, master_cells: int = 7, method: str = "mortar", element: str = "P1",
+               pressure: float = 0.01, law=None) -> Scene:
+    """The contact patch test (Taylor–Papadopoulos): a unit block on another, ``slave_cells`` against
+    ``master_cells`` across the interface, a uniform ``pressure`` on top; rollers on the left sides and
+    under the lower block. The exact interface pressure is ``pressure`` everywhere."""
+    material = Material(E=1.0, nu=0.3)
+    parts = [Part("upper", Rectangle(1.0, 1.0, slave_cells, slave_cells, origin=(0.0, 1.0)), material, element),
+             Part("lower", Rectangle(1.0, 1.0, master_cells, master_cells), material, element)]
+    return bodies_scene(
+        parts, Pair("upper.bottom", master="lower.top", method=method, law=law or Signorini()),
+        dirichlet=[Dirichlet("lower.bottom", uy=0.0), Dirichlet("lower.left", ux=0.0), Dirichlet("upper.left", ux=0.0)],
+        tractions=[Traction("upper.top", pressure=pressure)], name="patch_pair",
+    )
+
+
+def cylinder_mesh(h: float, radius: float, width: float, height: float, upper: bool, fine: float = 0.15,
+                  quads: bool = False) -> fe.Mesh:
+    """A body of ``width`` × ``height`` whose face on y = 0 is bent into the circle of ``radius`` touching the
+    origin (flat for an infinite radius), cells of size h over |x| < ``fine`` near it: the ``upper`` body lies
+    above y = 0. Boundaries: ``face`` (the curved one), ``back`` (opposite), ``left``, ``right``."""
+    base = punch_mesh(h, fine=fine, width=width, depth=height, quads=quads)  # [−w/2, w/2] × [−height, 0]
+    x, y = base.p
+
+    def sag(x):
+        return radius - np.sqrt(radius**2 - x**2) if np.isfinite(radius) else 0.0 * x
+
+    sign = 1.0 if upper else -1.0
+    p = np.vstack([x, sign * (-y + sag(x) * (1 + y / height))])
+    mesh = type(base)(p, base.t[::-1] if upper else base.t)
+    names = {"face": "top", "back": "bottom", "left": "left", "right": "right"}
+    return mesh.with_boundaries({name: facet_index(mesh, np.sort(base.facets[:, base.boundaries[side]], axis=0))
+                                 for name, side in names.items()})
+
+
+def two_cylinders(h: float = 0.01, radii=(1.0, 1.0), moduli=(1.0, 1.0), nu=(0.3, 0.3), approach: float = 0.01,
+                  method: str = "mortar", law=None, width: float = 1.2, height: float = 1.0, master_h: float | None = None,
+                  element: str = "P1") -> Scene:
+    """Two bodies with faces of ``radii`` (R₁ above, the slave; R₂ below, the master; inf = flat) pressed together by
+    ``approach``: the back of each is moved by half of it towards the other, with its x fixed (plane strain
+    Hertz, docs/bodies.md). ``master_h``: the lower body's cell size (default ``h``: non-matching all the same,
+    the faces differ)."""
+    quads = element == "Q1"
+    parts = [Part("upper", cylinder_mesh(h, radii[0], width, height, True, quads=quads),
+                  Material(E=moduli[0], nu=nu[0]), element),
+             Part("lower", cylinder_mesh(master_h or h, radii[1], width, height, False, quads=quads),
+                  Material(E=moduli[1], nu=nu[1]), element)]
+    return bodies_scene(
+        parts, Pair("upper.face", master="lower.face", method=method, law=law or Signorini()),
+        dirichlet=[Dirichlet("upper.back", ux=0.0, uy=-approach / 2), Dirichlet("lower.back", ux=0.0, uy=approach / 2)],
+        name="two_cylinders",
+    )
+
+
+def punch_on_foundation(h: float = 0.01, law=None, approach: float = 0.01, moduli=(10.0, 1.0)) -> Scene:
+    """A stiffer cylindrical punch (R = 1, its own mesh) pressed into a flat elastic foundation by ``approach``:
+    the dissimilar materials make the normal load shear the interface, so Coulomb friction sticks in the middle
+    and slips outside."""
+    return two_cylinders(h, radii=(1.0, np.inf), moduli=moduli, approach=approach, law=law, width=1.0,
+                         master_h=1.3 * h)
+

@@ -1,0 +1,187 @@
+"""Contact between two elastic bodies (docs/bodies.md): mortar pairs against closed forms and independent solves."""
+
+import numpy as np
+import pytest
+
+import convexcontact as cc
+from convexcontact import Pair, Part, bodies_scene
+from convexcontact.analytic import hertz_pressure
+from convexcontact.scene.bodies_library import cylinder_mesh, patch_pair, punch_on_foundation, two_cylinders
+from convexcontact.scene.model import Box
+
+STEEL = cc.Material(1.0, 0.3)
+PUSH = 0.02  # on the left side of a block: lifts one end of it
+
+
+def hertz(force, radii, moduli, nu):
+    """Half-width and peak pressure of two cylinders (plane strain): 1/R = 1/R₁ + 1/R₂, 1/E* = Σ (1 − ν²)/E."""
+    radius = 1.0 / sum(1.0 / r for r in radii)
+    effective = 1.0 / sum((1 - n**2) / E for n, E in zip(nu, moduli))
+    a = np.sqrt(4 * force * radius / (np.pi * effective))
+    return a, 2 * force / (np.pi * a)
+
+
+@pytest.mark.parametrize("element", ["P1", "Q1"])
+def test_mortar_passes_the_contact_patch_test(element):
+    """Taylor–Papadopoulos: 5 against 7 cells across the interface carry the uniform pressure exactly."""
+    result = cc.solve(patch_pair(5, 7, element=element))
+    assert result.status == "solved"
+    np.testing.assert_allclose(result.contact.pressure, 0.01, rtol=1e-9)
+    assert np.all(result.closed)
+    assert result.normal_force == pytest.approx(0.01, rel=1e-9)
+    np.testing.assert_allclose(result.contact.master_forces.sum(axis=0), -result.contact_force, atol=1e-15)
+    assert result.certificate.residuals["pair_balance"] < 1e-12
+
+
+def test_node_to_segment_fails_the_patch_test():
+    """The slave nodes' lumped forces do not load the master consistently: the pressure is off by over 10 %."""
+    mortar = cc.solve(patch_pair(5, 7)).contact.pressure
+    nts = cc.solve(patch_pair(5, 7, method="node_to_segment"))
+    error = np.abs(nts.contact.pressure / 0.01 - 1).max()
+    assert error > 0.1 and error > 1e6 * np.abs(mortar / 0.01 - 1).max()
+    assert nts.normal_force == pytest.approx(0.01, rel=1e-9)  # global equilibrium still holds
+    assert nts.certificate.passes(1e-9)
+
+
+def test_hertz_two_equal_cylinders_converges():
+    """a within a cell and p₀ within 1 % of Hertz with R = R₁/2, E* = E/(2(1 − ν²)); the pressure's L² error shrinks."""
+    errors = []
+    for h in (0.02, 0.005):
+        result = cc.solve(two_cylinders(h, radii=(4.0, 4.0), approach=0.006, width=4.0, height=2.0))
+        assert result.certificate.passes(1e-9)
+        a, p0 = hertz(result.normal_force, (4.0, 4.0), (1.0, 1.0), (0.3, 0.3))
+        w, s = result.fem.contact.weights, result.contact.coordinate
+        exact = hertz_pressure(s, a, p0)
+        errors.append(np.sqrt(w @ (result.contact.pressure - exact) ** 2 / (w @ exact**2)))
+    assert a - h <= result.contact_half_width <= a
+    assert result.max_pressure == pytest.approx(p0, rel=0.01)
+    assert errors[1] < errors[0] / 3
+
+
+def test_hertz_dissimilar_cylinders():
+    """Radii 4 and 8, moduli 1 and 3: the same formula with the combined R and E*."""
+    radii, moduli, nu = (4.0, 8.0), (1.0, 3.0), (0.3, 0.2)
+    result = cc.solve(two_cylinders(0.01, radii=radii, moduli=moduli, nu=nu, approach=0.004, width=4.0, height=2.0))
+    a, p0 = hertz(result.normal_force, radii, moduli, nu)
+    assert a - 0.01 <= result.contact_half_width <= a
+    assert result.max_pressure == pytest.approx(p0, rel=0.01)
+
+
+def blocks(law=None, stiffness: float = 1.0, approach: float = 0.01, element: str = "Q1"):
+    """Two mirrored unit blocks, the upper one pushed sideways at its left side: the contact pressure is not
+    uniform. ``stiffness``: the lower block's E."""
+    parts = [Part("upper", cc.Rectangle(1.0, 1.0, 8, 8), STEEL, element),
+             Part("lower", cc.Rectangle(1.0, 1.0, 8, 8, origin=(0.0, -1.0)), cc.Material(stiffness, 0.3), element)]
+    return bodies_scene(parts, Pair("upper.bottom", master="lower.top", law=law or cc.Signorini()),
+                        dirichlet=[cc.Dirichlet("upper.top", ux=0.0, uy=-approach / 2),
+                                   cc.Dirichlet("lower.bottom", ux=0.0, uy=approach / 2)],
+                        tractions=[cc.Traction("upper.left", pressure=PUSH), cc.Traction("lower.left", pressure=PUSH)])
+
+
+def on_rigid_plane(element: str = "Q1", approach: float = 0.01, advance: float = 0.0):
+    """The upper block alone, its top moved by half the approach, on a rigid plane at y = 0 moved up by ``advance``."""
+    upper = Part("upper", cc.Rectangle(1.0, 1.0, 8, 8), STEEL, element)
+    return bodies_scene([upper], cc.Contact("upper.bottom", cc.Obstacle("flat", depth=advance)),
+                        dirichlet=[cc.Dirichlet("upper.top", ux=0.0, uy=-approach / 2)],
+                        tractions=[cc.Traction("upper.left", pressure=PUSH)])
+
+
+def test_symmetry_two_identical_bodies_equal_one_on_a_rigid_plane():
+    """Mirror images pressed together by 2δ = one body on a rigid plane pressed by δ; the resultants balance."""
+    pair, rigid = cc.solve(blocks()), cc.solve(on_rigid_plane())
+    assert 0 < np.count_nonzero(pair.closed) < pair.fem.contact.m  # the side push lifts one end
+    np.testing.assert_allclose(pair.contact.coords, rigid.contact.coords)
+    np.testing.assert_allclose(pair.contact.pressure, rigid.contact.pressure, rtol=1e-7, atol=1e-9 * rigid.max_pressure)
+    np.testing.assert_allclose(pair.contact.master_forces.sum(axis=0), -pair.contact_force,
+                               atol=1e-12 * rigid.normal_force)
+
+
+def test_a_stiff_master_tends_to_the_rigid_obstacle():
+    """E₂ → ∞: the difference from today's rigid-plane answer falls like 1/E₂."""
+    approach = 0.01
+    rigid = cc.solve(on_rigid_plane(approach=approach, advance=approach / 2))  # where the stiff block moves it
+    differences = []
+    for stiffness in (1e2, 1e4):
+        pair = cc.solve(blocks(stiffness=stiffness, approach=approach))
+        differences.append(np.abs(pair.contact.pressure - rigid.contact.pressure).max() / rigid.max_pressure)
+    assert differences[1] < 1e-3
+    assert differences[1] == pytest.approx(differences[0] / 100, rel=0.05)
+
+
+def test_hertz_stiff_flat_master_agrees_with_the_rigid_obstacle():
+    """A curved body on a flat master 10⁶ times stiffer = the same body on a rigid plane (gap measured along
+    the body's normal, as the mortar's): the force within 2·10⁻⁴, the pressures within 3·10⁻³ of p₀ (the
+    mortar's gap is the projected one averaged over each node's support, the obstacle's a nodal value)."""
+    radius, approach, h = 4.0, 0.006, 0.02
+    pair = cc.solve(two_cylinders(h, radii=(radius, np.inf), moduli=(1.0, 1e6), approach=approach, width=4.0,
+                                  height=2.0))
+    upper = Part("upper", cylinder_mesh(h, radius, 4.0, 2.0, upper=True), STEEL)
+    plane = cc.Obstacle("expression", expression=f"y * {radius} / ({radius} - y)", depth=approach / 2)
+    rigid = cc.solve(bodies_scene([upper], cc.Contact("upper.face", plane),
+                                  dirichlet=[cc.Dirichlet("upper.back", ux=0.0, uy=-approach / 2)]))
+    assert pair.normal_force == pytest.approx(rigid.normal_force, rel=2e-4)
+    same = [np.argmin(np.linalg.norm(rigid.contact.coords - x, axis=1)) for x in pair.contact.coords]
+    assert np.abs(pair.contact.pressure - rigid.contact.pressure[same]).max() < 3e-3 * rigid.max_pressure
+
+
+def test_coulomb_punch_on_an_elastic_foundation():
+    """A stiffer punch (its own mesh) pressed into the foundation: Picard converges, the certificate holds,
+    the middle sticks and both sides slip, the resultants balance."""
+    result = cc.solve(punch_on_foundation(0.01, law=cc.Coulomb(0.3)))
+    assert result.status == "solved" and result.extra["picard"]["outcome"] == "converged"
+    assert result.certificate.passes(1e-7)
+    status = result.contact.status
+    assert {"stick", "slip+", "slip-"} <= set(status)
+    s, slips = result.contact.coordinate, np.char.startswith(status.astype(str), "slip")
+    stick = s[status == "stick"]
+    assert np.all((s[slips] < stick.min()) | (s[slips] > stick.max()))  # one stick zone, slip outside it
+    assert result.certificate.residuals["pair_balance"] < 1e-12
+
+
+def test_outputs_carry_the_body_and_the_transferred_forces(tmp_path):
+    import meshio
+
+    result = cc.solve(patch_pair(3, 4))
+    result.save(tmp_path, formats=("json", "vtk"))
+    vtu = meshio.read(tmp_path / "solution.vtu")
+    assert sorted(np.unique(vtu.cell_data["body"][0])) == [0, 1]
+    force = vtu.point_data["contact_force"]
+    np.testing.assert_allclose(force.sum(axis=0), 0.0, atol=1e-15)  # slave and master forces, opposite
+    assert force[:, 1].max() == pytest.approx(0.01 / 3, rel=1e-9)  # an inner slave node: p h
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda: {"dirichlet": [cc.Dirichlet("pnch.top", ux=0.0)]}, "dirichlet[pnch.top].boundary"),
+    (lambda: {"contact": Pair("upper.bottom", master="upper.top")}, "contact.master"),
+    (lambda: {"contact": Pair("upper.bottom", master="lower.bottm")}, "contact.master"),
+    (lambda: {"dirichlet": [cc.Dirichlet("lower.bottom", ux=0.0, uy=0.0)]}, "dirichlet"),
+    (lambda: {"parts": [Part("upper", cc.Rectangle(1.0, 1.0, 2, 2, origin=(0.0, 1.0)), STEEL, "Q1"),
+                         Part("lower", cc.Rectangle(1.0, 1.0, 2, 2), STEEL, "P1")]}, "parts.element"),
+    (lambda: {"contact": Pair("upper.bottom", master="lower.bottom")}, "contact.master"),
+    (lambda: {"contact": Pair("upper.bottom", master="lower.top", law=cc.Signorini("weak"))},
+     "contact.non_penetration"),
+    (lambda: {"contact": Pair("upper.bottom", master="lower.top", law=cc.Tresca(0.1, quadrature="gauss"))},
+     "contact.non_penetration"),
+])
+def test_bad_inputs_name_the_field(change, field):
+    """Unknown bodies and boundaries, a pair within one body, a floating body, mixed elements, boundaries that
+    do not face each other, a law the pair cannot pose: each a SceneError naming its field."""
+    arguments = {
+        "parts": [Part("upper", cc.Rectangle(1.0, 1.0, 2, 2, origin=(0.0, 1.0)), STEEL),
+               Part("lower", cc.Rectangle(1.0, 1.0, 2, 2), STEEL)],
+        "contact": Pair("upper.bottom", master="lower.top"),
+        "dirichlet": [cc.Dirichlet("lower.bottom", ux=0.0, uy=0.0), cc.Dirichlet("upper.top", ux=0.0, uy=-0.01)],
+    }
+    with pytest.raises(cc.SceneError) as error:
+        cc.solve(bodies_scene(**(arguments | change())))
+    assert error.value.field == field
+
+
+def test_pairs_are_two_dimensional():
+    box = Box(size=(1, 1, 1), cells=(2, 2, 2))
+    parts = [Part("upper", Box(size=(1, 1, 1), cells=(2, 2, 2), origin=(0, 0, 1)), STEEL), Part("lower", box, STEEL)]
+    scene = bodies_scene(parts, Pair("upper.bottom", master="lower.top"),
+                         dirichlet=[cc.Dirichlet("lower.bottom", ux=0, uy=0, uz=0),
+                                    cc.Dirichlet("upper.top", ux=0, uy=0, uz=-0.01)])
+    with pytest.raises(cc.SceneError, match="2-D"):
+        cc.solve(scene)
