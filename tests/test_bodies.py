@@ -1,5 +1,7 @@
 """Contact between two elastic bodies (docs/bodies.md): mortar pairs against closed forms and independent solves."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,7 @@ from convexcontact.scene.bodies_library import cylinder_mesh, patch_pair, punch_
 from convexcontact.scene.model import Box
 
 STEEL = cc.Material(1.0, 0.3)
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
 PUSH = 0.02  # on the left side of a block: lifts one end of it
 
 
@@ -185,3 +188,27 @@ def test_pairs_are_two_dimensional():
                                     cc.Dirichlet("upper.top", ux=0, uy=0, uz=-0.01)])
     with pytest.raises(cc.SceneError, match="2-D"):
         cc.solve(scene)
+
+
+def test_the_example_scene_file_solves():
+    """examples/scenes/punch_on_foundation.toml: a Q1 punch on a Q1 foundation, Coulomb on a mortar pair."""
+    scene = cc.scene.load_scene(EXAMPLES / "punch_on_foundation.toml")
+    assert isinstance(scene.contact, Pair) and [part.name for part in scene.body.parts] == ["punch", "foundation"]
+    result = cc.solve(scene)
+    assert result.status == "solved" and result.certificate.passes(1e-7)
+    assert {"stick", "slip+", "slip-"} <= set(result.contact.status)
+
+
+@pytest.mark.parametrize("edit, field", [
+    (lambda text: text.replace('name = "punch" ', 'name = "punch"\ncolour = "red" '), "bodies[punch].colour"),
+    (lambda text: text.replace("material = { E = 10.0, nu = 0.3 }", ""), "bodies[punch].material"),
+    (lambda text: text.replace('method = "mortar"', 'method = "nitsche"'), "contact.method"),
+    (lambda text: text + '\n[obstacle]\nshape = "flat"\n', "obstacle"),
+    (lambda text: text.replace('boundary = "punch.top"', 'boundary = "pnch.top"'), "dirichlet[pnch.top].boundary"),
+])
+def test_bad_scene_files_name_the_field(tmp_path, edit, field):
+    path = tmp_path / "scene.toml"
+    path.write_text(edit((EXAMPLES / "punch_on_foundation.toml").read_text()))
+    with pytest.raises(cc.SceneError) as error:
+        cc.scene.load_scene(path)
+    assert error.value.field == field

@@ -16,6 +16,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
+from .bodies import Pair, Part, bodies_scene
 from .history import History
 from .model import (
     Body,
@@ -46,6 +47,9 @@ TOP = {
     "dirichlet": TABLES, "traction": TABLES, "contact": TABLE, "obstacle": TABLE, "history": TABLE,
 }
 BODY = {"mesh": TEXT, "element": TEXT, "plane": TEXT}
+BODIES_TOP = {"name": TEXT, "bodies": TABLES, "dirichlet": TABLES, "traction": TABLES, "contact": TABLE, "obstacle": TABLE}
+PART = {"name": TEXT, "material": TABLE, "offset": VECTOR}
+PAIR_KEYS = {"master": TEXT, "method": TEXT}
 RECTANGLE = {
     **BODY, "width": NUMBER, "height": NUMBER, "origin": PAIR, "nx": INTEGER, "ny": INTEGER,
     "grading": PAIR, "refine_x": NUMBER, "refine_y": TEXT,
@@ -111,6 +115,8 @@ def load_scene(path) -> Scene:
 
 def scene_from_dict(data: dict, base_dir: Path | str = ".") -> Scene:
     """Build a :class:`Scene` from parsed TOML ``data``; mesh paths are relative to ``base_dir``."""
+    if isinstance(data, dict) and "bodies" in data:
+        return _bodies(data, Path(base_dir))
     data = _table(data, "", TOP, required=("body", "dirichlet", "contact"))
     if "material" in data and "materials" in data:
         raise SceneError("material", "both [material] and [materials.NAME] given", "keep one of them")
@@ -148,27 +154,52 @@ def _history(table) -> History:
     return History(times=times, values=table)
 
 
-def _body(table, base_dir: Path) -> Body:
-    mesh = _table(table, "body", None, required=("mesh",))["mesh"]
-    _check_type(mesh, TEXT, "body.mesh")
+def _bodies(data: dict, base_dir: Path) -> Scene:
+    """Several bodies: ``[[bodies]]`` tables (a body's keys, its ``name``, ``material`` and ``offset``), boundaries
+    named ``body.boundary``, and a ``[contact]`` pair (``master``, ``method``) or a rigid obstacle."""
+    data = _table(data, "", BODIES_TOP, required=("bodies", "dirichlet", "contact"))
+    parts = []
+    for i, entry in enumerate(data["bodies"]):
+        path = f"bodies[{_label(entry, i, 'name')}]"
+        table = _table(entry, path, None, required=("name", "material"))
+        part = {key: table.pop(key) for key in PART if key in table}
+        _table(part, path, PART)
+        body = _body(table, base_dir, path, PART)
+        material = Material(**_table(part.pop("material"), f"{path}.material", MATERIAL, required=("E", "nu")),
+                            name=f"{path}.material")
+        parts.append(Part(geometry=body.geometry, element=body.element, plane=body.plane, material=material, **part))
+    return bodies_scene(
+        parts,
+        contact=_contact(data["contact"], data.get("obstacle", {}), PAIR_KEYS),
+        dirichlet=[Dirichlet(**entry) for entry in _entries(data, "dirichlet", DIRICHLET)],
+        tractions=[Traction(**entry) for entry in _entries(data, "traction", TRACTION)],
+        **{key: data[key] for key in ("name",) if key in data},
+    )
+
+
+def _body(table, base_dir: Path, path: str = "body", extra: dict | None = None) -> Body:
+    """A body's table at ``path``; ``extra``: further keys its table may hold (checked by the caller)."""
+    mesh = _table(table, path, None, required=("mesh",))["mesh"]
+    _check_type(mesh, TEXT, f"{path}.mesh")
     built_in = {"rectangle": (Rectangle, RECTANGLE), "box": (Box, BOX)}
     if mesh in built_in:
-        keys = _table(table, "body", built_in[mesh][1], context=f' with mesh = "{mesh}"')
+        keys = _table(table, path, built_in[mesh][1] | (extra or {}), context=f' with mesh = "{mesh}"')
     else:
-        keys = _table(table, "body", BODY, context=" with a mesh file")
+        keys = _table(table, path, BODY | (extra or {}), context=" with a mesh file")
     del keys["mesh"]
     options = {key: keys.pop(key) for key in ("element", "plane") if key in keys}
     geometry = built_in[mesh][0](**keys) if mesh in built_in else MeshFile(base_dir / mesh)
     return Body(geometry, **options)
 
 
-def _contact(table, obstacle) -> Contact:
+def _contact(table, obstacle, pair: dict | None = None) -> Contact:
+    """``[contact]`` and ``[obstacle]``; with ``pair`` (several bodies) a ``master`` makes it a :class:`Pair`."""
     law_name = _table(table, "contact", None).get("law", "signorini")
     _check_type(law_name, TEXT, "contact.law")
     if law_name not in LAWS:
         raise SceneError("contact.law", f"unknown law {law_name!r}", f"available laws: {', '.join(LAWS)}")
     law, law_keys = LAWS[law_name]
-    keys = _table(table, "contact", CONTACT | law_keys, required=("boundary",))
+    keys = _table(table, "contact", CONTACT | law_keys | (pair or {}), required=("boundary",))
     shape = _table(obstacle, "obstacle", None).get("shape", "flat")
     _check_type(shape, TEXT, "obstacle.shape")
     if shape not in OBSTACLES:
@@ -181,6 +212,11 @@ def _contact(table, obstacle) -> Contact:
         options["compliance"] = NormalCompliance(options.pop("stiffness"), options.pop("exponent", 1.0))
     elif law is not NormalCompliance and "exponent" in options:
         raise SceneError("contact.exponent", "an exponent without a stiffness", "add stiffness = c_N (normal compliance)")
+    if "master" in keys:
+        if obstacle:
+            raise SceneError("obstacle", "a pair of bodies has no rigid obstacle", "drop the [obstacle] table")
+        return Pair(boundary=keys["boundary"], law=law(**options),
+                    **{key: keys[key] for key in PAIR_KEYS if key in keys})
     return Contact(
         boundary=keys["boundary"],
         obstacle=Obstacle(**_table(obstacle, "obstacle", OBSTACLES[shape], context=f" with shape = {shape!r}")),
@@ -196,9 +232,9 @@ def _entries(data: dict, name: str, spec: dict) -> list[dict]:
     ]
 
 
-def _label(entry, index: int):
-    boundary = entry.get("boundary") if isinstance(entry, dict) else None
-    return boundary if isinstance(boundary, str) else index
+def _label(entry, index: int, key: str = "boundary"):
+    label = entry.get(key) if isinstance(entry, dict) else None
+    return label if isinstance(label, str) else index
 
 
 def _table(value, path: str, spec: dict | None, required: tuple = (), context: str = "") -> dict:
