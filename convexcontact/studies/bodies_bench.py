@@ -1,0 +1,63 @@
+"""Two-body costs, as ratios measured in one process (docs/bodies.md, Performance).
+
+- :func:`mortar_assembly`: the trace of a pair (mortar and node-to-segment) against the stiffness assembly of
+  the same two-body mesh, at a given number of slave facets;
+- :func:`two_body_solve`: the contact solve of a punch on an elastic foundation against one linear solve of
+  the whole assembly (K's factorization and u = K⁻¹f), as ``convexcontact bench`` reports for one body.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+
+def strips(facets: int, rows: int, ratio: float = 1.3):
+    """Two strips of square P1 cells, ``facets`` against about ``ratio`` × ``facets`` across the interface."""
+    import convexcontact as cc
+
+    master = round(ratio * facets)
+    parts = [cc.Part("upper", cc.Rectangle(1.0, rows / facets, facets, rows, origin=(0.0, rows / facets)),
+                     cc.Material(1.0, 0.3)),
+             cc.Part("lower", cc.Rectangle(1.0, rows / master, master, rows, origin=(0.0, 0.0)), cc.Material(1.0, 0.3))]
+    return cc.bodies_scene(parts, cc.Pair("upper.bottom", master="lower.top"),
+                           dirichlet=[cc.Dirichlet("lower.bottom", ux=0.0, uy=0.0),
+                                      cc.Dirichlet("upper.top", ux=0.0, uy=-1e-4)], name="strips")
+
+
+def timed(function, *args) -> float:
+    start = time.perf_counter()
+    function(*args)
+    return time.perf_counter() - start
+
+
+def mortar_assembly(facets: int = 10_000, rows: int = 8) -> dict:
+    """Seconds to build the pair's trace (mortar, node-to-segment) and the stiffness K of the same mesh."""
+    from convexcontact.fem.assembly import assemble, stiffness
+    from convexcontact.fem.mortar import pair_trace
+
+    scene = strips(facets, rows)
+    fem = assemble(scene)
+    arguments = (fem.mesh, fem.basis, fem.scaling, fem.free, fem.prescribed)
+    out = {"slave_facets": facets, "master_facets": round(1.3 * facets), "dofs": fem.n_free,
+           "stiffness": timed(stiffness, fem.basis, fem.lame)}
+    for method in ("mortar", "node_to_segment"):
+        out[method] = timed(pair_trace, dataclasses.replace(scene.contact, method=method), *arguments)
+        out[f"{method}_per_stiffness"] = out[method] / out["stiffness"]
+    return out
+
+
+def two_body_solve(h: float = 0.004, solver: str = "clarabel") -> dict:
+    """The Signorini punch on a foundation (:func:`~convexcontact.scene.bodies_library.punch_on_foundation`): the
+    contact solve (formulation, condensation, solve) against one linear solve of both bodies."""
+    import convexcontact as cc
+    from convexcontact.fem.factorization import factorize
+
+    model = cc.prepare(cc.bodies_library.punch_on_foundation(h, law=cc.Signorini()))
+    fem = model.fem
+    linear = timed(lambda: factorize(fem.K, dim=fem.dim).solve(fem.f))
+    result = model.solve(solver)
+    contact = sum(value for stage, value in result.timings.items() if stage != "assembly")
+    return {"dofs": fem.n_free, "contact_nodes": fem.contact.m, "formulation": model.formulation,
+            "linear": linear, "contact": contact, "contact_per_linear": contact / linear,
+            "certificate": result.certificate.worst}
