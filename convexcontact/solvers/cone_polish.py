@@ -57,7 +57,8 @@ class BoundForm:
 
 
 def bound_form(program: ConicProgram) -> BoundForm | None:
-    """The program's bound form, or None when it has none (or balls of different sizes)."""
+    """The program's bound form, or None when it has none (or balls of different sizes). A program with
+    bounds only (no balls) has one too."""
     A = sp.csr_matrix(program.A)
     counts = np.diff(A.indptr)
     column = np.full(A.shape[0], -1)
@@ -79,10 +80,10 @@ def bound_form(program: ConicProgram) -> BoundForm | None:
             sizes.add(cone.dim)
         else:
             return None
-    if len(sizes) != 1:  # no balls: a linear program (:mod:`.polish`); balls of two sizes: not vectorized
+    if len(sizes) > 1:  # balls of two sizes: not vectorized
         return None
     bound_rows = np.concatenate(bounds) if bounds else np.zeros(0, int)
-    ball = np.array(balls, dtype=int).reshape(len(balls), -1)
+    ball = np.array(balls, dtype=int).reshape(len(balls), sizes.pop() if sizes else 1)
     used = np.concatenate([column[bound_rows], column[ball[:, 1:]].ravel()])
     if np.unique(used).size != used.size:
         return None

@@ -96,7 +96,7 @@ def half_planes(program: ConicProgram) -> sp.csr_matrix | None:
 
 def polishable(program: ConicProgram) -> bool:
     """Whether :func:`polish` applies to the program (it may still fail on a given answer)."""
-    return half_planes(program) is not None or bound_form(program) is not None
+    return half_planes(program) is not None or (not program.is_linear and bound_form(program) is not None)
 
 
 def polish(program: ConicProgram, solution: ConicSolution) -> ConicSolution:
@@ -107,7 +107,7 @@ def polish(program: ConicProgram, solution: ConicSolution) -> ConicSolution:
         return solution
     H = half_planes(program)
     if H is None:  # a cone that is not polyhedral: Newton's method if the cones bound their own variables
-        form = bound_form(program)
+        form = None if program.is_linear else bound_form(program)
         return solution if form is None else cone_polish(program, solution, form)
     if program.is_linear:
         return _polish_linear(program, solution)
