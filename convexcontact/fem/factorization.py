@@ -1,6 +1,6 @@
 """Sparse factorizations of the stiffness K, and its condensation onto the contact DOFs.
 
-:func:`factorize` gives K⁻¹ b and W = B K⁻¹ Bᵀ. :func:`condense` gives the dense Schur
+:func:`factorize` gives K⁻¹ b and W = B K⁻¹ Bᵀ, dense or as an operator. :func:`condense` gives the dense Schur
 complement S of K onto the contact DOFs C (|C| ≪ n) with the condensed load and the
 lift back to all free DOFs; W = B_C S⁻¹ B_Cᵀ then costs no sparse solve at all.
 
@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import time
 from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as la
@@ -127,6 +129,63 @@ class Factorization(ABC):
         for start in range(0, B.shape[0], self._block):
             W[:, start:start + self._block] = B @ self.solve(Bt[:, start:start + self._block].toarray())
         return 0.5 * (W + W.T)
+
+    def delassus(self, B: sp.spmatrix, K: sp.spmatrix | None = None) -> Delassus:
+        """W = B K⁻¹ Bᵀ as an operator, never formed (see :class:`Delassus`); with ``K``, it carries the
+        approximation of W by the slab of K next to B's columns."""
+        return Delassus(B, self.solve, None if K is None else slab(K, B))
+
+
+SLAB = 1 / 3
+"""Most DOFs of the slab, as a fraction of K's: on a 2-D whole-face strip (10⁵ DOFs, 1001 contact nodes)
+CG on W took 103 iterations to 1e-12 unpreconditioned, 31 with an 8-layer slab (18% of the DOFs, 0.1 s to
+factorize) and 21 with 16 layers (34%, 0.16 s, against 0.5 s for K); on a 3-D block (10⁵ DOFs, 1681 nodes)
+126, 30 with 2 layers (15%, 0.2 s) and 23 with 4 (25%, 0.5 s, against 6 s for K)."""
+LAYERS = 16
+"""Most layers of elements in the slab."""
+
+
+@dataclass(frozen=True)
+class Approximation:
+    """W ≈ G H⁻¹ Gᵀ with H sparse SPD (K on a slab of DOFs next to the contact) and G = B on them;
+    ``factorize(H)`` returns an object with ``solve``."""
+
+    G: sp.csr_matrix
+    H: sp.csr_matrix
+    factorize: Callable
+
+
+def slab(K: sp.spmatrix, B: sp.spmatrix) -> Approximation:
+    """K on the DOFs within a few layers of B's columns (the rest clamped), and B on them: the same Delassus
+    operator for a thin body, which has the contact face's short waves right (they decay within a few
+    layers) and only its long ones wrong; as a preconditioner it leaves CG few iterations."""
+    K, B = sp.csr_matrix(K), sp.csr_matrix(B)
+    graph = (abs(K) > 0).astype(np.int32)  # int8 sums of neighbours overflow
+    inside = np.zeros(K.shape[0], dtype=bool)
+    inside[np.unique(B.indices)] = True
+    for _ in range(LAYERS):
+        grown = (graph @ inside.astype(np.int32)) > 0
+        if grown.sum() > SLAB * K.shape[0] or grown.sum() == inside.sum():
+            break
+        inside = grown
+    index = np.flatnonzero(inside)
+    return Approximation(B[:, index].tocsr(), K[index][:, index].tocsr(), factorize)
+
+
+class Delassus(spla.LinearOperator):
+    """W = B K⁻¹ Bᵀ as a symmetric operator: each product is one solve with K's factors, and W is never formed
+    (memory O(n + nnz(L)) whatever the number of rows of B). ``approximation``: a cheaper W for
+    preconditioning, or None."""
+
+    def __init__(self, B: sp.spmatrix, solve: Callable, approximation: Approximation | None = None):
+        super().__init__(float, (B.shape[0], B.shape[0]))
+        self.B, self._Bt, self._solve = sp.csr_matrix(B), sp.csr_matrix(B.T), solve
+        self.approximation = approximation
+
+    def _matvec(self, r):
+        return self.B @ self._solve(self._Bt @ r)
+
+    _rmatvec = _matmat = _matvec
 
 
 class _Direct(Factorization):
