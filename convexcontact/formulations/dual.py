@@ -39,10 +39,17 @@ def dual(
     epsilon: float | None = None,
     compliance: tuple[float, float] | None = None,
     factorization: Factorization | None = None,
+    matrix_free: bool = False,
 ):
-    """The dual program, its recovery map and ``bound_update(s) -> {"b": ...}``."""
+    """The dual program, its recovery map and ``bound_update(s) -> {"b": ...}``.
+
+    ``matrix_free``: P is W as an operator (:meth:`~convexcontact.fem.factorization.Factorization.delassus`),
+    never formed; for exact friction only."""
     if compliance is not None:
         raise SceneError("formulation", "normal compliance is formulated in the primal only", "use formulation='primal'")
+    if matrix_free and epsilon is not None:
+        raise SceneError("formulation", "the ε-regularized friction has no matrix-free dual",
+                         "use formulation='dual' or 'primal'")
     factorization = factorization or factorize(K)
     m = contact.m
     count = friction.count if friction is not None else 0
@@ -52,7 +59,8 @@ def dual(
     c = np.concatenate([C @ (contact.normal_offset - contact.gap)] + ([-friction.offset] if count else []))
     Kf = factorization.solve(f)
     size = m + tangential + extra
-    P = sp.block_diag([sp.csc_matrix(factorization.schur(B)), sp.csc_matrix((extra, extra))], format="csc")
+    P = factorization.delassus(B, K) if matrix_free else sp.block_diag(
+        [sp.csc_matrix(factorization.schur(B)), sp.csc_matrix((extra, extra))], format="csc")
     q = np.concatenate([-(B @ Kf + c), -epsilon * friction.weights if extra else np.zeros(0)])
 
     rows, b, cones = [], [], []
