@@ -1,7 +1,9 @@
 """Solver adapters: thin functions from a ConicProgram to a ConicSolution.
 
 A solver never knows mechanics. Names: ``clarabel``, ``osqp``, ``cvxpy`` or
-``cvxpy:NAME`` (any solver cvxpy reaches, e.g. ``cvxpy:SCS``).
+``cvxpy:NAME`` (any solver cvxpy reaches, e.g. ``cvxpy:SCS``), ``newton-cg`` (bound-form
+programs, P a matrix or an operator), and ``auto``: newton-cg when P is an operator
+(a matrix-free program), else clarabel.
 """
 
 from __future__ import annotations
@@ -10,12 +12,13 @@ import math
 import numbers
 
 import numpy as np
+import scipy.sparse.linalg as spla
 
 from ..conic import ConicProgram, ConicSolution
-from . import clarabel_direct, cvxpy_model, osqp_direct
+from . import clarabel_direct, cvxpy_model, newton_cg, osqp_direct
 from .osqp_direct import ConeNotSupported
 
-SOLVERS = ("clarabel", "osqp", "cvxpy")
+SOLVERS = ("auto", "clarabel", "osqp", "cvxpy", "newton-cg")
 
 
 def check_name(name: str) -> str:
@@ -53,7 +56,7 @@ def check_options(options: dict, solver: str | None = None) -> dict:
     for name, (valid, expected, example) in OPTIONS.items():
         if options.get(name) is not None and not valid(options[name]):
             raise ValueError(f"{name}: expected {expected}, got {options[name]!r:.60} — e.g. {example}")
-    adapter = {"clarabel": clarabel_direct, "osqp": osqp_direct}.get(solver)
+    adapter = {"clarabel": clarabel_direct, "osqp": osqp_direct, "newton-cg": newton_cg}.get(solver)
     if adapter is not None:
         adapter.check_settings(set(options) - set(OPTIONS))
     return options
@@ -65,7 +68,15 @@ def session(program: ConicProgram, solver: str = "clarabel", **options):
     Clarabel keeps its setup, OSQP its factorization and warm start; cvxpy rebuilds.
     """
     base, _, sub = check_name(solver).partition(":")
+    operator = matrix_free(program)
+    if base == "auto":
+        base = solver = "newton-cg" if operator else "clarabel"
     check_options(options, solver)
+    if operator and base != "newton-cg":
+        raise ValueError(f"solver: {solver} needs P as a matrix, and this program's P is an operator (matrix-free); "
+                         "use solver='auto' or 'newton-cg', or a formulation that forms P ('dual' or 'primal')")
+    if base == "newton-cg":
+        return newton_cg.Session(program, **options)
     if base == "clarabel":
         return clarabel_direct.Session(program, **options)
     if base == "osqp":
@@ -73,9 +84,14 @@ def session(program: ConicProgram, solver: str = "clarabel", **options):
     return cvxpy_model.Session(program, solver=sub or None, **options)
 
 
+def matrix_free(program: ConicProgram) -> bool:
+    """Whether the program's P is an operator (only products with it), not a matrix."""
+    return isinstance(program.P, spla.LinearOperator)
+
+
 def seedable(solver: str, options: dict) -> bool:
     """Whether the solver's sessions start from a guess (``seed``); cvxpy rebuilds its model every solve."""
-    return check_name(solver).split(":", 1)[0] in ("clarabel", "osqp") and options.get("polishing", True)
+    return check_name(solver).split(":", 1)[0] in ("clarabel", "osqp", "newton-cg") and options.get("polishing", True)
 
 
 def solve(program: ConicProgram, solver: str = "clarabel", **options) -> ConicSolution:
@@ -83,4 +99,5 @@ def solve(program: ConicProgram, solver: str = "clarabel", **options) -> ConicSo
     return session(program, solver, **options).solve()
 
 
-__all__ = ["SOLVERS", "ConeNotSupported", "check_name", "check_options", "cvxpy_model", "seedable", "solve"]
+__all__ = ["SOLVERS", "ConeNotSupported", "check_name", "check_options", "cvxpy_model", "matrix_free", "seedable",
+           "solve"]
