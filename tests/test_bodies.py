@@ -139,6 +139,26 @@ def test_coulomb_punch_on_an_elastic_foundation():
     stick = s[status == "stick"]
     assert np.all((s[slips] < stick.min()) | (s[slips] > stick.max()))  # one stick zone, slip outside it
     assert result.certificate.residuals["pair_balance"] < 1e-12
+    np.testing.assert_allclose(result.contact.master_forces.sum(axis=0), -result.contact_force,
+                               atol=1e-12 * result.normal_force)
+
+
+@pytest.mark.parametrize("shift", [0.0026, 0.004])
+def test_cattaneo_mindlin_identical_bodies(shift):
+    """Two identical cylinders (β = 0 for any ν, no incompressible body): pressed, then sheared by moving the upper
+    back sideways; the stick zone is c/a = sqrt(1 − Q/(F P)) within a cell, Q and P the measured resultants."""
+    friction, h = 0.6, 0.005
+    result = cc.solve(two_cylinders(h, radii=(4.0, 4.0), approach=0.006, width=4.0, height=2.0,
+                                    law=cc.Coulomb(friction), shift=shift))
+    assert result.certificate.passes(1e-8)
+    s, status = result.contact.coordinate, result.contact.status
+    c, a = np.ptp(s[status == "stick"]) / 2, np.ptp(s[status != "open"]) / 2
+    loading = abs(result.tangential_force) / (friction * result.normal_force)
+    assert 0.4 < loading < 0.8
+    assert c / a == pytest.approx(np.sqrt(1 - loading), abs=h / a)
+    slipping = status != "stick"
+    np.testing.assert_allclose(np.abs(result.contact.friction[slipping & (status != "open")]),
+                               friction * result.contact.pressure[slipping & (status != "open")], rtol=1e-6)
 
 
 def test_outputs_carry_the_body_and_the_transferred_forces(tmp_path):

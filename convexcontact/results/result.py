@@ -223,9 +223,11 @@ def contact_nodes(
         status = np.where(~closed, "open", np.where(~moving, "stick", sliding))
         slip = (slip[:, 0] if friction.dim == 1 else slip) * scaling.displacement
     master = {}
-    if isinstance(contact, PairTrace):
+    if isinstance(contact, PairTrace):  # its T reaches the master too: the forces are read off both bodies' DOFs
+        both = pair_forces(contact, C, fields, friction)
+        forces = both[contact.dofs]
         master = {"master_coords": contact.master_coords * scaling.length,
-                  "master_forces": pair_forces(contact, C, fields, friction)[contact.master_dofs] * scaling.force}
+                  "master_forces": both[contact.master_dofs] * scaling.force}
     return ContactNodes(
         coords=contact.coords * scaling.length,
         coordinate=contact.coordinate * scaling.length,

@@ -46,11 +46,11 @@ def cylinder_mesh(h: float, radius: float, width: float, height: float, upper: b
 
 def two_cylinders(h: float = 0.01, radii=(1.0, 1.0), moduli=(1.0, 1.0), nu=(0.3, 0.3), approach: float = 0.01,
                   method: str = "mortar", law=None, width: float = 1.2, height: float = 1.0, master_h: float | None = None,
-                  element: str = "P1") -> Scene:
+                  element: str = "P1", shift: float = 0.0) -> Scene:
     """Two bodies with faces of ``radii`` (R₁ above, the slave; R₂ below, the master; inf = flat) pressed together by
     ``approach``: the back of each is moved by half of it towards the other, with its x fixed (plane strain
     Hertz, docs/bodies.md). ``master_h``: the lower body's cell size (default ``h``: non-matching all the same,
-    the faces differ)."""
+    the faces differ). ``shift``: the upper back's x displacement (Cattaneo–Mindlin)."""
     quads = element == "Q1"
     parts = [Part("upper", cylinder_mesh(h, radii[0], width, height, True, quads=quads),
                   Material(E=moduli[0], nu=nu[0]), element),
@@ -58,7 +58,7 @@ def two_cylinders(h: float = 0.01, radii=(1.0, 1.0), moduli=(1.0, 1.0), nu=(0.3,
                   Material(E=moduli[1], nu=nu[1]), element)]
     return bodies_scene(
         parts, Pair("upper.face", master="lower.face", method=method, law=law or Signorini()),
-        dirichlet=[Dirichlet("upper.back", ux=0.0, uy=-approach / 2), Dirichlet("lower.back", ux=0.0, uy=approach / 2)],
+        dirichlet=[Dirichlet("upper.back", ux=shift, uy=-approach / 2), Dirichlet("lower.back", ux=0.0, uy=approach / 2)],
         name="two_cylinders",
     )
 
