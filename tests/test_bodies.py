@@ -181,6 +181,8 @@ def test_outputs_carry_the_body_and_the_transferred_forces(tmp_path):
     (lambda: {"parts": [Part("upper", cc.Rectangle(1.0, 1.0, 2, 2, origin=(0.0, 1.0)), STEEL, "Q1"),
                          Part("lower", cc.Rectangle(1.0, 1.0, 2, 2), STEEL, "P1")]}, "parts.element"),
     (lambda: {"contact": Pair("upper.bottom", master="lower.bottom")}, "contact.master"),
+    (lambda: {"parts": [Part("upper", cc.Rectangle(1.0, 1.0, 2, 2, origin=(0.0, 0.2)), STEEL),
+                        Part("lower", cc.Rectangle(1.0, 1.0, 2, 2), STEEL)]}, "parts"),
     (lambda: {"contact": Pair("upper.bottom", master="lower.top", law=cc.Signorini("weak"))},
      "contact.non_penetration"),
     (lambda: {"contact": Pair("upper.bottom", master="lower.top", law=cc.Tresca(0.1, quadrature="gauss"))},
@@ -188,7 +190,8 @@ def test_outputs_carry_the_body_and_the_transferred_forces(tmp_path):
 ])
 def test_bad_inputs_name_the_field(change, field):
     """Unknown bodies and boundaries, a pair within one body, a floating body, mixed elements, boundaries that
-    do not face each other, a law the pair cannot pose: each a SceneError naming its field."""
+    do not face each other, bodies overlapping by more than a cell, a law the pair cannot pose: each a SceneError
+    naming its field."""
     arguments = {
         "parts": [Part("upper", cc.Rectangle(1.0, 1.0, 2, 2, origin=(0.0, 1.0)), STEEL),
                Part("lower", cc.Rectangle(1.0, 1.0, 2, 2), STEEL)],

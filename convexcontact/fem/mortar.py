@@ -200,7 +200,14 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
     tangents, _, mean_tangent = tangent_frame(normals, weights)
     N_full = relative_rows(normals, dofs, transfer, master_dofs, basis.N)
     T_full = relative_rows(tangents, dofs, transfer, master_dofs, basis.N)
-    gap = ((transfer @ master_coords - coords) * normals).sum(axis=1) * scaling.length / scaling.displacement
+    gap = ((transfer @ master_coords - coords) * normals).sum(axis=1)
+    cell = max(slave.length.max(), master.length.max())
+    if gap.min() < -cell:
+        raise SceneError("parts", f"the bodies overlap: {pair.boundary!r} lies up to {-gap.min() * scaling.length:.3g} "
+                         f"inside {pair.master!r}, deeper than a cell of the interface",
+                         "move the bodies apart (Rectangle origin, Part offset); an interference fit must be "
+                         "shallower than a cell")
+    gap = gap * scaling.length / scaling.displacement
     return PairTrace(
         facets=np.asarray(mesh.boundaries[pair.boundary]), dofs=dofs, coords=coords, normals=normals,
         tangents=tangents, coordinate=coords @ mean_tangent, weights=weights, mass=sp.diags(weights, format="csr"),
