@@ -1,5 +1,6 @@
 """Contact between two elastic bodies (docs/bodies.md): mortar pairs against closed forms and independent solves."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -161,6 +162,19 @@ def test_cattaneo_mindlin_identical_bodies(shift):
                                friction * result.contact.pressure[slipping & (status != "open")], rtol=1e-6)
 
 
+def test_identical_bodies_forget_the_load_path():
+    """β = 0: pressing, then shearing (a history of two steps) ends where pressing and shearing at once does."""
+    static = two_cylinders(0.01, radii=(4.0, 4.0), approach=0.006, width=4.0, height=2.0, law=cc.Coulomb(0.6),
+                           shift=0.0026)
+    history = cc.History(times=[1.0, 2.0], values={"dirichlet[upper.back].ux": [0.0, 0.0026]})
+    steps = cc.solve(dataclasses.replace(static, history=history)).steps
+    once = cc.solve(static)
+    assert not steps[0].closed.all() and np.all(steps[0].contact.status[steps[0].closed] == "stick")
+    np.testing.assert_allclose(steps[1].contact.friction, once.contact.friction, atol=1e-7 * once.max_pressure)
+    np.testing.assert_allclose(steps[1].contact.pressure, once.contact.pressure, atol=1e-9 * once.max_pressure)
+    assert list(steps[1].contact.status) == list(once.contact.status)
+
+
 def test_outputs_carry_the_body_and_the_transferred_forces(tmp_path):
     import meshio
 
@@ -235,3 +249,11 @@ def test_bad_scene_files_name_the_field(tmp_path, edit, field):
     with pytest.raises(cc.SceneError) as error:
         cc.scene.load_scene(path)
     assert error.value.field == field
+
+
+def test_a_scene_file_with_a_history(tmp_path):
+    path = tmp_path / "scene.toml"
+    history = '\n[history]\ntimes = [1.0, 2.0]\n"dirichlet[punch.top].uy" = [-0.001, -0.002]\n'
+    path.write_text((EXAMPLES / "punch_on_foundation.toml").read_text() + history)
+    scene = cc.scene.load_scene(path)
+    assert scene.history.values["dirichlet[punch.top].uy"] == (-0.001, -0.002)

@@ -18,6 +18,7 @@ import skfem as fe
 
 from ..fem.mesh import build_mesh
 from .checks import SceneError, finite_vector, of_type, sequence_of
+from .history import History
 from .model import ELEMENTS, Body, Box, Contact, Dirichlet, Material, MeshFile, Obstacle, Rectangle, Scene, Traction
 
 METHODS = ("mortar", "node_to_segment")
@@ -155,8 +156,11 @@ def bodies_scene(
     dirichlet,
     tractions=(),
     name: str = "bodies",
+    body_force=(0.0, 0.0),
+    history: History | None = None,
 ) -> Scene:
-    """A scene of several bodies (see the module's docstring); every body needs a support of its own."""
+    """A scene of several bodies (see the module's docstring); every body needs a support of its own.
+    ``history`` names the bodies' boundaries as the scene does, e.g. ``dirichlet[punch.top].ux``."""
     parts = sequence_of(parts, Part, "parts", "give a list of cc.Part(name, geometry, material)")
     names = [part.name for part in parts]
     if not parts or len(set(names)) != len(names):
@@ -193,4 +197,6 @@ def bodies_scene(
         tractions=tractions,
         contact=contact,
         name=name,
+        body_force=body_force,
+        history=history,
     )

@@ -47,7 +47,8 @@ TOP = {
     "dirichlet": TABLES, "traction": TABLES, "contact": TABLE, "obstacle": TABLE, "history": TABLE,
 }
 BODY = {"mesh": TEXT, "element": TEXT, "plane": TEXT}
-BODIES_TOP = {"name": TEXT, "bodies": TABLES, "dirichlet": TABLES, "traction": TABLES, "contact": TABLE, "obstacle": TABLE}
+BODIES_TOP = {"name": TEXT, "body_force": VECTOR, "bodies": TABLES, "dirichlet": TABLES, "traction": TABLES,
+              "contact": TABLE, "obstacle": TABLE, "history": TABLE}
 PART = {"name": TEXT, "material": TABLE, "offset": VECTOR}
 PAIR_KEYS = {"master": TEXT, "method": TEXT}
 RECTANGLE = {
@@ -168,13 +169,17 @@ def _bodies(data: dict, base_dir: Path) -> Scene:
         material = Material(**_table(part.pop("material"), f"{path}.material", MATERIAL, required=("E", "nu")),
                             name=f"{path}.material")
         parts.append(Part(geometry=body.geometry, element=body.element, plane=body.plane, material=material, **part))
-    return bodies_scene(
+    scene = bodies_scene(
         parts,
         contact=_contact(data["contact"], data.get("obstacle", {}), PAIR_KEYS),
         dirichlet=[Dirichlet(**entry) for entry in _entries(data, "dirichlet", DIRICHLET)],
         tractions=[Traction(**entry) for entry in _entries(data, "traction", TRACTION)],
-        **{key: data[key] for key in ("name",) if key in data},
+        **{key: data[key] for key in ("name", "body_force") if key in data},
+        history=_history(data["history"]) if "history" in data else None,
     )
+    if scene.history is not None:
+        scene.history.check(scene)
+    return scene
 
 
 def _body(table, base_dir: Path, path: str = "body", extra: dict | None = None) -> Body:
