@@ -72,6 +72,7 @@ class Segments:
 
 
 def segments(mesh: fe.Mesh, facets: np.ndarray) -> Segments:
+    """The ``facets`` of a 2-D mesh as oriented segments (their cell on the left of start → end)."""
     nodes = mesh.facets[:, facets].T.copy()
     centroid = mesh.p[:, mesh.t[:, mesh.f2t[0, facets]]].mean(axis=1).T
     start, end = mesh.p[:, nodes[:, 0]].T, mesh.p[:, nodes[:, 1]].T
@@ -149,70 +150,75 @@ def relative_rows(vectors, dofs, transfer: sp.coo_matrix, master_dofs, ndofs: in
     return sp.csr_matrix((values, (rows, cols)), shape=(m, ndofs))
 
 
+def slave_nodes(slave: Segments) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The slave boundary's vertices, each facet's two node numbers among them, the weights w_i = ∫ψ_i and
+    the nodal normals n_i ∝ ∫ψ_i n ds (the facets' normals averaged with the weights of ψ_i)."""
+    vertices, local = np.unique(slave.nodes, return_inverse=True)
+    local = local.reshape(-1, 2)
+    half = np.repeat(slave.length / 2, 2)
+    weights = np.bincount(local.ravel(), weights=half)
+    summed = np.column_stack([np.bincount(local.ravel(), half * np.repeat(slave.normal[:, j], 2)) for j in range(2)])
+    return vertices, local, weights, summed / np.linalg.norm(summed, axis=1, keepdims=True)
+
+
+def transfer_matrix(pair: Pair, slave: Segments, master: Segments, local, weights, normals, coords):
+    """Π (slave nodes × master nodes) of the pair's method, the master's vertices, and which slave nodes keep
+    their rows."""
+    masters, master_local = np.unique(master.nodes, return_inverse=True)
+    master_local = master_local.reshape(-1, 2)
+    mean_normal = weights @ normals / np.linalg.norm(weights @ normals)
+    along, margin = np.array([mean_normal[1], -mean_normal[0]]), 2.0 * max(slave.length.max(), master.length.max())
+    shape = (len(weights), len(masters))
+    if pair.method == "node_to_segment":
+        i, f, b, values = node_to_segment(coords, normals, master, along, margin)
+        ok = np.zeros(len(weights), bool)
+        ok[i] = True
+        return sp.coo_matrix((values, (i, master_local[f, b])), shape=shape).tocsr(), masters, ok
+    (e, a, f, b, values), covered = mortar(slave, master, along, margin)
+    if (covered > 1 + COVERED).any():
+        raise SceneError("contact.master", f"{pair.master!r} is met twice along the normals of {pair.boundary!r} "
+                         "(it folds over, or faces the slave from both sides)",
+                         "name only the part of the master boundary that faces the slave")
+    ok = np.ones(len(weights), bool)
+    ok[local[covered < 1 - COVERED].ravel()] = False  # a node keeps its row only when its facets are covered
+    mass = sp.coo_matrix((values, (local[e, a], master_local[f, b])), shape=shape).tocsr()
+    return sp.diags(1.0 / weights) @ mass, masters, ok
+
+
 def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray,
                prescribed: np.ndarray) -> PairTrace:
     """The trace of a contact pair: slave nodes, their normals and weights, N, T and the gap from geometry."""
     if mesh.dim() != 2 or basis.N != 2 * mesh.p.shape[1]:
         raise SceneError("contact.master", "contact pairs are built in 2-D for P1 and Q1 elements (straight "
                          "facets, nodes at the vertices)", "use 2-D bodies of P1 or Q1 elements")
-    slave = segments(mesh, check_boundary(mesh, pair.boundary, "contact.boundary"))
-    master = segments(mesh, check_boundary(mesh, pair.master, "contact.master"))
-    vertices, local = np.unique(slave.nodes, return_inverse=True)
-    local = local.reshape(-1, 2)
-    weights = np.bincount(local.ravel(), weights=np.repeat(slave.length / 2, 2))
-    summed = np.column_stack([np.bincount(local.ravel(), np.repeat(slave.length / 2 * slave.normal[:, j], 2))
-                              for j in range(2)])
-    normals = summed / np.linalg.norm(summed, axis=1, keepdims=True)
-    mean_normal = weights @ normals / np.linalg.norm(weights @ normals)
-    along = np.array([mean_normal[1], -mean_normal[0]])
-    margin = 2.0 * max(slave.length.max(), master.length.max())
-    masters, master_local = np.unique(master.nodes, return_inverse=True)
-    master_local = master_local.reshape(-1, 2)
+    facets = check_boundary(mesh, pair.boundary, "contact.boundary")
+    slave, master = segments(mesh, facets), segments(mesh, check_boundary(mesh, pair.master, "contact.master"))
+    vertices, local, weights, normals = slave_nodes(slave)
     coords = mesh.p[:, vertices].T
-
-    if pair.method == "mortar":
-        (e, a, f, b, values), covered = mortar(slave, master, along, margin)
-        if (covered > 1 + COVERED).any():
-            raise SceneError("contact.master", f"{pair.master!r} is met twice along the normals of {pair.boundary!r} "
-                             "(it folds over, or faces the slave from both sides)",
-                             "name only the part of the master boundary that faces the slave")
-        rows, ok = local[e, a], np.ones(len(vertices), bool)
-        ok[local[covered < 1 - COVERED].ravel()] = False  # a node keeps its row only when its facets are covered
-        mass = sp.coo_matrix((values, (rows, master_local[f, b])), shape=(len(vertices), len(masters))).tocsr()
-        transfer = sp.diags(1.0 / weights) @ mass
-    else:
-        i, f, b, values = node_to_segment(coords, normals, master, along, margin)
-        ok = np.zeros(len(vertices), bool)
-        ok[i] = True
-        transfer = sp.coo_matrix((values, (i, master_local[f, b])), shape=(len(vertices), len(masters))).tocsr()
+    transfer, masters, ok = transfer_matrix(pair, slave, master, local, weights, normals, coords)
     if not ok.any():
         raise SceneError("contact.master", f"no facet of {pair.master!r} faces {pair.boundary!r} (they lie side by "
                          "side or back to back)", "pair boundaries that face each other: the slave's outward normal "
                          "must point at the master")
     left_out = (f"{np.count_nonzero(~ok)} of {ok.size} nodes of {pair.boundary!r} have no master facet under their "
                 "whole support: they are left out of the contact (make the larger boundary the master)")
-    warnings = () if ok.all() else (left_out,)
-    transfer = sp.coo_matrix(transfer[ok])
-    dofs = basis.nodal_dofs[:, vertices[ok]].T
-    master_dofs = basis.nodal_dofs[:, masters].T
-    normals, weights, coords = normals[ok], weights[ok], coords[ok]
+    transfer, normals, weights, coords = sp.coo_matrix(transfer[ok]), normals[ok], weights[ok], coords[ok]
+    dofs, master_dofs = basis.nodal_dofs[:, vertices[ok]].T, basis.nodal_dofs[:, masters].T
     master_coords = mesh.p[:, masters].T
     tangents, _, mean_tangent = tangent_frame(normals, weights)
     N_full = relative_rows(normals, dofs, transfer, master_dofs, basis.N)
     T_full = relative_rows(tangents, dofs, transfer, master_dofs, basis.N)
     gap = ((transfer @ master_coords - coords) * normals).sum(axis=1)
-    cell = max(slave.length.max(), master.length.max())
-    if gap.min() < -cell:
+    if gap.min() < -max(slave.length.max(), master.length.max()):
         raise SceneError("parts", f"the bodies overlap: {pair.boundary!r} lies up to {-gap.min() * scaling.length:.3g} "
                          f"inside {pair.master!r}, deeper than a cell of the interface",
                          "move the bodies apart (Rectangle origin, Part offset); an interference fit must be "
                          "shallower than a cell")
-    gap = gap * scaling.length / scaling.displacement
     return PairTrace(
-        facets=np.asarray(mesh.boundaries[pair.boundary]), dofs=dofs, coords=coords, normals=normals,
+        facets=facets, dofs=dofs, coords=coords, normals=normals,
         tangents=tangents, coordinate=coords @ mean_tangent, weights=weights, mass=sp.diags(weights, format="csr"),
         N=N_full[:, free], T=T_full[:, free], normal_offset=N_full @ prescribed, tangent_offset=T_full @ prescribed,
-        gap=gap, obstacle_coupling=None, obstacle_force=0.0,
+        gap=gap * scaling.length / scaling.displacement, obstacle_coupling=None, obstacle_force=0.0,
         master_dofs=master_dofs, master_coords=master_coords, transfer=transfer.tocsr(), N_full=N_full,
-        T_full=T_full, warnings=warnings,
+        T_full=T_full, warnings=() if ok.all() else (left_out,),
     )
