@@ -257,3 +257,48 @@ def test_a_scene_file_with_a_history(tmp_path):
     path.write_text((EXAMPLES / "punch_on_foundation.toml").read_text() + history)
     scene = cc.scene.load_scene(path)
     assert scene.history.values["dirichlet[punch.top].uy"] == (-0.001, -0.002)
+
+
+def stack_of_three(law=None, **change):
+    """Three unit blocks of 5, 7 and 6 cells across, a uniform pressure on top, rollers on the left sides."""
+    parts = [Part(name, cc.Rectangle(1.0, 1.0, n, n, origin=(0.0, y)), STEEL)
+             for name, n, y in (("top", 5, 2.0), ("middle", 7, 1.0), ("bottom", 6, 0.0))]
+    arguments = {
+        "parts": parts,
+        "contact": [Pair("top.bottom", master="middle.top", law=law or cc.Signorini()),
+                    Pair("middle.bottom", master="bottom.top", law=law or cc.Signorini())],
+        "dirichlet": [cc.Dirichlet("bottom.bottom", uy=0.0)] + [cc.Dirichlet(f"{p.name}.left", ux=0.0) for p in parts],
+        "tractions": [cc.Traction("top.top", pressure=0.01)],
+    }
+    return bodies_scene(**(arguments | change))
+
+
+def test_several_pairs_carry_the_patch_pressure_through_a_stack():
+    """Two non-matching interfaces in one scene: each transmits the uniform pressure exactly, each balances."""
+    result = cc.solve(stack_of_three())
+    assert result.fem.contact.m == 6 + 8
+    np.testing.assert_allclose(result.contact.pressure, 0.01, rtol=1e-9)
+    assert result.certificate.residuals["pair_balance"] < 1e-12
+    shifted = cc.solve(stack_of_three().with_law(cc.Tresca(0.001)))  # with_law reaches every pair
+    np.testing.assert_allclose(shifted.contact.pressure, 0.01, rtol=1e-8)
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda: {"contact": [Pair("top.bottom", master="middle.top"), Pair("middle.bottom", master="bottom.top",
+                                                                         law=cc.Coulomb(0.3))]}, "contact[1].law"),
+    (lambda: {"contact": [Pair("top.bottom", master="middle.top"), Pair("top.bottom", master="bottom.top")]},
+     "contact[1].boundary"),
+])
+def test_several_pairs_share_one_law_and_a_slave_each(change, field):
+    with pytest.raises(cc.SceneError) as error:
+        stack_of_three(**change())
+    assert error.value.field == field
+
+
+def test_a_scene_file_with_several_pairs():
+    """examples/scenes/three_blocks.toml: [[contact]] tables, the stack's patch test."""
+    result = cc.solve(cc.scene.load_scene(EXAMPLES / "three_blocks.toml"))
+    np.testing.assert_allclose(result.contact.pressure, 0.01, rtol=1e-9)
+    with pytest.raises(cc.SceneError, match=r"contact\[1\]\.master"):
+        cc.scene.scene_from_dict({"bodies": [], "dirichlet": [], "contact": [{"boundary": "a.b", "master": "c.d"},
+                                                                             {"boundary": "c.e"}]})

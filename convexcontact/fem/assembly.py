@@ -11,11 +11,11 @@ import skfem as fe
 from skfem.helpers import ddot, div, dot, eye, sym_grad, trace
 from skfem.models.elasticity import lame_parameters
 
-from ..scene.bodies import Bodies, Pair
+from ..scene.bodies import Bodies, Pair, Pairs
 from ..scene.model import Contact, Dirichlet, Material, Scene, SceneError, check_plane
 from .contact import ContactTrace, contact_trace
 from .mesh import build_mesh, check_boundary, vector_basis
-from .mortar import PairTrace, pair_trace
+from .mortar import PairTrace, pair_trace, pairs_trace
 from .scaling import Scaling
 
 
@@ -236,8 +236,8 @@ def characteristic_pressure(scene: Scene, length: float, stress: float, overlap:
 
 def build_trace(contact: Contact, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray,
                 prescribed: np.ndarray) -> ContactTrace:
-    """The contact trace: of Γ_C against the obstacle, or of a pair of bodies (:mod:`.mortar`)."""
-    build = pair_trace if isinstance(contact, Pair) else contact_trace
+    """The contact trace: of Γ_C against the obstacle, or of pairs of bodies (:mod:`.mortar`)."""
+    build = pair_trace if isinstance(contact, Pair) else pairs_trace if isinstance(contact, Pairs) else contact_trace
     return build(contact, mesh, basis, scaling, free, prescribed)
 
 

@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 import skfem as fe
 
-from ..scene.bodies import Pair
+from ..scene.bodies import Pair, Pairs
 from ..scene.model import SceneError
 from .contact import ContactTrace, tangent_frame
 from .mesh import check_boundary
@@ -40,7 +40,8 @@ GAUSS = np.array([-1.0, 1.0]) / np.sqrt(3.0)
 @dataclass
 class PairTrace(ContactTrace):
     """A trace whose rows couple the slave nodes ``dofs`` to the master nodes ``master_dofs`` through
-    ``transfer`` Π (m × master nodes); ``N_full`` and ``T_full`` are N and T on every DOF."""
+    ``transfer`` Π (m × master nodes); ``N_full`` and ``T_full`` are N and T on every DOF. Several pairs
+    stack their rows: ``pieces`` holds each pair's (rows, slave DOFs, master DOFs)."""
 
     master_dofs: np.ndarray | None = None
     master_coords: np.ndarray | None = None
@@ -48,15 +49,39 @@ class PairTrace(ContactTrace):
     N_full: sp.csr_matrix | None = None
     T_full: sp.csr_matrix | None = None
     warnings: tuple[str, ...] = ()
+    pieces: tuple = ()
 
-    def forces(self, normal: np.ndarray, tangential: np.ndarray | None = None) -> np.ndarray:
-        """Contact forces on the bodies at every DOF, from the weighted multipliers Cλ_N and w·λ_T."""
-        force = -(self.N_full.T @ normal)
-        return force if tangential is None else force + self.T_full.T @ tangential
+    def forces(self, normal: np.ndarray, tangential: np.ndarray | None = None, rows=slice(None)) -> np.ndarray:
+        """Contact forces on the bodies at every DOF, from the weighted multipliers Cλ_N and w·λ_T (of ``rows``)."""
+        force = -(self.N_full[rows].T @ normal[rows])
+        return force if tangential is None else force + self.T_full[rows].T @ tangential[rows]
 
-    def resultants(self, force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(slave, master) resultants of a DOF vector of ``forces`` (per unit thickness)."""
-        return force[self.dofs].sum(axis=0), force[self.master_dofs].sum(axis=0)
+    def imbalance(self, normal: np.ndarray, tangential: np.ndarray | None = None) -> float:
+        """The largest ‖R_slave + R_master‖ of a pair, relative to ‖R_slave‖ (at least the force of a unit pressure)."""
+        worst = 0.0
+        for rows, slave, master in self.pieces:
+            force = self.forces(normal, tangential, rows)
+            resultants = force[slave].sum(axis=0), force[master].sum(axis=0)
+            scale = max(np.linalg.norm(resultants[0]), self.weights[rows].sum())
+            worst = max(worst, np.linalg.norm(resultants[0] + resultants[1]) / scale)
+        return worst
+
+
+def stack(traces: list[PairTrace]) -> PairTrace:
+    """One trace of several pairs: their rows one after the other."""
+    def joined(name):
+        return np.concatenate([getattr(trace, name) for trace in traces])
+
+    starts = np.cumsum([0] + [trace.m for trace in traces])
+    arrays = ("facets", "dofs", "coords", "normals", "tangents", "coordinate", "weights", "normal_offset",
+              "tangent_offset", "gap", "master_dofs", "master_coords")
+    return PairTrace(
+        **{name: joined(name) for name in arrays}, obstacle_coupling=None, obstacle_force=0.0,
+        **{name: sp.block_diag([getattr(t, name) for t in traces], format="csr") for name in ("mass", "transfer")},
+        **{name: sp.vstack([getattr(t, name) for t in traces]).tocsr() for name in ("N", "T", "N_full", "T_full")},
+        warnings=sum((trace.warnings for trace in traces), ()),
+        pieces=tuple((slice(start, start + t.m), t.dofs, t.master_dofs) for start, t in zip(starts, traces)),
+    )
 
 
 @dataclass
@@ -220,5 +245,10 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
         N=N_full[:, free], T=T_full[:, free], normal_offset=N_full @ prescribed, tangent_offset=T_full @ prescribed,
         gap=gap * scaling.length / scaling.displacement, obstacle_coupling=None, obstacle_force=0.0,
         master_dofs=master_dofs, master_coords=master_coords, transfer=transfer.tocsr(), N_full=N_full,
-        T_full=T_full, warnings=() if ok.all() else (left_out,),
+        T_full=T_full, warnings=() if ok.all() else (left_out,), pieces=((slice(None), dofs, master_dofs),),
     )
+
+
+def pairs_trace(pairs: Pairs, *arguments) -> PairTrace:
+    """The trace of several pairs (each built by :func:`pair_trace`)."""
+    return stack([pair_trace(pair, *arguments) for pair in pairs.pairs])

@@ -12,8 +12,8 @@ error δ in both factors into δ² and pass a 1e-5 error as 1e-10.
 - ``complementarity``   max |min(λ_N / p_ref, (g − u_N) / u_ref)|   (the Signorini natural map)
 - ``equilibrium``       ‖Ku − f + NᵀCλ_N − Rᵀλ_T‖∞ / f_ref
 - ``obstacle_balance``  |Σ contact force − P| / max(P, Q, 1), likewise Q  (force control only)
-- ``pair_balance``      ‖R_slave + R_master‖ / max(‖R_slave‖, Σw): the contact forces on the two bodies of a
-                        pair, summed over each body's nodes, are equal and opposite (pairs only)
+- ``pair_balance``      max over pairs of ‖R_slave + R_master‖ / max(‖R_slave‖, Σw): the contact forces on the
+                        two bodies of a pair, summed over each body's nodes, are equal and opposite (pairs only)
 - ``friction_bound``    max (‖λ_T‖ − s)_+ / p_ref     (friction only)
 - ``friction_law``      max ‖λ_T − Π_{B(s)}(λ_T − ρ v)‖ / p_ref with ρ = p_ref / u_ref (friction
                         only): the projection (De Saxcé / Alart–Curnier) form of "‖λ_T‖ ≤ s, and
@@ -131,15 +131,13 @@ def certify(
     if friction is not None:
         residuals.update(friction_residuals(friction, fields, slip_bound, p_ref, u_ref, epsilon))
     if isinstance(contact, PairTrace):
-        slave, master = contact.resultants(pair_forces(contact, C, fields, friction))
-        residuals["pair_balance"] = np.linalg.norm(slave + master) / max(np.linalg.norm(slave), contact.weights.sum())
+        residuals["pair_balance"] = contact.imbalance(*pair_multipliers(C, fields, friction))
     return Certificate({k: float(v) for k, v in residuals.items()})
 
 
-def pair_forces(contact: PairTrace, C: sp.spmatrix, fields: ContactFields, friction: FrictionPoints | None):
-    """Contact forces on both bodies of a pair at every DOF (scaled), as the formulation applies them."""
-    tangential = None if friction is None else np.tile(friction.weights, friction.dim) * fields.friction
-    return contact.forces(C @ fields.pressure, tangential)
+def pair_multipliers(C: sp.spmatrix, fields: ContactFields, friction: FrictionPoints | None):
+    """The weighted multipliers (Cλ_N, w·λ_T) whose forces a pair's rows apply (scaled)."""
+    return C @ fields.pressure, None if friction is None else np.tile(friction.weights, friction.dim) * fields.friction
 
 
 def weighted_slip(friction: FrictionPoints, fields: ContactFields) -> np.ndarray:

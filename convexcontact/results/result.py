@@ -11,7 +11,7 @@ from ..fem.assembly import FEModel
 from ..fem.friction import FrictionPoints
 from ..fem.mortar import PairTrace
 from ..formulations.fields import ContactFields
-from .certificate import Certificate, normal_gap, pair_forces
+from .certificate import Certificate, normal_gap, pair_multipliers
 
 CLOSED_PRESSURE = 1e-6
 """A node is closed when its pressure exceeds this fraction of the largest pressure, and of the
@@ -224,7 +224,7 @@ def contact_nodes(
         slip = (slip[:, 0] if friction.dim == 1 else slip) * scaling.displacement
     master = {}
     if isinstance(contact, PairTrace):  # its T reaches the master too: the forces are read off both bodies' DOFs
-        both = pair_forces(contact, C, fields, friction)
+        both = contact.forces(*pair_multipliers(C, fields, friction))
         forces = both[contact.dofs]
         master = {"master_coords": contact.master_coords * scaling.length,
                   "master_forces": both[contact.master_dofs] * scaling.force}

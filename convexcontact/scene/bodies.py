@@ -11,7 +11,7 @@ boundary of another part (docs/bodies.md).
 from __future__ import annotations
 
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import skfem as fe
@@ -116,6 +116,40 @@ class Pair(Contact):
                              "drop smoothing_radius (the local law)")
 
 
+@dataclass(frozen=True)
+class Pairs(Contact):
+    """Several pairs of one law (the scene's program has one): ``boundary`` is the first slave, and each pair
+    takes ``law``, so that :meth:`Scene.with_law` changes them all."""
+
+    pairs: tuple[Pair, ...] = ()
+
+    def __post_init__(self):
+        super().__post_init__()
+        pairs = sequence_of(self.pairs, Pair, "contact", "give a list of cc.Pair(slave, master=…)")
+        object.__setattr__(self, "pairs", tuple(replace(pair, law=self.law) for pair in pairs))
+
+
+def one_law(pairs: tuple[Pair, ...]) -> Pairs:
+    """Pairs sharing the first pair's law; another law, or a slave boundary twice, is refused."""
+    slaves = [pair.boundary for pair in pairs]
+    for index, pair in enumerate(pairs):
+        if not same(pair.law, pairs[0].law):
+            raise SceneError(f"contact[{index}].law", f"{type(pair.law).__name__} where contact[0] has "
+                             f"{pairs[0].law!r:.80}", "give every pair the same law: one scene is one program")
+        if slaves.index(pair.boundary) != index:
+            raise SceneError(f"contact[{index}].boundary", f"{pair.boundary!r} is the slave of two pairs",
+                             "give each slave boundary one master")
+    return Pairs(pairs[0].boundary, law=pairs[0].law, pairs=pairs)
+
+
+def same(a, b) -> bool:
+    """Equal laws; fields holding arrays compare element-wise."""
+    try:
+        return bool(a == b)
+    except ValueError:  # numpy arrays in the fields: compare them one by one
+        return type(a) is type(b) and all(np.array_equal(x, y) for x, y in zip(vars(a).values(), vars(b).values()))
+
+
 def body_of(boundary: str, names: list[str], field_name: str) -> str:
     """The part a ``"<part>.<boundary>"`` name belongs to, or an error naming the parts there are."""
     part = boundary.split(".", 1)[0] if isinstance(boundary, str) else None
@@ -152,14 +186,15 @@ def facet_index(mesh: fe.Mesh, vertices: np.ndarray) -> np.ndarray:
 
 def bodies_scene(
     parts,
-    contact: Contact,
+    contact: Contact | list[Pair],
     dirichlet,
     tractions=(),
     name: str = "bodies",
     body_force=(0.0, 0.0),
     history: History | None = None,
 ) -> Scene:
-    """A scene of several bodies (see the module's docstring); every body needs a support of its own.
+    """A scene of several bodies (see the module's docstring); every body needs a support of its own. ``contact``
+    is one pair, a list of pairs of one law, or a rigid obstacle on a body's boundary.
     ``history`` names the bodies' boundaries as the scene does, e.g. ``dirichlet[punch.top].ux``."""
     parts = sequence_of(parts, Part, "parts", "give a list of cc.Part(name, geometry, material)")
     names = [part.name for part in parts]
@@ -176,14 +211,18 @@ def bodies_scene(
         raise SceneError("parts.geometry", "2-D and 3-D bodies mixed", "give every body the same dimension")
     dirichlet = sequence_of(dirichlet, Dirichlet, "dirichlet", "give a list of cc.Dirichlet(boundary, ux=…, uy=…)")
     tractions = sequence_of(tractions, Traction, "tractions", "give a list of cc.Traction(boundary, pressure=…)")
-    of_type(contact, Contact, "contact", "give cc.Pair(slave, master=…, law=…) or cc.Contact(boundary, obstacle)")
+    if isinstance(contact, (list, tuple)):
+        contact = one_law(sequence_of(contact, Pair, "contact", "give a list of cc.Pair(slave, master=…, law=…)"))
+    of_type(contact, Contact, "contact", "give cc.Pair(slave, master=…, law=…), a list of them, or "
+            "cc.Contact(boundary, obstacle)")
     supported = {body_of(d.boundary, names, f"dirichlet[{d.boundary}].boundary") for d in dirichlet}
     for traction in tractions:
         body_of(traction.boundary, names, f"traction[{traction.boundary}].boundary")
-    slave = body_of(contact.boundary, names, "contact.boundary")
-    if isinstance(contact, Pair) and body_of(contact.master, names, "contact.master") == slave:
-        raise SceneError("contact.master", f"{contact.master!r} and {contact.boundary!r} are boundaries of one body",
-                         "pair a boundary of one body with a boundary of another (self-contact is not built)")
+    for pair in contact.pairs if isinstance(contact, Pairs) else (contact,):
+        slave = body_of(pair.boundary, names, "contact.boundary")
+        if isinstance(pair, Pair) and body_of(pair.master, names, "contact.master") == slave:
+            raise SceneError("contact.master", f"{pair.master!r} and {pair.boundary!r} are boundaries of one body",
+                             "pair a boundary of one body with a boundary of another (self-contact is not built)")
     floating = [name for name in names if name not in supported]
     if floating:
         raise SceneError("dirichlet", f"body {floating[0]!r} has no Dirichlet boundary: it can move rigidly "

@@ -41,6 +41,7 @@ TRIPLE, INTEGERS3 = "three numbers [a, b, c]", "three integers [nx, ny, nz]"
 VECTOR, POINT = "two or three numbers (2-D or 3-D)", "a number (2-D) or a point [x, y, z] (3-D)"
 FIELD = "a number or a formula in x and y"
 TABLE, TABLES = "a table [name]", "an array of tables [[name]]"
+TABLE_OR_TABLES = "a table [name] or an array of tables [[name]]"
 
 TOP = {
     "name": TEXT, "body_force": VECTOR, "body": TABLE, "material": TABLE, "materials": TABLE,
@@ -48,7 +49,7 @@ TOP = {
 }
 BODY = {"mesh": TEXT, "element": TEXT, "plane": TEXT}
 BODIES_TOP = {"name": TEXT, "body_force": VECTOR, "bodies": TABLES, "dirichlet": TABLES, "traction": TABLES,
-              "contact": TABLE, "obstacle": TABLE, "history": TABLE}
+              "contact": TABLE_OR_TABLES, "obstacle": TABLE, "history": TABLE}
 PART = {"name": TEXT, "material": TABLE, "offset": VECTOR}
 PAIR_KEYS = {"master": TEXT, "method": TEXT}
 RECTANGLE = {
@@ -171,7 +172,8 @@ def _bodies(data: dict, base_dir: Path) -> Scene:
         parts.append(Part(geometry=body.geometry, element=body.element, plane=body.plane, material=material, **part))
     scene = bodies_scene(
         parts,
-        contact=_contact(data["contact"], data.get("obstacle", {}), PAIR_KEYS),
+        contact=_contact(data["contact"], data.get("obstacle", {}), PAIR_KEYS) if isinstance(data["contact"], dict)
+        else [_pair(table, i) for i, table in enumerate(data["contact"])],
         dirichlet=[Dirichlet(**entry) for entry in _entries(data, "dirichlet", DIRICHLET)],
         tractions=[Traction(**entry) for entry in _entries(data, "traction", TRACTION)],
         **{key: data[key] for key in ("name", "body_force") if key in data},
@@ -180,6 +182,14 @@ def _bodies(data: dict, base_dir: Path) -> Scene:
     if scene.history is not None:
         scene.history.check(scene)
     return scene
+
+
+def _pair(table, index: int) -> Pair:
+    """One ``[[contact]]`` table of several: a pair."""
+    if not isinstance(table.get("master"), str):
+        raise SceneError(f"contact[{index}].master", "missing: several [[contact]] tables are pairs of bodies",
+                         "name the master boundary, e.g. master = 'foundation.top'")
+    return _contact(table, {}, PAIR_KEYS)
 
 
 def _body(table, base_dir: Path, path: str = "body", extra: dict | None = None) -> Body:
@@ -287,6 +297,7 @@ def _check_type(value, kind: str, path: str) -> None:
         FIELD: number(value) or isinstance(value, str),
         TABLE: isinstance(value, dict),
         TABLES: isinstance(value, list) and all(isinstance(x, dict) for x in value),
+        TABLE_OR_TABLES: isinstance(value, dict) or (isinstance(value, list) and all(isinstance(x, dict) for x in value)),
     }[kind]
     if not ok:
         raise SceneError(path, f"expected {kind.replace('name', path)}, got {value!r}")
