@@ -76,7 +76,8 @@ class Model:
     def with_law(self, law) -> Model:
         """This model under another contact law, for sweeps (F, slip bounds, ε): the assembly,
         the contact trace and K's condensation are reused; only the program is rebuilt."""
-        model = formulate(self.fem.with_law(law), self.formulation, {}, self.condensation, self.reason)
+        formulation = MATRIX_FREE if solvers.matrix_free(self.program) else self.formulation
+        model = formulate(self.fem.with_law(law), formulation, {}, self.condensation, self.reason)
         model.cache = self.cache  # shared: the frictionless first Picard step is the same for every law
         return model
 
@@ -84,8 +85,9 @@ class Model:
         """The cvxpy Problem of this model, to inspect or extend before :meth:`solve`."""
         return solvers.cvxpy_model.model(self.program)
 
-    def solve(self, solver: str = "clarabel", progress: Callable | None = None, **options) -> ContactResult:
-        """Solve with ``solver`` (clarabel, osqp, cvxpy, cvxpy:NAME) and certify the answer.
+    def solve(self, solver: str = "auto", progress: Callable | None = None, **options) -> ContactResult:
+        """Solve with ``solver`` (auto, clarabel, osqp, cvxpy, cvxpy:NAME, newton-cg) and certify the answer;
+        "auto" is newton-cg on a matrix-free program, clarabel on any other.
 
         ``options`` go to the solver adapter (``tol``, ``max_iter``, ``verbose``,
         native settings; ``cvxpy_model`` for an extended cvxpy model). Coulomb laws
@@ -213,12 +215,22 @@ INCOMPRESSIBLE = 1000.0
 dual's certificate was 1e-9 at ν = 0.499 (λ/μ = 499), 9e-5 at 0.4999 and 3e-2 at 0.49999."""
 
 DENSE_LIMIT = 10000
-"""Most contact unknowns (rows of B) the condensed program takes: its W is dense, so memory
-grows as m² (800 MB at the limit). With the frictionless seed the interior point runs on the
-normal multipliers only and the polish factors W restricted to the free multipliers a few
-times. Measured at 6348 rows (3-D Tresca, 2.8·10⁵ DOFs): contact 3.9× one linear solve, peak
-memory 2.3× (the interior point on the whole dense program, before the seed, took 0.9 s per
-iteration already at 3072 rows)."""
+"""Most contact unknowns (rows of B) a dense W takes at all: memory grows as m² (800 MB at the limit).
+Measured at 6348 rows (3-D Tresca punch, 2.8·10⁵ DOFs, few of them in contact): contact 3.9× one
+linear solve, peak memory 2.3×. Beyond it, the matrix-free dual (or the primal where that has no bound
+form)."""
+
+CLOSED_LIMIT = 2000
+"""Most contact unknowns at nodes closed at the start (gap ≤ 0) for a dense W: the dense solvers' work
+grows with the unknowns in contact, the matrix-free dual's hardly. Measured on whole faces (every node
+closed; ratios to one linear solve, dense / matrix-free): 2-D 10⁵ DOFs, Signorini 500 unknowns 2.0 / 2.6,
+1000: 3.3 / 2.5, 2000: 24 / 2.2; Tresca 1000: 4.7 / 5.1, 2000: 10.4 / 3.2, 4000: 169 / 3.2; 3-D 3·10⁴ DOFs,
+Signorini 625: 3.4 / 1.6 (2.5 repeated), 1089: 12.1 / 2.7; Tresca 1875: 11.9 / failed (100 Newton steps),
+3267: 51 / 7.3. On the punch (few nodes closed) the dense W stayed ahead: 2-D Tresca 634 unknowns 1.9 / 4.0,
+1098: 2.2 / 7.0."""
+
+MATRIX_FREE = "dual-matrix-free"
+"""The dual with W as an operator (one solve with K's factors per product) and newton-cg."""
 
 
 def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
@@ -232,14 +244,29 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
     columns = contact_columns(fem).size
     if columns == 0:
         return "primal", "no contact node has a free DOF: nothing to condense onto"
+    reuse = " and is reused by every Picard step" if isinstance(law, Coulomb) else ""
+    closed = round(unknowns * np.count_nonzero(fem.contact.gap <= 0) / fem.contact.m)
+    if (unknowns > DENSE_LIMIT or closed > CLOSED_LIMIT) and matrix_free_applies(fem, law):
+        size = (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}" if unknowns > DENSE_LIMIT else
+                f"{closed} contact unknowns at closed nodes exceed {CLOSED_LIMIT}")
+        return MATRIX_FREE, (f"{size}: W = B K⁻¹ Bᵀ is applied through one factorization of K{reuse}, never formed "
+                             "(a dense W would cost more), and newton-cg solves the dual")
     if unknowns > DENSE_LIMIT:
         return "primal", (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}: the dense condensed program would "
-                          "cost more than the sparse one")
+                          "cost more than the sparse one (a force-controlled obstacle or a regularized friction "
+                          "has no matrix-free dual)")
     if 4 * columns > fem.n_free:
         return "primal", f"the contact nodes carry {columns} of the {fem.n_free} DOFs: too many to gain by condensing"
-    reuse = " and is reused by every Picard step" if isinstance(law, Coulomb) else ""
     return "dual", (f"{unknowns} contact unknowns beside {fem.n_free} DOFs: K is condensed onto Γ_C once "
                     f"(Delassus operator W){reuse}, then the program is small and dense")
+
+
+def matrix_free_applies(fem: FEModel, law) -> bool:
+    """Whether the matrix-free dual is in bound form (newton-cg's programs): no equality (force control) and
+    exact friction."""
+    contact = fem.contact
+    return (contact.obstacle_coupling is None and contact.tangential_coupling is None
+            and getattr(law, "regularization", None) is None)
 
 
 def contact_columns(fem: FEModel) -> np.ndarray:
@@ -252,12 +279,14 @@ def prepare(scene: Scene, formulation: str = "auto") -> Model:
     """Assemble and formulate ``scene``.
 
     ``formulation``: "primal" (the sparse program over all DOFs), "dual" (condensed onto
-    the contact multipliers with the Delassus operator) or "auto", which picks one from
-    the problem's shape and records why in ``Model.reason``.
+    the contact multipliers with the Delassus operator), "dual-matrix-free" (the same dual with
+    W applied through K's factorization, never formed; solved by newton-cg) or "auto", which
+    picks one from the problem's shape and records why in ``Model.reason``.
     """
     of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
-    if formulation not in (*FORMULATIONS, "auto"):
-        raise SceneError("formulation", f"unknown {formulation!r}", f"use one of {sorted(FORMULATIONS)} or 'auto'")
+    if formulation not in (*FORMULATIONS, MATRIX_FREE, "auto"):
+        raise SceneError("formulation", f"unknown {formulation!r}",
+                         f"use one of {sorted(FORMULATIONS)}, {MATRIX_FREE!r} or 'auto'")
     timings: dict = {}
     with timed(timings, "assembly"):
         fem = assemble(scene)
@@ -284,17 +313,18 @@ def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, 
     if formulation == "auto":
         unknowns = fem.contact.m + (friction.R.shape[0] if friction is not None else 0)
         formulation, reason = choose_formulation(fem, law, unknowns)
-        if formulation == "dual":
+        if formulation != "primal":
             try:
-                condensation = condensation or condensed(fem, timings)
+                condensation = condensation or condensed(fem, timings, formulation == MATRIX_FREE)
             except SceneError as error:
                 if error.field != "dirichlet":
                     raise
                 formulation, reason = "primal", "K is singular (the contact holds a rigid motion): nothing to condense"
-    elif formulation == "dual":
-        condensation = condensation or condensed(fem, timings)
-    options = {"factorization": condensation if isinstance(condensation, Reused) else Reused(condensation)
-               } if formulation == "dual" else {}
+    elif formulation != "primal":
+        condensation = condensation or condensed(fem, timings, formulation == MATRIX_FREE)
+    options = {"factorization": condensation if isinstance(condensation, Reused) else Reused(condensation),
+               "matrix_free": formulation == MATRIX_FREE} if formulation != "primal" else {}
+    formulation = "dual" if formulation == MATRIX_FREE else formulation
     with timed(timings, "formulation"):
 
         def build(friction, slip_bound, epsilon, contact=fem.contact):
@@ -317,6 +347,9 @@ class Reused:
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self.factorization.solve(b)
 
+    def delassus(self, B: sp.spmatrix, K: sp.spmatrix | None = None):
+        return self.factorization.delassus(B, K)
+
     def schur(self, B: sp.spmatrix) -> np.ndarray:
         B = sp.csr_matrix(B)
         key = (B.shape, B.indptr.tobytes(), B.indices.tobytes(), B.data.tobytes())
@@ -325,10 +358,11 @@ class Reused:
         return self._W
 
 
-def condensed(fem: FEModel, timings: dict):
-    """K condensed onto the contact DOFs (one sparse factorization; see :func:`~convexcontact.fem.factorization.condense`)."""
+def condensed(fem: FEModel, timings: dict, matrix_free: bool = False):
+    """K condensed onto the contact DOFs (one sparse factorization; see :func:`~convexcontact.fem.factorization.condense`),
+    or only factorized for the matrix-free dual."""
     columns = contact_columns(fem)
     with timed(timings, "condensation"):
-        if 0 < columns.size < fem.n_free:
+        if 0 < columns.size < fem.n_free and not matrix_free:
             return condense(fem.K, columns, dim=fem.dim)
         return factorize(fem.K, dim=fem.dim)  # nothing to condense from or onto: W from K's factors
