@@ -161,9 +161,11 @@ def commands(argv=None) -> int:
                                  help="all: every solution of a Coulomb scene, each certified (docs/uniqueness.md)")
         else:
             command.add_argument("--nx", type=int, default=80, help="elements across the block (default 80)")
-        command.add_argument("--solver", default="clarabel", help="clarabel | osqp | cvxpy[:NAME]")
+        command.add_argument("--solver", default="auto", help="auto (newton-cg on a matrix-free dual, else clarabel) "
+                             "| clarabel | osqp | cvxpy[:NAME] | newton-cg")
         command.add_argument("--formulation", default="auto",
-                             help="auto (default: chosen from the problem's shape) | primal | dual (condensed on Γ_C)")
+                             help="auto (default: chosen from the problem's shape) | primal | dual (condensed on Γ_C) "
+                             "| dual-matrix-free (W through K's factors, never formed)")
         command.add_argument("--tol", type=float, default=None, help="solver tolerance (default: the adapter's)")
         command.add_argument("--out", type=Path, default=Path("out") if name == "demo" else None,
                              help="folder for summary.json, solution.vtu, PNG plots")

@@ -14,7 +14,7 @@ from .model import prepare
 from .solutions import all_solutions
 
 
-def solve(scene: Scene, solver: str = "clarabel", formulation: str = "auto", solutions: str = "one", **options):
+def solve(scene: Scene, solver: str = "auto", formulation: str = "auto", solutions: str = "one", **options):
     """Solve ``scene`` exactly with ``solver``; see :meth:`~convexcontact.drivers.model.Model.solve`.
 
     Returns a :class:`~convexcontact.results.result.ContactResult`; for a scene with a history a
