@@ -137,3 +137,30 @@ def punch_3d(cells: int = 12, law=None, element: str = "Q1", depth: float = 0.01
     obstacle = (Obstacle("parabolic", radius=radius, center=(0.0, 0.0, 0.0), depth=depth) if radius is not None
                 else Obstacle("flat", depth=depth))
     return quarter_box(cells, element, grading, obstacle, law, "punch_3d")
+
+
+def whole_face(dim: int = 2, nodes: int = 1001, dofs: float = 1e5, law=None, depth: float = 0.01,
+               shift: float = 0.003) -> Scene:
+    """A block whose whole bottom rests on a flat rigid foundation (gap 0), its top pressed down by ``depth``
+    and moved sideways by ``shift`` (a large contact zone: every bottom node is a contact node).
+
+    2-D: a strip of height 1 and ``nodes`` − 1 square P1 cells along the bottom; 3-D: a Q1 block of
+    about ``nodes`` bottom nodes, square in plan; the rows up the height make about ``dofs`` DOFs.
+    """
+    if dim == 2:
+        nx = max(2, nodes - 1)
+        ny = max(2, round(dofs / (2 * (nx + 1))) - 1)
+        geometry = Rectangle(width=nx / ny, height=1.0, nx=nx, ny=ny)
+        top = Dirichlet("top", ux=shift, uy=-depth)
+    else:
+        n = max(2, round(np.sqrt(nodes)) - 1)
+        nz = max(2, round(dofs / (3 * (n + 1) ** 2)) - 1)
+        geometry = Box(size=(n / nz, n / nz, 1.0), cells=(n, n, nz))
+        top = Dirichlet("top", ux=shift, uy=0.0, uz=-depth)
+    return Scene(
+        name="whole_face",
+        body=Body(geometry, element="P1" if dim == 2 else "Q1"),
+        materials=Material(E=1.0, nu=0.3),
+        dirichlet=(top,),
+        contact=Contact("bottom", Obstacle("flat", gap=0.0), law or Signorini()),
+    )

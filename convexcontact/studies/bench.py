@@ -1,6 +1,7 @@
 """``convexcontact bench``: a contact solve against one linear elastic solve, per mesh size.
 
-For each size and law (Signorini, Tresca, Coulomb) on the punch scene, one fresh
+For each size and law (Signorini, Tresca, Coulomb) on the punch scene (or, with
+``--scenario whole-face``, a block whose whole bottom face is in contact), one fresh
 process assembles the scene, then times (a) one linear elastic solve, K's sparse
 factorization plus u = K⁻¹f, and (b) the contact solve on the same assembly: the
 condensation (if the formulation condenses), the formulation, the solver (the whole
@@ -29,7 +30,10 @@ from ..results.output import check_folder_target
 
 LAWS = ("signorini", "tresca", "coulomb")
 SIZES = {2: (1e4, 1e5, 1e6), 3: (1e4, 1e5, 3e5)}
-COLUMNS = ("dim", "law", "dofs", "contact_nodes", "unknowns", "formulation", "solver", "status", "iterations",
+SCENARIOS = ("punch", "whole-face")
+NODES = {2: (1e3, 4e3), 3: (1e3, 4e3)}
+"""Contact nodes of the whole-face cases, by default (``--nodes``)."""
+COLUMNS = ("scenario", "dim", "law", "dofs", "contact_nodes", "unknowns", "formulation", "solver", "status", "iterations",
            "assembly", "linear", "condensation", "contact_solve", "contact_total", "ratio", "memory_linear_mb",
            "memory_contact_mb", "memory_ratio", "certificate")
 
@@ -66,6 +70,15 @@ def punch_scene(dim: int, law: str, dofs: float):
     return dataclasses.replace(scene, name="punch", contact=contact)
 
 
+def scene_of(scenario: str, dim: int, law: str, dofs: float, nodes: float | None = None):
+    """The bench's scene: the punch, or the whole face of :func:`~convexcontact.scene.library.whole_face`."""
+    if scenario == "punch":
+        return punch_scene(dim, law, dofs)
+    from ..scene.library import whole_face
+
+    return whole_face(dim, int(nodes), dofs, law_of(law))
+
+
 def _reset_peak() -> bool:
     """Reset the kernel's peak-RSS counter (VmHWM); False where the kernel does not allow it."""
     try:
@@ -82,13 +95,15 @@ def _rss_mb(key: str) -> float:
     return float("nan")
 
 
-def measure(dim: int, law: str, dofs: float, formulation: str, solver: str) -> dict:
+def measure(dim: int, law: str, dofs: float, formulation: str, solver: str, scenario: str = "punch",
+            nodes: float | None = None) -> dict:
     """One benchmark case in this process (call it in a fresh one: see :func:`run`)."""
-    from ..drivers.model import formulate
+    from .. import solvers
+    from ..drivers.model import MATRIX_FREE, formulate
     from ..fem.assembly import assemble
     from ..fem.factorization import condense, factorize
 
-    scene = punch_scene(dim, law, dofs)
+    scene = scene_of(scenario, dim, law, dofs, nodes)
     start = time.perf_counter()
     fem = assemble(scene)
     K, f = fem.K, fem.f
@@ -115,8 +130,9 @@ def measure(dim: int, law: str, dofs: float, formulation: str, solver: str) -> d
     memory_contact = _rss_mb("VmHWM") - base
     unknowns = fem.contact.m + (model.friction.R.shape[0] if model.friction is not None else 0)
     return {
-        "dim": dim, "law": law, "dofs": fem.n_free, "contact_nodes": fem.contact.m, "unknowns": unknowns,
-        "formulation": model.formulation, "solver": solver, "status": result.status,
+        "scenario": scenario, "dim": dim, "law": law, "dofs": fem.n_free, "contact_nodes": fem.contact.m,
+        "unknowns": unknowns, "formulation": MATRIX_FREE if solvers.matrix_free(model.program) else model.formulation,
+        "solver": result.solver, "status": result.status,
         "iterations": result.extra.get("picard", {}).get("iterations", result.iterations),
         "assembly": assembly, "linear": linear, "condensation": timings.get("condensation", 0.0),
         "contact_solve": result.timings.get("solve", 0.0), "contact_total": total, "ratio": total / linear,
@@ -128,12 +144,13 @@ def measure(dim: int, law: str, dofs: float, formulation: str, solver: str) -> d
     }
 
 
-def run(dim: int, sizes, laws=LAWS, formulation: str = "auto", solver: str = "clarabel", progress=print) -> list:
+def run(dim: int, sizes, laws=LAWS, formulation: str = "auto", solver: str = "auto", progress=print,
+        scenario: str = "punch", nodes=(None,)) -> list:
     """All cases, each in a fresh Python process (clean caches, thread pools and peak memory)."""
     rows = []
-    for dofs in sizes:
+    for dofs, count in ((dofs, count) for dofs in sizes for count in nodes):
         for law in laws:
-            case = json.dumps([dim, law, dofs, formulation, solver])
+            case = json.dumps([dim, law, dofs, formulation, solver, scenario, count])
             done = subprocess.run([sys.executable, "-m", "convexcontact.studies.bench", "--case", case],
                                   check=False, capture_output=True, text=True, env=ENVIRONMENT)
             if done.returncode != 0:
@@ -144,7 +161,7 @@ def run(dim: int, sizes, laws=LAWS, formulation: str = "auto", solver: str = "cl
     return rows
 
 
-def friction_sweep(dim: int, dofs: float, coefficients, solver: str = "clarabel", progress=print) -> dict:
+def friction_sweep(dim: int, dofs: float, coefficients, solver: str = "auto", progress=print) -> dict:
     """Coulomb solves for many friction coefficients: independent solves against one model reused
     through :meth:`~convexcontact.drivers.model.Model.with_law` (assembly, trace, condensation kept)."""
     from ..drivers.model import prepare
@@ -170,7 +187,7 @@ def friction_sweep(dim: int, dofs: float, coefficients, solver: str = "clarabel"
 
 def format_row(row: dict) -> str:
     return (f"{row['dim']}-D {row['law']:>9} {row['dofs']:>8d} DOFs {row['unknowns']:>5d} unknowns "
-            f"{row['formulation']:>6}/{row['solver']:<8} {row['status']:>10} it {row['iterations']:>3}  "
+            f"{row['formulation']:>6}/{row['solver']:<9} {row['status']:>10} it {row['iterations']:>3}  "
             f"assembly {row['assembly']:6.2f} s  linear {row['linear']:6.2f} s  contact {row['contact_total']:6.2f} s "
             f"(condensation {row['condensation']:.2f}, solve {row['contact_solve']:.2f})  ratio {row['ratio']:5.2f}  "
             f"memory {row['memory_contact_mb']:.0f}/{row['memory_linear_mb']:.0f} MB = {row['memory_ratio']:.2f}  "
@@ -218,11 +235,21 @@ def check_arguments(args) -> None:
     from ..fem.mesh import check_size
 
     solvers.check_name(args.solver)
-    if args.formulation not in ("auto", "primal", "dual"):
-        raise ValueError(f"--formulation: unknown {args.formulation!r}; use auto, primal or dual")
+    if args.formulation not in ("auto", "primal", "dual", "dual-matrix-free"):
+        raise ValueError(f"--formulation: unknown {args.formulation!r}; use auto, primal, dual or dual-matrix-free")
+    if args.nodes is not None and (args.scenario != "whole-face" or min(args.nodes) < 2):
+        raise ValueError("--nodes: give at least 2 contact nodes, with --scenario whole-face")
     check_folder_target(Path(args.out), "--out")
     for dofs in args.sizes or SIZES[args.dim]:
-        check_size(punch_scene(args.dim, "signorini", dofs).body)
+        for nodes in nodes_of(args):
+            check_size(scene_of(args.scenario, args.dim, "signorini", dofs, nodes).body)
+
+
+def nodes_of(args) -> tuple:
+    """The contact nodes of the whole-face cases (None for the punch, whose mesh sets them)."""
+    if args.scenario == "punch":
+        return (None,)
+    return tuple(args.nodes or NODES[args.dim])
 
 
 def main(argv=None) -> list:
@@ -232,8 +259,13 @@ def main(argv=None) -> list:
     parser.add_argument("--sizes", type=float, nargs="+", default=None, help="target free DOFs (default: 1e4 … 1e6 "
                         "in 2-D, 1e4 … 3e5 in 3-D)")
     parser.add_argument("--laws", nargs="+", choices=LAWS, default=list(LAWS))
-    parser.add_argument("--formulation", default="auto", help="auto | primal | dual")
-    parser.add_argument("--solver", default="clarabel")
+    parser.add_argument("--scenario", choices=SCENARIOS, default="punch",
+                        help="punch (a small contact zone) or whole-face (a block's whole bottom face in contact)")
+    parser.add_argument("--nodes", type=float, nargs="+", default=None,
+                        help="whole-face: contact nodes (default: 1e3 4e3), each case at each of --sizes")
+    parser.add_argument("--formulation", default="auto", help="auto | primal | dual | dual-matrix-free")
+    parser.add_argument("--solver", default="auto", help="auto (the one that takes the program) | clarabel | "
+                        "osqp | cvxpy[:NAME] | newton-cg")
     parser.add_argument("--out", default="out/bench", help="folder for bench_<dim>d.csv and .png")
     parser.add_argument("--sweep", type=int, default=0, metavar="COUNT",
                         help="instead: COUNT Coulomb coefficients in [0.1, 0.5] at the first size, independent "
@@ -254,10 +286,11 @@ def main(argv=None) -> list:
     if args.sweep:
         return [friction_sweep(args.dim, (args.sizes or SIZES[args.dim])[0], np.linspace(0.1, 0.5, args.sweep),
                                args.solver)]
-    rows = run(args.dim, args.sizes or SIZES[args.dim], args.laws, args.formulation, args.solver)
+    rows = run(args.dim, args.sizes or SIZES[args.dim], args.laws, args.formulation, args.solver,
+               scenario=args.scenario, nodes=nodes_of(args))
     if rows:
-        print("wrote", write_csv(rows, Path(args.out) / f"bench_{args.dim}d.csv"), plot(rows, Path(args.out) /
-                                                                                         f"bench_{args.dim}d.png"))
+        name = f"bench_{args.dim}d" + ("" if args.scenario == "punch" else f"_{args.scenario}")
+        print("wrote", write_csv(rows, Path(args.out) / f"{name}.csv"), plot(rows, Path(args.out) / f"{name}.png"))
     return rows
 
 

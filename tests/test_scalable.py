@@ -1,0 +1,163 @@
+"""Large contact zones: the matrix-free dual (W = B K⁻¹ Bᵀ through K's factors) and newton-cg, against
+Clarabel on the dense program, judged by the certificate."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+import convexcontact as cc
+from convexcontact import solvers
+from convexcontact.conic import ConicProgram, nonnegative, soc, zero
+from convexcontact.drivers import model as model_module
+from convexcontact.fem import factorization
+from convexcontact.fem.factorization import factorize
+from convexcontact.formulations import contact_weights
+from convexcontact.scene.library import whole_face
+from convexcontact.scene.model import Coulomb, Signorini, Tresca
+
+
+def random_program(rng, bounds: int, balls: int, size: int, operator: bool = False) -> ConicProgram:
+    """min ½xᵀPx + qᵀx over x_j ≥ lower_j (rows −x_j ≤ −lower_j) and ‖c_k − x_k‖ ≤ ρ_k, P random SPD."""
+    n = bounds + balls * size
+    G = rng.standard_normal((n, n))
+    P = G @ G.T / n + 0.05 * np.eye(n)
+    rows, b, cones = [-sp.eye(bounds, n)], [rng.uniform(-0.5, 0.5, bounds)], [nonnegative(bounds)]
+    for k in range(balls):
+        start = bounds + k * size
+        rows.append(sp.vstack([sp.csr_matrix((1, n)), sp.eye(size, n, start)]))
+        b.append(np.concatenate([[rng.uniform(0.1, 1.0)], rng.uniform(-0.2, 0.2, size)]))
+        cones.append(soc(1 + size))
+    return ConicProgram(spla.aslinearoperator(P) if operator else sp.csc_matrix(P), rng.standard_normal(n),
+                        sp.vstack(rows).tocsc(), np.concatenate(b), tuple(cones))
+
+
+def kkt_residual(program: ConicProgram, solution) -> float:
+    """Stationarity P x + q + Aᵀz = 0, with P applied as given."""
+    gradient = spla.aslinearoperator(program.P).matvec(solution.x) + program.q + program.A.T @ solution.z
+    return np.abs(gradient).max()
+
+
+@pytest.mark.parametrize("bounds, balls, size", [(30, 0, 1), (15, 15, 1), (10, 12, 2)])
+def test_newton_cg_agrees_with_clarabel_on_random_programs(bounds, balls, size):
+    """Bounds, intervals (2-D friction) and discs (3-D friction): the same optimum as Clarabel, P as a matrix
+    or as an operator, and a KKT point (stationary, z in the dual cone)."""
+    rng = np.random.default_rng(bounds + 7 * balls + size)
+    dense = random_program(rng, bounds, balls, size)
+    reference = solvers.solve(dense, "clarabel")
+    for program in (dense, ConicProgram(spla.aslinearoperator(dense.P.toarray()), dense.q, dense.A, dense.b,
+                                        dense.cones)):
+        answer = solvers.solve(program, "auto" if solvers.matrix_free(program) else "newton-cg")
+        assert answer.solver == "newton-cg" and answer.status == "solved"
+        assert np.abs(answer.x - reference.x).max() < 1e-8
+        assert kkt_residual(program, answer) < 1e-10
+        assert answer.z[:bounds].min() > -1e-12
+        radius = answer.z[bounds::1 + size]
+        assert (radius >= np.linalg.norm(answer.z[bounds:].reshape(-1, 1 + size)[:, 1:], axis=1) - 1e-12).all()
+
+
+def test_delassus_operator_is_the_dense_w():
+    """W r and W R through K's factors equal the dense W = B K⁻¹ Bᵀ; the slab approximation over the whole body
+    is W itself."""
+    fem = cc.prepare(whole_face(2, 41, 2e3), "primal").fem
+    B = (contact_weights(fem.contact, "nodal") @ fem.contact.N).tocsr()
+    factors = factorize(fem.K)
+    W, operator = factors.schur(B), factors.delassus(B, fem.K)
+    R = np.random.default_rng(0).standard_normal((B.shape[0], 3))
+    assert np.abs(operator @ R[:, 0] - W @ R[:, 0]).max() < 1e-12 * np.abs(W).max()
+    assert np.abs(operator @ R - W @ R).max() < 1e-12 * np.abs(W).max()
+    assert operator.approximation.H.shape[0] < fem.n_free  # a slab, not the body
+
+
+def test_whole_slab_approximation_is_exact(monkeypatch):
+    monkeypatch.setattr(factorization, "SLAB", 1.0)
+    monkeypatch.setattr(factorization, "LAYERS", 10**6)
+    fem = cc.prepare(whole_face(2, 21, 6e2), "primal").fem
+    B = (contact_weights(fem.contact, "nodal") @ fem.contact.N).tocsr()
+    slab = factorization.slab(fem.K, B)
+    assert slab.H.shape == fem.K.shape
+    approximate = slab.G @ slab.factorize(slab.H).solve(slab.G.T.toarray())
+    W = factorize(fem.K).schur(B)
+    assert np.abs(approximate - W).max() < 1e-12 * np.abs(W).max()
+
+
+@pytest.mark.parametrize("dim, nodes, dofs, law", [
+    (2, 81, 3e3, Signorini()),
+    (2, 81, 3e3, Tresca(slip_bound=0.002)),
+    (3, 49, 6e2, Tresca(slip_bound=0.002)),
+])
+def test_matrix_free_dual_agrees_with_the_dense_dual(dim, nodes, dofs, law):
+    """The same contact dual, dense with Clarabel and matrix-free with newton-cg: the same pressures and
+    friction, both certified to 1e-10 from the recovered fields."""
+    scene = whole_face(dim, nodes, dofs, law)
+    dense = cc.prepare(scene, "dual").solve("clarabel")
+    model = cc.prepare(scene, "dual-matrix-free")
+    assert solvers.matrix_free(model.program) and model.formulation == "dual"
+    scalable = model.solve()
+    assert scalable.solver == "newton-cg" and scalable.status == "solved"
+    assert scalable.certificate.worst <= 1e-10 and dense.certificate.worst <= 1e-10
+    scale = np.abs(dense.contact.pressure).max()
+    assert np.abs(scalable.contact.pressure - dense.contact.pressure).max() < 1e-8 * scale
+    if isinstance(law, Tresca):
+        friction = dense.contact.friction
+        assert np.abs(scalable.contact.friction - friction).max() < 1e-8 * scale
+        assert 0 < np.mean(np.abs(friction).max(axis=-1) if friction.ndim > 1 else np.abs(friction)) < np.inf
+
+
+def test_coulomb_picard_over_newton_cg():
+    """Coulomb by Picard over matrix-free Tresca programs: the dense answer."""
+    scene = whole_face(2, 61, 2e3, Coulomb(friction=0.3))
+    dense = cc.prepare(scene, "dual").solve("clarabel")
+    scalable = cc.prepare(scene, "dual-matrix-free").solve()
+    assert scalable.solver == "newton-cg" and scalable.status == "solved"
+    scale = np.abs(dense.contact.pressure).max()
+    assert np.abs(scalable.contact.pressure - dense.contact.pressure).max() < 1e-6 * scale
+
+
+def test_programs_not_in_bound_form_are_refused():
+    rng = np.random.default_rng(3)
+    program = random_program(rng, 6, 0, 1)
+    coupled = ConicProgram(program.P, program.q, sp.csc_matrix(np.ones((1, 6))), np.ones(1), (nonnegative(1),))
+    with pytest.raises(ValueError, match="bound form"):
+        solvers.solve(coupled, "newton-cg")
+    equality = ConicProgram(program.P, program.q, sp.vstack([sp.csr_matrix(np.ones((1, 6))), program.A]).tocsc(),
+                            np.concatenate([[1.0], program.b]), (zero(1), *program.cones))
+    with pytest.raises(ValueError, match="equality"):
+        solvers.solve(equality, "newton-cg")
+    with pytest.raises(ValueError, match="no such setting"):
+        solvers.solve(program, "newton-cg", max_threads=1)
+    operator = ConicProgram(spla.aslinearoperator(program.P), program.q, program.A, program.b, program.cones)
+    with pytest.raises(ValueError, match="operator"):
+        solvers.solve(operator, "clarabel")
+
+
+def test_auto_goes_matrix_free_for_large_closed_zones(monkeypatch):
+    """The rule, not the timing: beyond CLOSED_LIMIT unknowns at closed nodes (or DENSE_LIMIT in all) auto applies
+    W through K's factors and says why; a punch closing few nodes keeps the dense W; a force-controlled obstacle
+    (an equality) is not in newton-cg's bound form and keeps the primal beyond DENSE_LIMIT."""
+    scene = whole_face(2, 41, 1e3, Tresca(slip_bound=0.002))
+    assert cc.prepare(scene).formulation == "dual" and not solvers.matrix_free(cc.prepare(scene).program)
+    monkeypatch.setattr(model_module, "CLOSED_LIMIT", 50)
+    model = cc.prepare(scene)
+    assert solvers.matrix_free(model.program) and "closed nodes exceed 50" in model.reason
+    result = model.solve()
+    assert result.solver == "newton-cg" and "never formed" in result.extra["formulation_reason"]
+    punch = cc.prepare(cc.library.tresca_punch(nx=80))  # 81 contact nodes, 162 unknowns, a few closed
+    assert punch.formulation == "dual" and not solvers.matrix_free(punch.program)
+    monkeypatch.setattr(model_module, "DENSE_LIMIT", 100)
+    assert solvers.matrix_free(cc.prepare(cc.library.tresca_punch(nx=80)).program)
+    forced = cc.prepare(cc.library.hertz_punch(nx=120))
+    assert forced.formulation == "primal" and "force-controlled" in forced.reason
+
+
+def test_whole_face_bench_row_says_what_auto_chose(tmp_path, monkeypatch):
+    from convexcontact.cli import main
+    from convexcontact.studies import bench
+
+    row = bench.measure(2, "tresca", 2000, "dual-matrix-free", "auto", "whole-face", 41)
+    assert (row["scenario"], row["formulation"], row["solver"], row["status"]) == (
+        "whole-face", "dual-matrix-free", "newton-cg", "solved")
+    assert row["contact_nodes"] == 41 and row["certificate"] <= 1e-10 and row["ratio"] > 0
+    assert main(["bench", "--scenario", "whole-face", "--sizes", "2000", "--nodes", "41", "--laws", "signorini",
+                 "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "bench_2d_whole-face.csv").read_text().count("\n") == 2
