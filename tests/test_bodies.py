@@ -217,13 +217,69 @@ def test_bad_inputs_name_the_field(change, field):
     assert error.value.field == field
 
 
-def test_pairs_are_two_dimensional():
-    box = Box(size=(1, 1, 1), cells=(2, 2, 2))
-    parts = [Part("upper", Box(size=(1, 1, 1), cells=(2, 2, 2), origin=(0, 0, 1)), STEEL), Part("lower", box, STEEL)]
-    scene = bodies_scene(parts, Pair("upper.bottom", master="lower.top"),
+def boxes(law=None, cells=(3, 4)):
+    """The 3-D patch test: unit boxes of P1 tetrahedra, 3 × 3 against 4 × 4 cells across, p on top, rollers."""
+    parts = [Part("upper", Box(size=(1, 1, 1), cells=(cells[0], cells[0], 2), origin=(0, 0, 1)), STEEL),
+             Part("lower", Box(size=(1, 1, 1), cells=(cells[1], cells[1], 2)), STEEL)]
+    rollers = [cc.Dirichlet(f"{part}.{side}", **{axis: 0.0}) for part in ("upper", "lower")
+               for side, axis in (("left", "ux"), ("front", "uy"))]
+    return bodies_scene(parts, Pair("upper.bottom", master="lower.top", law=law or cc.Signorini()),
+                        dirichlet=[cc.Dirichlet("lower.bottom", uz=0.0), *rollers],
+                        tractions=[cc.Traction("upper.top", pressure=0.01)])
+
+
+@pytest.mark.parametrize("law", [cc.Signorini(), cc.Tresca(0.001)])
+def test_mortar_passes_the_patch_test_in_3d(law):
+    """Non-matching triangles (the master clipped on each slave facet) carry the uniform pressure exactly."""
+    result = cc.solve(boxes(law))
+    np.testing.assert_allclose(result.contact.pressure, 0.01, rtol=1e-9)
+    assert result.certificate.passes(1e-9) and result.certificate.residuals["pair_balance"] < 1e-12
+
+
+def test_a_stiff_master_tends_to_the_rigid_obstacle_in_3d():
+    """A box pushed sideways on a box E₂ times stiffer: the rigid plane's answer, to a difference ∝ 1/E₂."""
+    def upper():
+        return Part("upper", Box(size=(1, 1, 1), cells=(4, 4, 3)), STEEL)
+
+    loads = {"tractions": [cc.Traction("upper.left", pressure=0.02)]}
+    top = cc.Dirichlet("upper.top", ux=0.0, uy=0.0, uz=-0.005)
+    rigid = cc.solve(bodies_scene([upper()], cc.Contact("upper.bottom", cc.Obstacle("flat", depth=0.005)),
+                                  dirichlet=[top], **loads))
+    assert 0 < np.count_nonzero(rigid.closed) < rigid.fem.contact.m
+    differences = []
+    for stiffness in (1e2, 1e4):
+        lower = Part("lower", Box(size=(1, 1, 1), cells=(5, 5, 2), origin=(0, 0, -1)), cc.Material(stiffness, 0.3))
+        pair = cc.solve(bodies_scene([upper(), lower], Pair("upper.bottom", master="lower.top"),
+                                     dirichlet=[top, cc.Dirichlet("lower.bottom", ux=0.0, uy=0.0, uz=0.005)], **loads))
+        differences.append(np.abs(pair.contact.pressure - rigid.contact.pressure).max() / rigid.max_pressure)
+    assert differences[1] < 2e-4
+    assert differences[1] == pytest.approx(differences[0] / 100, rel=0.05)
+
+
+def test_a_sheared_3d_stack_of_two_pairs():
+    """Three boxes, the top one pressed and dragged diagonally, Coulomb on both interfaces: the two tangents of
+    each pair stacked component-major as the friction cones expect (certificate), each pair balanced."""
+    parts = [Part(name, Box(size=(1, 1, 1), cells=(n, n, 2), origin=(0, 0, z)), STEEL)
+             for name, n, z in (("top", 3, 2), ("middle", 4, 1), ("bottom", 2, 0))]
+    law = cc.Coulomb(0.3)
+    result = cc.solve(bodies_scene(
+        parts, [Pair("top.bottom", master="middle.top", law=law), Pair("middle.bottom", master="bottom.top", law=law)],
+        dirichlet=[cc.Dirichlet("bottom.bottom", ux=0.0, uy=0.0, uz=0.0), cc.Dirichlet("middle.left", ux=0.0, uy=0.0),
+                   cc.Dirichlet("top.top", ux=0.001, uy=0.0005, uz=-0.01)]))
+    assert result.status == "solved" and result.certificate.passes(1e-6)
+    assert {"stick", "slip"} <= set(result.contact.status)
+    assert result.certificate.residuals["pair_balance"] < 1e-12
+
+
+def test_3d_pairs_are_mortar_on_tetrahedra():
+    with pytest.raises(cc.SceneError, match="node-to-segment is built in 2-D"):
+        cc.solve(dataclasses.replace(boxes(), contact=Pair("upper.bottom", master="lower.top", method="node_to_segment")))
+    hexes = [Part(name, Box(size=(1, 1, 1), cells=(2, 2, 2), origin=(0, 0, z)), STEEL, "Q1")
+             for name, z in (("upper", 1), ("lower", 0))]
+    scene = bodies_scene(hexes, Pair("upper.bottom", master="lower.top"),
                          dirichlet=[cc.Dirichlet("lower.bottom", ux=0, uy=0, uz=0),
                                     cc.Dirichlet("upper.top", ux=0, uy=0, uz=-0.01)])
-    with pytest.raises(cc.SceneError, match="2-D"):
+    with pytest.raises(cc.SceneError, match="P1 tetrahedra"):
         cc.solve(scene)
 
 

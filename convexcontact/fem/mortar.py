@@ -1,4 +1,4 @@
-"""The contact trace of a pair of bodies in 2-D: mortar (segment-to-segment) or node-to-segment.
+"""The contact trace of a pair of bodies: mortar (segment-to-segment; 3-D in :mod:`.mortar3d`) or node-to-segment.
 
 Slave node i (non-mortar side, which carries the multipliers), its averaged outward normal n_i and
 tangent t_i; master nodes k:
@@ -14,7 +14,9 @@ tangent t_i; master nodes k:
   balance, and a linear field is reproduced exactly: the contact patch test passes.
 - ``node_to_segment``: Π_ik = φ_k(π(x_i)), x_i projected on the master along n_i.
 
-Slave nodes whose facets are not all covered by the master are left out (with a warning).
+Slave nodes whose facets are not all covered by the master are left out (with a warning). In 3-D
+(P1 tetrahedra) the multipliers are the dual basis 4λ_a − 1 of the slave triangles, t_i and the second
+tangent b_i = n_i × t_i as :func:`~convexcontact.fem.contact.tangent_frame` chooses them.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from ..scene.bodies import Pair, Pairs
 from ..scene.model import SceneError
 from .contact import ContactTrace, tangent_frame
 from .mesh import check_boundary
+from .mortar3d import Triangles, mortar_3d, triangles
 from .scaling import Scaling
 
 COVERED = 1e-9
@@ -52,9 +55,14 @@ class PairTrace(ContactTrace):
     pieces: tuple = ()
 
     def forces(self, normal: np.ndarray, tangential: np.ndarray | None = None, rows=slice(None)) -> np.ndarray:
-        """Contact forces on the bodies at every DOF, from the weighted multipliers Cλ_N and w·λ_T (of ``rows``)."""
+        """Contact forces on the bodies at every DOF, from the weighted multipliers Cλ_N and w·λ_T (of ``rows``;
+        λ_T component-major, as T)."""
         force = -(self.N_full[rows].T @ normal[rows])
-        return force if tangential is None else force + self.T_full[rows].T @ tangential[rows]
+        if tangential is None:
+            return force
+        picked = np.arange(self.m)[rows]
+        tangent_rows = np.concatenate([picked + component * self.m for component in range(self.dim - 1)])
+        return force + self.T_full[tangent_rows].T @ tangential[tangent_rows]
 
     def imbalance(self, normal: np.ndarray, tangential: np.ndarray | None = None) -> float:
         """The largest ‖R_slave + R_master‖ of a pair, relative to ‖R_slave‖ (at least the force of a unit pressure)."""
@@ -72,13 +80,19 @@ def stack(traces: list[PairTrace]) -> PairTrace:
     def joined(name):
         return np.concatenate([getattr(trace, name) for trace in traces])
 
+    def by_component(name, join):  # T's rows are component-major: every node's first tangent, then the second
+        return join([getattr(t, name)[c * t.m:(c + 1) * t.m] for c in range(traces[0].dim - 1) for t in traces])
+
     starts = np.cumsum([0] + [trace.m for trace in traces])
-    arrays = ("facets", "dofs", "coords", "normals", "tangents", "coordinate", "weights", "normal_offset",
-              "tangent_offset", "gap", "master_dofs", "master_coords")
+    arrays = ("facets", "dofs", "coords", "normals", "tangents", "coordinate", "weights", "normal_offset", "gap",
+              "master_dofs", "master_coords")
     return PairTrace(
         **{name: joined(name) for name in arrays}, obstacle_coupling=None, obstacle_force=0.0,
+        bitangents=None if traces[0].bitangents is None else joined("bitangents"),
+        tangent_offset=by_component("tangent_offset", np.concatenate),
         **{name: sp.block_diag([getattr(t, name) for t in traces], format="csr") for name in ("mass", "transfer")},
-        **{name: sp.vstack([getattr(t, name) for t in traces]).tocsr() for name in ("N", "T", "N_full", "T_full")},
+        **{name: sp.vstack([getattr(t, name) for t in traces]).tocsr() for name in ("N", "N_full")},
+        **{name: by_component(name, lambda blocks: sp.vstack(blocks).tocsr()) for name in ("T", "T_full")},
         warnings=sum((trace.warnings for trace in traces), ()),
         pieces=tuple((slice(start, start + t.m), t.dofs, t.master_dofs) for start, t in zip(starts, traces)),
     )
@@ -91,9 +105,13 @@ class Segments:
     nodes: np.ndarray  # (facets, 2) vertex indices, start → end
     start: np.ndarray  # (facets, 2)
     end: np.ndarray
-    length: np.ndarray
+    measure: np.ndarray  # lengths
     tangent: np.ndarray
     normal: np.ndarray
+
+    @property
+    def size(self) -> np.ndarray:
+        return self.measure
 
 
 def segments(mesh: fe.Mesh, facets: np.ndarray) -> Segments:
@@ -131,7 +149,7 @@ def mortar(slave: Segments, master: Segments, along: np.ndarray, margin: float):
     fraction."""
     ends = [np.column_stack([s.start @ along, s.end @ along]) for s in (slave, master)]
     e, f = overlapping(ends[0].min(1), ends[0].max(1), ends[1].min(1), ends[1].max(1), margin)
-    t, length = slave.tangent[e], slave.length[e]
+    t, length = slave.tangent[e], slave.measure[e]
     xi_start = ((master.start[f] - slave.start[e]) * t).sum(axis=1) / length
     xi_end = ((master.end[f] - slave.start[e]) * t).sum(axis=1) / length
     lo = np.maximum(np.minimum(xi_start, xi_end), 0.0)
@@ -145,7 +163,7 @@ def mortar(slave: Segments, master: Segments, along: np.ndarray, margin: float):
     shape = (1 - eta, eta)
     entries = [(e, np.full_like(e, a), f, np.full_like(f, b), (weight * dual[a] * shape[b]).sum(axis=1))
                for a in (0, 1) for b in (0, 1)]
-    covered = np.bincount(e, weights=hi - lo, minlength=slave.length.size)
+    covered = np.bincount(e, weights=hi - lo, minlength=slave.measure.size)
     return [np.concatenate(parts) for parts in zip(*entries)], covered
 
 
@@ -175,31 +193,35 @@ def relative_rows(vectors, dofs, transfer: sp.coo_matrix, master_dofs, ndofs: in
     return sp.csr_matrix((values, (rows, cols)), shape=(m, ndofs))
 
 
-def slave_nodes(slave: Segments) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The slave boundary's vertices, each facet's two node numbers among them, the weights w_i = ∫ψ_i and
-    the nodal normals n_i ∝ ∫ψ_i n ds (the facets' normals averaged with the weights of ψ_i)."""
+def slave_nodes(slave: Segments | Triangles) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The slave boundary's vertices, each facet's node numbers among them, the weights w_i = ∫ψ_i and the
+    nodal normals n_i ∝ ∫ψ_i n ds (the facets' normals averaged with the weights of ψ_i)."""
     vertices, local = np.unique(slave.nodes, return_inverse=True)
-    local = local.reshape(-1, 2)
-    half = np.repeat(slave.length / 2, 2)
-    weights = np.bincount(local.ravel(), weights=half)
-    summed = np.column_stack([np.bincount(local.ravel(), half * np.repeat(slave.normal[:, j], 2)) for j in range(2)])
+    corners, dim = slave.nodes.shape[1], slave.normal.shape[1]
+    local = local.reshape(-1, corners)
+    share = np.repeat(slave.measure / corners, corners)
+    weights = np.bincount(local.ravel(), weights=share)
+    summed = np.column_stack([np.bincount(local.ravel(), share * np.repeat(slave.normal[:, j], corners))
+                              for j in range(dim)])
     return vertices, local, weights, summed / np.linalg.norm(summed, axis=1, keepdims=True)
 
 
-def transfer_matrix(pair: Pair, slave: Segments, master: Segments, local, weights, normals, coords):
+def transfer_matrix(pair: Pair, slave, master, local, weights, normals, coords):
     """Π (slave nodes × master nodes) of the pair's method, the master's vertices, and which slave nodes keep
     their rows."""
     masters, master_local = np.unique(master.nodes, return_inverse=True)
-    master_local = master_local.reshape(-1, 2)
+    master_local = master_local.reshape(master.nodes.shape)
     mean_normal = weights @ normals / np.linalg.norm(weights @ normals)
-    along, margin = np.array([mean_normal[1], -mean_normal[0]]), 2.0 * max(slave.length.max(), master.length.max())
+    along = mean_normal[::-1] * [1, -1] if len(mean_normal) == 2 else None  # 2-D: Γ_C's mean tangent
+    margin = 2.0 * max(slave.size.max(), master.size.max())
     shape = (len(weights), len(masters))
     if pair.method == "node_to_segment":
         i, f, b, values = node_to_segment(coords, normals, master, along, margin)
         ok = np.zeros(len(weights), bool)
         ok[i] = True
         return sp.coo_matrix((values, (i, master_local[f, b])), shape=shape).tocsr(), masters, ok
-    (e, a, f, b, values), covered = mortar(slave, master, along, margin)
+    (e, a, f, b, values), covered = (mortar_3d(slave, master, mean_normal) if isinstance(slave, Triangles)
+                                     else mortar(slave, master, along, margin))
     if (covered > 1 + COVERED).any():
         raise SceneError("contact.master", f"{pair.master!r} is met twice along the normals of {pair.boundary!r} "
                          "(it folds over, or faces the slave from both sides)",
@@ -213,11 +235,16 @@ def transfer_matrix(pair: Pair, slave: Segments, master: Segments, local, weight
 def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray,
                prescribed: np.ndarray) -> PairTrace:
     """The trace of a contact pair: slave nodes, their normals and weights, N, T and the gap from geometry."""
-    if mesh.dim() != 2 or basis.N != 2 * mesh.p.shape[1]:
-        raise SceneError("contact.master", "contact pairs are built in 2-D for P1 and Q1 elements (straight "
-                         "facets, nodes at the vertices)", "use 2-D bodies of P1 or Q1 elements")
+    dim = mesh.dim()
+    if basis.N != dim * mesh.p.shape[1] or (dim == 3 and not isinstance(mesh, fe.MeshTet1)):
+        raise SceneError("contact.master", "contact pairs are built for P1 and Q1 elements in 2-D and P1 tetrahedra "
+                         "in 3-D (flat facets, nodes at the vertices)", "use P1 (or, in 2-D, Q1) elements")
+    if dim == 3 and pair.method == "node_to_segment":
+        raise SceneError("contact.method", "node-to-segment is built in 2-D", "use method = 'mortar'")
     facets = check_boundary(mesh, pair.boundary, "contact.boundary")
-    slave, master = segments(mesh, facets), segments(mesh, check_boundary(mesh, pair.master, "contact.master"))
+    facet_geometry = segments if dim == 2 else triangles
+    slave = facet_geometry(mesh, facets)
+    master = facet_geometry(mesh, check_boundary(mesh, pair.master, "contact.master"))
     vertices, local, weights, normals = slave_nodes(slave)
     coords = mesh.p[:, vertices].T
     transfer, masters, ok = transfer_matrix(pair, slave, master, local, weights, normals, coords)
@@ -230,11 +257,12 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
     transfer, normals, weights, coords = sp.coo_matrix(transfer[ok]), normals[ok], weights[ok], coords[ok]
     dofs, master_dofs = basis.nodal_dofs[:, vertices[ok]].T, basis.nodal_dofs[:, masters].T
     master_coords = mesh.p[:, masters].T
-    tangents, _, mean_tangent = tangent_frame(normals, weights)
+    tangents, bitangents, mean_tangent = tangent_frame(normals, weights)
     N_full = relative_rows(normals, dofs, transfer, master_dofs, basis.N)
-    T_full = relative_rows(tangents, dofs, transfer, master_dofs, basis.N)
+    frame = [tangents] if bitangents is None else [tangents, bitangents]
+    T_full = sp.vstack([relative_rows(t, dofs, transfer, master_dofs, basis.N) for t in frame]).tocsr()
     gap = ((transfer @ master_coords - coords) * normals).sum(axis=1)
-    if gap.min() < -max(slave.length.max(), master.length.max()):
+    if gap.min() < -max(slave.size.max(), master.size.max()):
         raise SceneError("parts", f"the bodies overlap: {pair.boundary!r} lies up to {-gap.min() * scaling.length:.3g} "
                          f"inside {pair.master!r}, deeper than a cell of the interface",
                          "move the bodies apart (Rectangle origin, Part offset); an interference fit must be "
@@ -246,6 +274,7 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
         gap=gap * scaling.length / scaling.displacement, obstacle_coupling=None, obstacle_force=0.0,
         master_dofs=master_dofs, master_coords=master_coords, transfer=transfer.tocsr(), N_full=N_full,
         T_full=T_full, warnings=() if ok.all() else (left_out,), pieces=((slice(None), dofs, master_dofs),),
+        bitangents=bitangents,
     )
 
 

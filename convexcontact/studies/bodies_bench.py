@@ -25,23 +25,40 @@ def strips(facets: int, rows: int, ratio: float = 1.3):
                                       cc.Dirichlet("upper.top", ux=0.0, uy=-1e-4)], name="strips")
 
 
+def slabs(cells: int, ratio: float = 1.3):
+    """Two slabs of P1 tetrahedra, ``cells`` × ``cells`` hexahedra across (2 cells² triangles) against about
+    ``ratio`` times as many per side, one layer deep."""
+    import convexcontact as cc
+    from convexcontact.scene.model import Box
+
+    master = round(ratio * cells)
+    parts = [cc.Part("upper", Box(size=(1.0, 1.0, 1 / cells), cells=(cells, cells, 1), origin=(0, 0, 1 / master)),
+                     cc.Material(1.0, 0.3)),
+             cc.Part("lower", Box(size=(1.0, 1.0, 1 / master), cells=(master, master, 1)), cc.Material(1.0, 0.3))]
+    return cc.bodies_scene(parts, cc.Pair("upper.bottom", master="lower.top"),
+                           dirichlet=[cc.Dirichlet("lower.bottom", ux=0.0, uy=0.0, uz=0.0),
+                                      cc.Dirichlet("upper.top", ux=0.0, uy=0.0, uz=-1e-4)], name="slabs")
+
+
 def timed(function, *args) -> float:
     start = time.perf_counter()
     function(*args)
     return time.perf_counter() - start
 
 
-def mortar_assembly(facets: int = 10_000, rows: int = 8) -> dict:
-    """Seconds to build the pair's trace (mortar, node-to-segment) and the stiffness K of the same mesh."""
+def mortar_assembly(facets: int = 10_000, rows: int = 8, dim: int = 2) -> dict:
+    """Seconds to build the pair's trace (mortar, and node-to-segment in 2-D) and the stiffness K of the same mesh;
+    in 3-D about ``facets`` slave triangles (``rows`` unused)."""
     from convexcontact.fem.assembly import assemble, stiffness
     from convexcontact.fem.mortar import pair_trace
 
-    scene = strips(facets, rows)
+    scene = strips(facets, rows) if dim == 2 else slabs(round((facets / 2) ** 0.5))
     fem = assemble(scene)
     arguments = (fem.mesh, fem.basis, fem.scaling, fem.free, fem.prescribed)
-    out = {"slave_facets": facets, "master_facets": round(1.3 * facets), "dofs": fem.n_free,
+    out = {"slave_facets": fem.mesh.boundaries["upper.bottom"].size,
+           "master_facets": fem.mesh.boundaries["lower.top"].size, "dofs": fem.n_free,
            "stiffness": timed(stiffness, fem.basis, fem.lame)}
-    for method in ("mortar", "node_to_segment"):
+    for method in ("mortar", "node_to_segment")[: 4 - dim]:
         out[method] = timed(pair_trace, dataclasses.replace(scene.contact, method=method), *arguments)
         out[f"{method}_per_stiffness"] = out[method] / out["stiffness"]
     return out
