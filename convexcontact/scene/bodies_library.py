@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import skfem as fe
 
+from ..fem.mesh import build_mesh
 from .bodies import Pair, Part, bodies_scene, facet_index
 from .library import punch_mesh
-from .model import Dirichlet, Material, Rectangle, Scene, Signorini, Traction
+from .model import Body, Box, Dirichlet, Material, Rectangle, Scene, Signorini, Traction
 
 
 def patch_pair(slave_cells: int = 5, master_cells: int = 7, method: str = "mortar", element: str = "P1",
@@ -70,3 +71,32 @@ def punch_on_foundation(h: float = 0.01, law=None, approach: float = 0.01, modul
     return two_cylinders(h, radii=(1.0, np.inf), moduli=moduli, approach=approach, law=law, width=1.0,
                          master_h=1.3 * h)
 
+
+
+def sphere_cap_mesh(cells: int, radius: float, upper: bool, grading: float = 12.0) -> fe.Mesh:
+    """A quarter [0, 1]² × [0, 1] (``upper``) or × [−1, 0] of P1 tetrahedra whose face on z = 0 is bent into the
+    sphere of ``radius`` touching the origin; cells graded ``grading``:1 towards the origin. Boundaries as
+    :class:`~convexcontact.scene.model.Box`'s (the bent face is ``bottom`` above, ``top`` below)."""
+    base = build_mesh(Body(Box(size=(1.0, 1.0, 1.0), cells=(cells,) * 3, origin=(0.0, 0.0, 0.0 if upper else -1.0),
+                               grading=(grading,) * 3, refine=(0.0, 0.0, 0.0))))
+    x, y, z = base.p
+    sag = radius - np.sqrt(radius**2 - x**2 - y**2)
+    sign = 1.0 if upper else -1.0
+    bent = type(base)(np.vstack([x, y, z + sign * sag * (1 - sign * z)]), base.t)
+    return bent.with_boundaries({name: facet_index(bent, np.sort(base.facets[:, facets], axis=0))
+                                 for name, facets in base.boundaries.items()})
+
+
+def two_spheres(cells: int = 12, radii=(2.0, 2.0), moduli=(1.0, 1.0), nu=(0.3, 0.3), approach: float = 0.012,
+                law=None, master_cells: int | None = None) -> Scene:
+    """A quarter of two spheres' caps (R₁ above, the slave; R₂ below) pressed together by ``approach`` (3-D
+    Hertz), symmetry rollers on x = 0 (``left``) and y = 0 (``front``), the backs moved by half the approach."""
+    parts = [Part("upper", sphere_cap_mesh(cells, radii[0], True), Material(E=moduli[0], nu=nu[0])),
+             Part("lower", sphere_cap_mesh(master_cells or cells, radii[1], False), Material(E=moduli[1], nu=nu[1]))]
+    rollers = [Dirichlet(f"{part}.{side}", **{axis: 0.0}) for part in ("upper", "lower")
+               for side, axis in (("left", "ux"), ("front", "uy"))]
+    return bodies_scene(
+        parts, Pair("upper.bottom", master="lower.top", law=law or Signorini()),
+        dirichlet=[Dirichlet("upper.top", uz=-approach / 2), Dirichlet("lower.bottom", uz=approach / 2), *rollers],
+        name="two_spheres",
+    )
