@@ -142,10 +142,14 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     if start is None:
         v = _project(v - c * g, sets)
         g = gradient(v)
-    def segment(v, g, towards):  # the least f on [v, towards] (feasible: both ends are), and ∇f there
+    def segment(v, g, towards, residual=np.inf):
+        """``towards`` if its natural residual is below ``residual``, else the least f on [v, towards]
+        (feasible: both ends are); and ∇f there."""
         d = towards - v
         products[0] += 1
         Pd = sets.scale * P.matvec(sets.scale * d)
+        if _natural(towards, g + Pd, c, sets, program.q)[0] < residual:
+            return towards, g + Pd
         slope, curve = g @ d, d @ Pd
         alpha = min(1.0, max(0.0, -slope / curve)) if curve > 0 else float(slope < 0)
         return v + alpha * d, g + alpha * Pd
@@ -175,10 +179,11 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         newton, iterations = _step(P, program.q, sets, v, y, c, max(target, 0.1 * tol * size / c), products,
                                    cache["precondition"])
         cg_total += iterations
-        # Newton's point, projected, may raise f where the active set is still wrong (the full steps of a
-        # primal-dual active set cycled on a Tresca dual): the least f on the segment to it cannot, and where
-        # that gains too little a projected-gradient segment follows
-        v, g = segment(v, g, _project(newton, sets))
+        # Newton's point, projected, is taken where it lowers the natural residual. Elsewhere (full steps cycled
+        # on a Tresca dual) the least f on the segment to it, and where that gains too little a projected-gradient
+        # segment follows; near the answer f's changes are round-off, so that the segment alone stalled
+        # (a 3-D Tresca dual at 2e-10)
+        v, g = segment(v, g, _project(newton, sets), residual)
         if _natural(v, g, c, sets, program.q)[0] > STALL * residual:
             v, g = segment(v, g, _project(v - c * g, sets))
     x = sets.shift + sets.scale * v
