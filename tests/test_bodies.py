@@ -388,3 +388,21 @@ def test_the_two_cylinders_example(tmp_path):
     errors = module.main(h=0.01, out=tmp_path)
     assert errors["mortar"] < 0.02 and errors["node_to_segment"] > 3 * errors["mortar"]
     assert (tmp_path / "solution.vtu").exists()
+
+
+def test_a_mesh_file_part_moved_by_its_offset(tmp_path):
+    """A gmsh file of the upper block made at the origin, placed by ``offset``: the patch test again, and the
+    file's subdomains and boundaries prefixed by the part's name."""
+    from test_inputs import write_gmsh
+
+    from convexcontact.fem.mesh import build_mesh
+
+    block = build_mesh(cc.Body(cc.Rectangle(1.0, 1.0, 5, 5)))
+    path = tmp_path / "block.msh"
+    write_gmsh(block, str(path), {"corner": np.arange(10), "rest": np.arange(10, block.t.shape[1])})
+    scene = patch_pair()
+    parts = (Part("upper", cc.MeshFile(path), STEEL, offset=(0.0, 1.0)), scene.body.parts[1])
+    moved = bodies_scene(parts, scene.contact, scene.dirichlet, scene.tractions)
+    assert {"upper.corner", "upper.rest"} <= set(moved.body.geometry.subdomains)
+    assert "upper.top" in moved.body.geometry.boundaries
+    np.testing.assert_allclose(cc.solve(moved).contact.pressure, 0.01, rtol=1e-9)
