@@ -209,6 +209,11 @@ def bodies_scene(
     meshes = [part.mesh() for part in parts]
     if len({m.dim() for m in meshes}) > 1:
         raise SceneError("parts.geometry", "2-D and 3-D bodies mixed", "give every body the same dimension")
+    for part, mesh in zip(parts, meshes):
+        if mesh.doflocs.shape[1] != mesh.p.shape[1] or type(mesh) is not type(meshes[0]):
+            raise SceneError(f"parts[{part.name}].geometry", f"a {type(mesh).__name__} among "
+                             f"{type(meshes[0]).__name__} bodies: only linear meshes of one kind are joined",
+                             "give every body a linear mesh of one cell type (P2/Q2 elements run on them too)")
     dirichlet = sequence_of(dirichlet, Dirichlet, "dirichlet", "give a list of cc.Dirichlet(boundary, ux=…, uy=…)")
     tractions = sequence_of(tractions, Traction, "tractions", "give a list of cc.Traction(boundary, pressure=…)")
     if isinstance(contact, (list, tuple)):
