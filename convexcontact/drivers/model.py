@@ -98,6 +98,10 @@ class Model:
         if driver is not None:
             return driver(self, solver, progress, **options)
         timings = dict(self.timings)
+        if getattr(self.law, "non_penetration", None) == "gauss" and solver == "clarabel" and "tol" not in options:
+            # more touching points than nodes: an active set the polish cannot settle (dependent rows), so
+            # the interior point must be accurate on its own (1e-10: certificate 1e-6; 1e-12: 1e-15)
+            options = {**options, "tol": GAUSS_TOL}
         with timed(timings, "solve"):
             session = solvers.session(self.program, solver, **options)
             self.seed(session, solver, options)
@@ -214,6 +218,9 @@ INCOMPRESSIBLE = 1000.0
 """λ/μ (ν ≈ 0.4995) from which "auto" keeps the primal: on the Cattaneo–Mindlin scene the
 dual's certificate was 1e-9 at ν = 0.499 (λ/μ = 499), 9e-5 at 0.4999 and 3e-2 at 0.49999."""
 
+GAUSS_TOL = 1e-12
+"""Clarabel's default tolerance for Gauss-point non-penetration (see :meth:`Model.solve`)."""
+
 DENSE_LIMIT = 10000
 """Most contact unknowns (rows of B) a dense W takes at all: memory grows as m² (800 MB at the limit).
 Measured at 6348 rows (3-D Tresca punch, 2.8·10⁵ DOFs, few of them in contact): contact 3.9× one
@@ -237,6 +244,9 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
     """The formulation "auto" runs, and why (before knowing whether K is singular)."""
     if compliance_of(law) is not None:
         return "primal", "normal compliance is posed in the primal only"
+    if getattr(law, "non_penetration", None) == "gauss":
+        return "primal", ("Gauss-point non-penetration: more multipliers than contact nodes leave the condensed W "
+                          "singular, the primal is not")
     lam, mu = fem.lame
     if np.max(lam / mu) >= INCOMPRESSIBLE:
         return "primal", (f"near-incompressible (λ/μ up to {np.max(lam / mu):.0f}): the condensed program loses "

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -12,6 +12,25 @@ from skfem.helpers import dot
 from ..scene.model import COVERED, Contact, SceneError
 from .mesh import check_boundary
 from .scaling import Scaling
+
+
+@dataclass
+class ContactPoints:
+    """The Gauss points of Γ_C where non-penetration holds (``non_penetration = "gauss"``), scaled units.
+
+    ``interpolation`` G (points × contact nodes) takes nodal values to the points, ``weights`` ω_q are
+    the quadrature weights, ``gap`` the obstacle's gap at each point (evaluated there, not interpolated)
+    and ``C`` = diag(ω) G the rows that weigh u_N: Σ_i C_qi (u_N,i − …) ≤ ω_q g_q.
+    """
+
+    interpolation: sp.csr_matrix
+    weights: np.ndarray
+    coords: np.ndarray
+    gap: np.ndarray
+    C: sp.csr_matrix = field(init=False)
+
+    def __post_init__(self):
+        self.C = sp.csr_matrix(sp.diags(self.weights) @ self.interpolation)
 
 
 @dataclass
@@ -50,6 +69,7 @@ class ContactTrace:
     tangential_coupling: np.ndarray | None = None
     obstacle_tangential_force: float = 0.0
     bitangents: np.ndarray | None = None  # (m, 3) in 3-D
+    points: ContactPoints | None = None  # Gauss-point non-penetration only
 
     @property
     def m(self) -> int:
@@ -58,6 +78,20 @@ class ContactTrace:
     @property
     def dim(self) -> int:
         return self.coords.shape[1]
+
+    def weighted_gap(self, C: sp.spmatrix) -> np.ndarray:
+        """C g, the gap weighted as the rows of ``C`` weigh u_N; at Gauss points, ω_q g_q with the gap
+        evaluated at each point (C interpolates the displacement, not the obstacle)."""
+        if self.points is not None and C is self.points.C:
+            return self.points.weights * self.points.gap
+        return C @ self.gap
+
+    def nodal_pressure(self, C: sp.spmatrix, multipliers: np.ndarray) -> np.ndarray:
+        """The pressure at the contact nodes: the multipliers themselves, or from Gauss-point multipliers
+        the nodal force Cᵀλ over w_i (unique where the point multipliers are not: more points than nodes)."""
+        if self.points is not None and C is self.points.C:
+            return (C.T @ multipliers) / self.weights
+        return multipliers
 
     @property
     def frame(self) -> list[np.ndarray]:
@@ -159,6 +193,41 @@ def _mean_frame(nodes: _Nodes) -> tuple[np.ndarray, np.ndarray]:
     return mean_normal / np.linalg.norm(mean_normal), tangent_frame(nodes.normals, nodes.weights)[2]
 
 
+def gauss_interpolation(mesh: fe.Mesh, basis: fe.Basis, facets: np.ndarray, dofs: np.ndarray,
+                        order: int | None = None):
+    """G (points × contact nodes), weights ω_q and coordinates of the Gauss points of ``facets`` (the rule
+    integrating degree ``order`` exactly; scikit-fem's default for the element when None)."""
+    scalar = fe.FacetBasis(mesh, basis.elem.elem, facets=facets, intorder=order)
+    # scalar DOF j carries vector DOFs dj, …, dj + d − 1 (scikit-fem interleaves components)
+    m, dim = dofs.shape
+    node_of_dof = np.full(scalar.N, -1)
+    node_of_dof[dofs[:, 0] // dim] = np.arange(m)
+    assert np.allclose(scalar.doflocs[:, dofs[:, 0] // dim], basis.doflocs[:, dofs[:, 0]])
+    nfacets, nqp = scalar.dx.shape
+    rows = np.arange(nfacets * nqp).reshape(nfacets, nqp)
+    entries = [
+        (scalar.basis[j][0].value.ravel(), rows.ravel(), np.repeat(node_of_dof[scalar.element_dofs[j]], nqp))
+        for j in range(scalar.Nbfun)
+    ]
+    values, i, k = (np.concatenate(parts) for parts in zip(*entries))
+    on_facet = k >= 0  # the element's other DOFs vanish on the facet
+    assert np.allclose(values[~on_facet], 0.0)
+    values, i, k = values[on_facet], i[on_facet], k[on_facet]
+    G = sp.csr_matrix((values, (i, k)), shape=(nfacets * nqp, m))  # duplicates are summed
+    coords = scalar.global_coordinates().value.reshape(dim, -1).T
+    return G, scalar.dx.ravel(), coords
+
+
+def obstacle_gap(obstacle, user_coords: np.ndarray, user_coordinate: np.ndarray, mean_normal: np.ndarray,
+                 mean_tangent: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """The gap (user units, the indentation included) at points of Γ_C and, with ``normal = "obstacle"``,
+    the obstacle's normals there (None: the body's)."""
+    offset = axis_offset(obstacle, user_coords, user_coordinate, mean_normal, mean_tangent)
+    if obstacle.normal == "obstacle":
+        return obstacle.closest_point(offset, mean_normal)
+    return obstacle.shape_gap(user_coords, axis_distance(offset, mean_tangent)) - (obstacle.depth or 0.0), None
+
+
 def under_punch(contact: Contact, facets: np.ndarray, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling):
     """The facets of Γ_C whose vertices all lie under a flat punch (within round-off of its edge)."""
     mean_normal, mean_tangent = _mean_frame(_nodes(facets, mesh, basis, contact.boundary))
@@ -186,13 +255,16 @@ def contact_trace(
     dofs, coords, normals, weights = nodes.dofs, nodes.coords, nodes.normals, nodes.weights
     mean_normal, mean_tangent = _mean_frame(nodes)
     coordinate = coords @ mean_tangent
-    user_coords = coords * scaling.length
-    offset = axis_offset(obstacle, user_coords, coordinate * scaling.length, mean_normal, mean_tangent)
-    if obstacle.normal == "obstacle":
-        gap, normals = obstacle.closest_point(offset, mean_normal)
-    else:
-        gap = obstacle.shape_gap(user_coords, axis_distance(offset, mean_tangent)) - (obstacle.depth or 0.0)
+    gap, obstacle_normals = obstacle_gap(obstacle, coords * scaling.length, coordinate * scaling.length,
+                                         mean_normal, mean_tangent)
     gap = gap / scaling.displacement
+    normals = normals if obstacle_normals is None else obstacle_normals
+    points = None
+    if getattr(contact.law, "non_penetration", None) == "gauss":
+        G, weights_q, coords_q = gauss_interpolation(mesh, basis, facets, dofs, contact.law.order)
+        gap_q, _ = obstacle_gap(obstacle, coords_q * scaling.length, coords_q @ mean_tangent * scaling.length,
+                                mean_normal, mean_tangent)
+        points = ContactPoints(G, weights_q, coords_q, gap_q / scaling.displacement)
     tangents, bitangents, _ = tangent_frame(normals, weights)
     frame = [tangents] if bitangents is None else [tangents, bitangents]
     N_full = _rows(normals, dofs, basis.N)
@@ -225,4 +297,5 @@ def contact_trace(
         tangential_coupling=tangential,
         obstacle_tangential_force=(obstacle.tangential_force or 0.0) / scaling.force,
         bitangents=bitangents,
+        points=points,
     )

@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 import skfem as fe
 
-from .contact import ContactTrace
+from .contact import ContactTrace, gauss_interpolation
 
 
 @dataclass
@@ -65,35 +65,12 @@ class FrictionPoints:
         return per_point[:, 0] if self.dim == 1 else per_point
 
 
-def gauss_interpolation(mesh: fe.Mesh, basis: fe.Basis, contact: ContactTrace):
-    """G (points × contact nodes), weights ω_q and coordinates of Gauss points on Γ_C."""
-    scalar = fe.FacetBasis(mesh, basis.elem.elem, facets=contact.facets)
-    # scalar DOF j carries vector DOFs dj, …, dj + d − 1 (scikit-fem interleaves components)
-    dim = contact.dim
-    node_of_dof = np.full(scalar.N, -1)
-    node_of_dof[contact.dofs[:, 0] // dim] = np.arange(contact.m)
-    assert np.allclose(scalar.doflocs[:, contact.dofs[:, 0] // dim], basis.doflocs[:, contact.dofs[:, 0]])
-    nfacets, nqp = scalar.dx.shape
-    rows = np.arange(nfacets * nqp).reshape(nfacets, nqp)
-    entries = [
-        (scalar.basis[j][0].value.ravel(), rows.ravel(), np.repeat(node_of_dof[scalar.element_dofs[j]], nqp))
-        for j in range(scalar.Nbfun)
-    ]
-    values, i, k = (np.concatenate(parts) for parts in zip(*entries))
-    on_facet = k >= 0  # the element's other DOFs vanish on the facet
-    assert np.allclose(values[~on_facet], 0.0)
-    values, i, k = values[on_facet], i[on_facet], k[on_facet]
-    G = sp.csr_matrix((values, (i, k)), shape=(nfacets * nqp, contact.m))  # duplicates are summed
-    coords = scalar.global_coordinates().value.reshape(dim, -1).T
-    return G, scalar.dx.ravel(), coords
-
-
 def friction_points(
     contact: ContactTrace, mesh: fe.Mesh, basis: fe.Basis, quadrature: str, non_penetration: str
 ) -> FrictionPoints:
     """The friction rows for the chosen quadrature and non-penetration form."""
     if quadrature == "gauss":
-        G, weights, coords = gauss_interpolation(mesh, basis, contact)
+        G, weights, coords = gauss_interpolation(mesh, basis, contact.facets, contact.dofs)
         weighting = sp.diags(weights) @ G
     else:
         G, weights, coords = sp.identity(contact.m, format="csr"), contact.weights, contact.coords

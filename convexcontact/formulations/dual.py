@@ -51,12 +51,12 @@ def dual(
         raise SceneError("formulation", "the ε-regularized friction has no matrix-free dual",
                          "use formulation='dual' or 'primal'")
     factorization = factorization or factorize(K)
-    m = contact.m
+    m = C.shape[0]  # normal multipliers: one per node, or per Gauss point
     count = friction.count if friction is not None else 0
     tangential = count * friction.dim if friction is not None else 0  # λ_T unknowns
     extra = count if epsilon is not None else 0
     B = sp.vstack([C @ contact.N] + ([-friction.R] if friction is not None else [])).tocsr()
-    c = np.concatenate([C @ (contact.normal_offset - contact.gap)] + ([-friction.offset] if count else []))
+    c = np.concatenate([C @ contact.normal_offset - contact.weighted_gap(C)] + ([-friction.offset] if count else []))
     Kf = factorization.solve(f)
     size = m + tangential + extra
     P = factorization.delassus(B, K) if matrix_free else sp.block_diag(

@@ -31,7 +31,15 @@ from .fields import ContactFields
 
 
 def contact_weights(contact: ContactTrace, non_penetration: str) -> sp.csr_matrix:
-    """C: diag(w) for node-wise non-penetration, the boundary mass M for the weak form."""
+    """C: diag(w) for node-wise non-penetration, the boundary mass M for the weak form, diag(ω) G at the
+    Gauss points (points × nodes: the only C that is not square)."""
+    if non_penetration == "gauss":
+        if contact.points is None:
+            raise SceneError("contact.non_penetration", "this contact's trace has no Gauss points (they are "
+                             "built for a body against a rigid obstacle, when the scene is prepared with that law)",
+                             "use 'nodal' or 'weak' for a pair of bodies; prepare the scene with the Gauss-point "
+                             "law (cc.prepare), not with Model.with_law")
+        return contact.points.C
     if non_penetration == "nodal":
         if contact.weights.min() <= 1e-9 * contact.weights.max():
             # P2 tetrahedra: the vertex shape functions of a P2 triangle integrate to 0
@@ -78,13 +86,13 @@ class Layout:
 
 
 def normal_rows(contact: ContactTrace, C: sp.spmatrix, layout: Layout):
-    """Rows (A, b) of C(N u + c δ_N + offset − g [− e]) ≤ 0."""
-    A = sp.hstack([C @ contact.N, sp.csr_matrix((contact.m, layout.size - layout.n))]).tocsr()
+    """Rows (A, b) of C(N u + c δ_N + offset [− e]) − C g ≤ 0 (C g: :meth:`ContactTrace.weighted_gap`)."""
+    A = sp.hstack([C @ contact.N, sp.csr_matrix((C.shape[0], layout.size - layout.n))]).tocsr()
     if layout.advance is not None:
         A = A + layout.column(layout.advance, C @ contact.obstacle_coupling)
     if layout.excess.stop > layout.excess.start:
         A = A - selector(layout.excess, layout.size, C)
-    return A, C @ (contact.gap - contact.normal_offset)
+    return A, contact.weighted_gap(C) - C @ contact.normal_offset
 
 
 def selector(block: slice, size: int, scale: sp.spmatrix | None = None) -> sp.csr_matrix:
@@ -158,7 +166,7 @@ def primal(
     if layout.shift is not None:
         q[layout.shift] = -contact.obstacle_tangential_force
     A, b = normal_rows(contact, C, layout)
-    rows, offsets, cones = [A], [b], [nonnegative(contact.m)]
+    rows, offsets, cones = [A], [b], [nonnegative(C.shape[0])]
     if compliance is not None:
         P_diag, q_e, rows_e, b_e, cones_e = compliance_energy(layout, contact.weights, compliance)
         extra_diag, q = P_diag[layout.n :], q + q_e
@@ -176,7 +184,7 @@ def primal(
 
     def recover(solution: ConicSolution) -> ContactFields:
         z = solution.z
-        pressure = np.where(normal_carries, z[: contact.m], 0.0)
+        pressure = np.where(normal_carries, z[: C.shape[0]], 0.0)
         traction = None
         if friction is not None:  # the slip components of each cone, back to component-major order
             cones_z = z[friction_start:].reshape(friction.count, dim)[:, 1 : 1 + friction.dim]

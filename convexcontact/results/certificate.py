@@ -69,7 +69,9 @@ class Certificate:
 
 def lumped(contact: ContactTrace, C: sp.spmatrix) -> np.ndarray:
     """Weights that turn C(u_N − g) back into a gap: w_i, or Σ_j |C_ij| where ∫ψ_i vanishes
-    (vertices of P2 triangles on the facets of P2 tetrahedra)."""
+    (vertices of P2 triangles on the facets of P2 tetrahedra); ω_q at Gauss points."""
+    if contact.points is not None and C is contact.points.C:
+        return contact.points.weights
     weights = contact.weights
     vanishing = weights <= 1e-9 * weights.max()
     if not vanishing.any():
@@ -77,10 +79,15 @@ def lumped(contact: ContactTrace, C: sp.spmatrix) -> np.ndarray:
     return np.where(vanishing, np.asarray(abs(C).sum(axis=1)).ravel(), weights)
 
 
+def normal_displacement(contact: ContactTrace, fields: ContactFields) -> np.ndarray:
+    """u_N at the contact nodes, the obstacle's advance included."""
+    advance = 0.0 if contact.obstacle_coupling is None else contact.obstacle_coupling * fields.obstacle_advance
+    return contact.N @ fields.u + contact.normal_offset + advance
+
+
 def normal_gap(contact: ContactTrace, fields: ContactFields) -> np.ndarray:
     """u_N − g at the contact nodes, the obstacle's advance included (≤ 0 is admissible)."""
-    advance = 0.0 if contact.obstacle_coupling is None else contact.obstacle_coupling * fields.obstacle_advance
-    return contact.N @ fields.u + contact.normal_offset + advance - contact.gap
+    return normal_displacement(contact, fields) - contact.gap
 
 
 def certify(
@@ -97,8 +104,9 @@ def certify(
     """Residuals of the Signorini or normal compliance (and, with ``friction``, Tresca) conditions."""
     lam_N = fields.pressure
     gap = normal_gap(contact, fields)
-    weighted_gap = (C @ gap) / lumped(contact, C)  # u_N − g for nodal contact, its projection for weak
-    contact_force = contact.N.T @ (C @ lam_N)
+    # u_N − g for nodal contact, its projection for weak, its value at each Gauss point
+    weighted_gap = (C @ normal_displacement(contact, fields) - contact.weighted_gap(C)) / lumped(contact, C)
+    contact_force = contact.N.T @ (C.T @ lam_N)
     if friction is not None:
         contact_force = contact_force - friction.R.T @ fields.friction
     elastic_force = K @ fields.u
@@ -121,7 +129,7 @@ def certify(
     balance = []
     force_ref = max(contact.obstacle_force, abs(contact.obstacle_tangential_force), 1.0)  # 1: the data's force scale
     if contact.obstacle_coupling is not None:
-        resultant = contact.obstacle_coupling @ (C @ lam_N)
+        resultant = contact.obstacle_coupling @ (C.T @ lam_N)
         balance.append(abs(resultant - contact.obstacle_force) / force_ref)
     if contact.tangential_coupling is not None:
         resultant = friction.coupling @ fields.friction
@@ -136,8 +144,8 @@ def certify(
 
 
 def pair_multipliers(C: sp.spmatrix, fields: ContactFields, friction: FrictionPoints | None):
-    """The weighted multipliers (Cλ_N, w·λ_T) whose forces a pair's rows apply (scaled)."""
-    return C @ fields.pressure, None if friction is None else np.tile(friction.weights, friction.dim) * fields.friction
+    """The weighted multipliers (Cᵀλ_N, w·λ_T) whose forces a pair's rows apply (scaled)."""
+    return C.T @ fields.pressure, None if friction is None else np.tile(friction.weights, friction.dim) * fields.friction
 
 
 def weighted_slip(friction: FrictionPoints, fields: ContactFields) -> np.ndarray:

@@ -11,7 +11,7 @@ from ..fem.assembly import FEModel
 from ..fem.friction import FrictionPoints
 from ..fem.mortar import PairTrace
 from ..formulations.fields import ContactFields
-from .certificate import Certificate, normal_gap, pair_multipliers
+from .certificate import Certificate, normal_displacement, normal_gap, pair_multipliers
 
 CLOSED_PRESSURE = 1e-6
 """A node is closed when its pressure exceeds this fraction of the largest pressure, and of the
@@ -204,11 +204,11 @@ def contact_nodes(
 ) -> ContactNodes:
     """Contact-node fields in user units; open where the pressure is negligible."""
     contact, scaling = fem.contact, fem.scaling
-    pressure = fields.pressure * scaling.pressure
+    pressure = contact.nodal_pressure(C, fields.pressure) * scaling.pressure
     closed = pressure > CLOSED_PRESSURE * max(pressure.max(initial=0.0), scaling.pressure)
     u_N = contact.N @ fields.u + contact.normal_offset
     gap = u_N - normal_gap(contact, fields)
-    forces = -(C @ fields.pressure)[:, None] * contact.normals
+    forces = -(C.T @ fields.pressure)[:, None] * contact.normals
     status = np.where(closed, "closed", "open")
     traction = slip = None
     if friction is not None:
@@ -261,6 +261,15 @@ def not_unique(fem: FEModel, fields: ContactFields, friction: FrictionPoints | N
     if held.any():
         reasons["pressure"] = (f"{held.sum()} contact nodes have a prescribed normal displacement: their contact "
                                "force is the support's reaction, reported as 0")
+    if contact.points is not None and getattr(law, "non_penetration", None) == "gauss":
+        points = contact.points
+        gap = points.gap - points.interpolation @ normal_displacement(contact, fields)
+        active = gap <= SLIP * max(np.abs(fields.u).max(initial=0.0), 1.0)
+        nodes = np.unique(points.interpolation[active].indices).size
+        if active.sum() > nodes:
+            reasons["pressure_at_points"] = (f"{active.sum()} Gauss points touch, acting on {nodes} nodes: the point "
+                                             "multipliers are one choice among many; the nodal pressure (their "
+                                             "nodal force per contact weight) is unique and is what is reported")
     if friction is None:
         return reasons
     held = (np.diff(sp.csr_matrix(friction.R).indptr) == 0).reshape(friction.dim, -1).all(axis=0)

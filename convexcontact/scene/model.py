@@ -350,15 +350,27 @@ class Obstacle:
 class Signorini:
     """Frictionless unilateral contact.
 
-    ``non_penetration``: ``"nodal"`` (u_N ≤ g at every contact node, lumped) or
-    ``"weak"`` (Hild's continuous P1 multipliers: M(u_N − g) ≤ 0).
+    ``non_penetration``: ``"nodal"`` (u_N ≤ g at every contact node, lumped),
+    ``"weak"`` (Hild's continuous P1 multipliers: M(u_N − g) ≤ 0) or ``"gauss"`` (u_N ≤ g at
+    the Gauss points of Γ_C, the obstacle's gap evaluated there: the limit of penalty codes
+    that penalize at quadrature points; ``order``: the degree the rule integrates exactly,
+    scikit-fem's default for the element when None).
     """
 
     non_penetration: str = "nodal"
+    order: int | None = None
+
+    NON_PENETRATION = ("nodal", "weak", "gauss")
 
     def __post_init__(self):
-        if self.non_penetration not in ("nodal", "weak"):
-            raise SceneError("contact.non_penetration", f"got {self.non_penetration!r}", "use 'nodal' or 'weak'")
+        if self.non_penetration not in self.NON_PENETRATION:
+            raise SceneError("contact.non_penetration", f"got {self.non_penetration!r}",
+                             f"use one of {self.NON_PENETRATION}")
+        if self.order is not None:
+            if self.non_penetration != "gauss":
+                raise SceneError("contact.order", "a Gauss rule's order is for non_penetration = 'gauss'",
+                                 "drop order, or set non_penetration = 'gauss'")
+            object.__setattr__(self, "order", positive_integer(self.order, "contact.order"))
 
 
 @dataclass(frozen=True)
@@ -514,7 +526,8 @@ def _check_options(law):
     if law.compliance is not None and law.non_penetration != "nodal":
         raise SceneError("contact.non_penetration", "normal compliance is lumped node-wise", "use 'nodal'")
     if law.non_penetration not in ("nodal", "weak"):
-        raise SceneError("contact.non_penetration", f"got {law.non_penetration!r}", "use 'nodal' or 'weak'")
+        fix = "use 'nodal' or 'weak' (Gauss-point non-penetration is built for the frictionless law only)"
+        raise SceneError("contact.non_penetration", f"got {law.non_penetration!r}", fix)
     if law.quadrature not in QUADRATURES:
         raise SceneError("contact.quadrature", f"got {law.quadrature!r}", f"use one of {QUADRATURES}")
     if law.quadrature == "gauss" and law.non_penetration == "weak":

@@ -77,7 +77,7 @@ FRICTION_OPTIONS = {"non_penetration": TEXT, "quadrature": TEXT, "regularization
 LAWS = {
     # law name → (model class, its keys in [contact] besides boundary and law); with friction,
     # stiffness (and exponent) switch the normal law to normal compliance
-    "signorini": (Signorini, {"non_penetration": TEXT}),
+    "signorini": (Signorini, {"non_penetration": TEXT, "order": INTEGER}),
     "normal_compliance": (NormalCompliance, COMPLIANCE),
     "tresca": (Tresca, {"slip_bound": FIELD, **FRICTION_OPTIONS}),
     "coulomb": (Coulomb, {
