@@ -224,10 +224,10 @@ def test_bad_inputs_name_the_field(change, field):
     assert error.value.field == field
 
 
-def boxes(law=None, cells=(3, 4)):
-    """The 3-D patch test: unit boxes of P1 tetrahedra, 3 × 3 against 4 × 4 cells across, p on top, rollers."""
-    parts = [Part("upper", Box(size=(1, 1, 1), cells=(cells[0], cells[0], 2), origin=(0, 0, 1)), STEEL),
-             Part("lower", Box(size=(1, 1, 1), cells=(cells[1], cells[1], 2)), STEEL)]
+def boxes(law=None, cells=(3, 4), element="P1"):
+    """The 3-D patch test: unit boxes, 3 × 3 against 4 × 4 cells across, p on top, rollers."""
+    parts = [Part("upper", Box(size=(1, 1, 1), cells=(cells[0], cells[0], 2), origin=(0, 0, 1)), STEEL, element),
+             Part("lower", Box(size=(1, 1, 1), cells=(cells[1], cells[1], 2)), STEEL, element)]
     rollers = [cc.Dirichlet(f"{part}.{side}", **{axis: 0.0}) for part in ("upper", "lower")
                for side, axis in (("left", "ux"), ("front", "uy"))]
     return bodies_scene(parts, Pair("upper.bottom", master="lower.top", law=law or cc.Signorini()),
@@ -235,10 +235,12 @@ def boxes(law=None, cells=(3, 4)):
                         tractions=[cc.Traction("upper.top", pressure=0.01)])
 
 
-@pytest.mark.parametrize("law", [cc.Signorini(), cc.Tresca(0.001)])
-def test_mortar_passes_the_patch_test_in_3d(law):
-    """Non-matching triangles (the master clipped on each slave facet) carry the uniform pressure exactly."""
-    result = cc.solve(boxes(law))
+@pytest.mark.parametrize("law, element", [(cc.Signorini(), "P1"), (cc.Tresca(0.001), "P1"), (cc.Signorini(), "Q1"),
+                                          (cc.Tresca(0.001), "Q1")])
+def test_mortar_passes_the_patch_test_in_3d(law, element):
+    """Non-matching triangles or quadrilaterals (the master clipped on each slave facet) carry the uniform
+    pressure exactly."""
+    result = cc.solve(boxes(law, element=element))
     np.testing.assert_allclose(result.contact.pressure, 0.01, rtol=1e-9)
     assert result.certificate.passes(1e-9) and result.certificate.residuals["pair_balance"] < 1e-12
 
@@ -291,16 +293,18 @@ def test_hertz_two_spheres():
     assert np.sqrt(c0) == pytest.approx(p0, rel=0.05) and result.max_pressure == pytest.approx(p0, rel=0.05)
 
 
-def test_3d_pairs_are_mortar_on_tetrahedra():
+def test_3d_pairs_refuse_node_to_segment_and_warped_quadrilaterals():
     with pytest.raises(cc.SceneError, match="node-to-segment is built in 2-D"):
         cc.solve(dataclasses.replace(boxes(), contact=Pair("upper.bottom", master="lower.top", method="node_to_segment")))
-    hexes = [Part(name, Box(size=(1, 1, 1), cells=(2, 2, 2), origin=(0, 0, z)), STEEL, "Q1")
-             for name, z in (("upper", 1), ("lower", 0))]
-    scene = bodies_scene(hexes, Pair("upper.bottom", master="lower.top"),
-                         dirichlet=[cc.Dirichlet("lower.bottom", ux=0, uy=0, uz=0),
-                                    cc.Dirichlet("upper.top", ux=0, uy=0, uz=-0.01)])
-    with pytest.raises(cc.SceneError, match="P1 tetrahedra"):
-        cc.solve(scene)
+    from convexcontact.fem.mesh import build_mesh
+
+    flat = build_mesh(cc.Body(Box(size=(1, 1, 1), cells=(2, 2, 2)), "Q1"))
+    warped = type(flat)(flat.p + [[0], [0], [0.1]] * flat.p[0] * flat.p[1], flat.t, _boundaries=flat.boundaries)
+    scene = boxes(element="Q1")  # the patch test, its lower box warped
+    parts = (scene.body.parts[0], Part("lower", warped, STEEL, "Q1"))
+    with pytest.raises(cc.SceneError, match="parallelograms") as error:
+        cc.solve(bodies_scene(parts, scene.contact, scene.dirichlet, scene.tractions))
+    assert error.value.field == "contact.master"
 
 
 def test_the_example_scene_file_solves():

@@ -15,8 +15,9 @@ tangent t_i; master nodes k:
 - ``node_to_segment``: Π_ik = φ_k(π(x_i)), x_i projected on the master along n_i.
 
 Slave nodes whose facets are not all covered by the master are left out (with a warning). In 3-D
-(P1 tetrahedra) the multipliers are the dual basis 4λ_a − 1 of the slave triangles, t_i and the second
-tangent b_i = n_i × t_i as :func:`~convexcontact.fem.contact.tangent_frame` chooses them.
+(P1 tetrahedra, Q1 hexahedra with parallelogram faces) the multipliers are the dual basis of the slave facets
+(:mod:`.mortar3d`), t_i and the second tangent b_i = n_i × t_i as
+:func:`~convexcontact.fem.contact.tangent_frame` chooses them.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from ..scene.bodies import Pair, Pairs
 from ..scene.model import SceneError
 from .contact import ContactTrace, tangent_frame
 from .mesh import check_boundary
-from .mortar3d import Triangles, mortar_3d, triangles
+from .mortar3d import Facets, facets_3d, mortar_3d
 from .scaling import Scaling
 
 COVERED = 1e-9
@@ -193,7 +194,7 @@ def relative_rows(vectors, dofs, transfer: sp.coo_matrix, master_dofs, ndofs: in
     return sp.csr_matrix((values, (rows, cols)), shape=(m, ndofs))
 
 
-def slave_nodes(slave: Segments | Triangles) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def slave_nodes(slave: Segments | Facets) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The slave boundary's vertices, each facet's node numbers among them, the weights w_i = ∫ψ_i and the
     nodal normals n_i ∝ ∫ψ_i n ds (the facets' normals averaged with the weights of ψ_i)."""
     vertices, local = np.unique(slave.nodes, return_inverse=True)
@@ -220,7 +221,7 @@ def transfer_matrix(pair: Pair, slave, master, local, weights, normals, coords):
         ok = np.zeros(len(weights), bool)
         ok[i] = True
         return sp.coo_matrix((values, (i, master_local[f, b])), shape=shape).tocsr(), masters, ok
-    (e, a, f, b, values), covered = (mortar_3d(slave, master, mean_normal) if isinstance(slave, Triangles)
+    (e, a, f, b, values), covered = (mortar_3d(slave, master, mean_normal) if isinstance(slave, Facets)
                                      else mortar(slave, master, along, margin))
     if (covered > 1 + COVERED).any():
         raise SceneError("contact.master", f"{pair.master!r} is met twice along the normals of {pair.boundary!r} "
@@ -236,15 +237,17 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
                prescribed: np.ndarray) -> PairTrace:
     """The trace of a contact pair: slave nodes, their normals and weights, N, T and the gap from geometry."""
     dim = mesh.dim()
-    if basis.N != dim * mesh.p.shape[1] or (dim == 3 and not isinstance(mesh, fe.MeshTet1)):
-        raise SceneError("contact.master", "contact pairs are built for P1 and Q1 elements in 2-D and P1 tetrahedra "
-                         "in 3-D (flat facets, nodes at the vertices)", "use P1 (or, in 2-D, Q1) elements")
+    if basis.N != dim * mesh.p.shape[1]:
+        raise SceneError("contact.master", "contact pairs are built for P1 and Q1 elements (flat facets, nodes at the "
+                         "vertices)", "use P1 or Q1 elements")
     if dim == 3 and pair.method == "node_to_segment":
         raise SceneError("contact.method", "node-to-segment is built in 2-D", "use method = 'mortar'")
     facets = check_boundary(mesh, pair.boundary, "contact.boundary")
-    facet_geometry = segments if dim == 2 else triangles
-    slave = facet_geometry(mesh, facets)
-    master = facet_geometry(mesh, check_boundary(mesh, pair.master, "contact.master"))
+    if dim == 2:
+        slave, master = segments(mesh, facets), segments(mesh, check_boundary(mesh, pair.master, "contact.master"))
+    else:
+        slave = facets_3d(mesh, facets, "contact.boundary")
+        master = facets_3d(mesh, check_boundary(mesh, pair.master, "contact.master"), "contact.master")
     vertices, local, weights, normals = slave_nodes(slave)
     coords = mesh.p[:, vertices].T
     transfer, masters, ok = transfer_matrix(pair, slave, master, local, weights, normals, coords)

@@ -1,10 +1,11 @@
-"""The 3-D mortar integrals of a pair: flat triangular facets (P1 tetrahedra).
+"""The 3-D mortar integrals of a pair: flat facets, triangles (P1 tetrahedra) or parallelograms (Q1 hexahedra).
 
-Each master triangle facing a slave triangle is projected on the slave's plane along its normal and
-clipped by it (Sutherland–Hodgman, vectorized over all facet pairs at once: a triangle clipped by three
-half-planes has at most six vertices); the intersection is cut into a fan of triangles, integrated with
-the edge-midpoint rule (exact for the quadratic integrand). The dual basis of a slave triangle is
-φ*_a = 4λ_a − 1: ∫φ*_a λ_b = δ_ab ∫λ_b, so D is diagonal as in 2-D (see :mod:`.mortar`).
+Each master facet facing a slave facet is projected on the slave's plane along its normal and clipped by it
+(Sutherland–Hodgman, vectorized over all facet pairs at once: a quadrilateral clipped by four half-planes
+has at most eight vertices); the intersection is cut into a fan of triangles and integrated with a degree-4
+rule (exact for the product of two bilinear functions on parallelograms). The dual basis of a slave facet
+makes D diagonal as in 2-D (see :mod:`.mortar`): φ*_a = 4λ_a − 1 on a triangle, the tensor product of the
+1-D duals 2 − 3t and 3t − 1 on a parallelogram (∫φ*_a ψ_b = δ_ab ∫ψ_b on both).
 """
 
 from __future__ import annotations
@@ -15,41 +16,51 @@ import numpy as np
 import skfem as fe
 from scipy.spatial import cKDTree
 
+from ..scene.model import SceneError
+
 FACING = 1e-3
 """A master facet faces a slave facet when their normals make more than 90° + 0.06° (a facet seen edge-on
 has no projection to integrate on)."""
 
 
 @dataclass
-class Triangles:
-    """Flat boundary facets, numbered so that (B − A) × (C − A) is the outward normal; ``frame`` (facets, 2, 3)
-    are two unit tangents of each facet's plane, the first along A→B."""
+class Facets:
+    """Flat boundary facets (triangles or parallelograms), their vertices in cyclic order so that
+    (B − A) × (C − A) is the outward normal; ``frame`` (facets, 2, 3) are two unit tangents of each facet's
+    plane, the first along A→B."""
 
-    nodes: np.ndarray  # (facets, 3) vertex indices
-    points: np.ndarray  # (facets, 3, 3): vertex × coordinate
+    nodes: np.ndarray  # (facets, corners) vertex indices
+    points: np.ndarray  # (facets, corners, 3)
     measure: np.ndarray  # areas
     size: np.ndarray  # longest edges
     normal: np.ndarray
     frame: np.ndarray
 
 
-def triangles(mesh: fe.Mesh, facets: np.ndarray) -> Triangles:
-    """The ``facets`` of a tetrahedral mesh as outward-numbered triangles."""
-    nodes = mesh.facets[:, facets].T.copy()
+def facets_3d(mesh: fe.Mesh, facets: np.ndarray, field_name: str) -> Facets:
+    """The ``facets`` of a tetrahedral or hexahedral mesh, numbered outwards; warped or non-parallelogram
+    quadrilaterals are refused (their bilinear map and dual basis are not built)."""
+    nodes = mesh.facets[:, facets].T.copy()  # scikit-fem keeps a quadrilateral's vertices in cyclic order
     centroid = mesh.p[:, mesh.t[:, mesh.f2t[0, facets]]].mean(axis=1).T
     points = mesh.p[:, nodes].transpose(1, 2, 0)
     turned = np.cross(points[:, 1] - points[:, 0], points[:, 2] - points[:, 0])
     inward = ((centroid - points[:, 0]) * turned).sum(axis=1) > 0
-    nodes[inward] = nodes[inward][:, [0, 2, 1]]
+    nodes[inward] = nodes[inward][:, [0, *range(nodes.shape[1] - 1, 0, -1)]]
     points = mesh.p[:, nodes].transpose(1, 2, 0)
-    turned = np.cross(points[:, 1] - points[:, 0], points[:, 2] - points[:, 0])
-    twice = np.linalg.norm(turned, axis=1)
-    normal = turned / twice[:, None]
+    edges = np.linalg.norm(points - np.roll(points, 1, axis=1), axis=2).max(axis=1)
+    turned = np.cross(points[:, 1] - points[:, 0], points[:, -1] - points[:, 0])
+    if nodes.shape[1] == 4:
+        skew = np.linalg.norm(points[:, 0] + points[:, 2] - points[:, 1] - points[:, 3], axis=1)
+        if (skew > 1e-8 * edges).any():
+            raise SceneError(field_name, f"{np.count_nonzero(skew > 1e-8 * edges)} quadrilateral facets are not "
+                             "parallelograms (warped or tapered hexahedra)", "use P1 tetrahedra for this body, "
+                             "or hexahedra whose contact faces are parallelograms (a Box, graded or not)")
+    doubled = np.linalg.norm(turned, axis=1)
+    normal = turned / doubled[:, None]
     first = points[:, 1] - points[:, 0]
     first /= np.linalg.norm(first, axis=1, keepdims=True)
-    edges = np.linalg.norm(points - np.roll(points, 1, axis=1), axis=2)
-    return Triangles(nodes, points, twice / 2, edges.max(axis=1), normal,
-                     np.stack([first, np.cross(normal, first)], axis=1))
+    measure = doubled / 2 if nodes.shape[1] == 3 else doubled
+    return Facets(nodes, points, measure, edges, normal, np.stack([first, np.cross(normal, first)], axis=1))
 
 
 def plane_axes(normal: np.ndarray) -> np.ndarray:
@@ -60,11 +71,11 @@ def plane_axes(normal: np.ndarray) -> np.ndarray:
     return np.array([first, np.cross(normal, first)])
 
 
-def candidates(slave: Triangles, master: Triangles, mean_normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def candidates(slave: Facets, master: Facets, mean_normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Facet pairs whose centroids, seen along Γ_C's mean normal, lie closer than their sizes (a KD-tree)."""
     axes = plane_axes(mean_normal)
     trees = [cKDTree(facets.points.mean(axis=1) @ axes.T) for facets in (slave, master)]
-    reach = (slave.size.max() + master.size.max()) / np.sqrt(3)  # a vertex lies within edge/√3 of the centroid
+    reach = sum(np.linalg.norm(f.points - f.points.mean(axis=1, keepdims=True), axis=2).max() for f in (slave, master))
     pairs = trees[0].sparse_distance_matrix(trees[1], reach, output_type="ndarray")
     return pairs["i"].astype(int), pairs["j"].astype(int)
 
@@ -95,17 +106,34 @@ def clip(polygon: np.ndarray, count: np.ndarray, start: np.ndarray, end: np.ndar
     return out, outputs.sum(axis=1)
 
 
-def barycentric(triangle: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates (n, q, 3) of ``points`` (n, q, 2) in the 2-D ``triangle`` (n, 3, 2)."""
-    origin, first, second = (triangle[:, k][:, None] for k in range(3))
-    area = cross2(first - origin, second - origin)
-    along_first = cross2(points - origin, second - origin) / area
-    along_second = cross2(first - origin, points - origin) / area
-    return np.stack([1 - along_first - along_second, along_first, along_second], axis=-1)
+DUNAVANT = (np.array([[0.445948490915965, 0.445948490915965, 0.108103018168070],
+                      [0.445948490915965, 0.108103018168070, 0.445948490915965],
+                      [0.108103018168070, 0.445948490915965, 0.445948490915965],
+                      [0.091576213509771, 0.091576213509771, 0.816847572980459],
+                      [0.091576213509771, 0.816847572980459, 0.091576213509771],
+                      [0.816847572980459, 0.091576213509771, 0.091576213509771]]),
+            np.array([0.223381589678011] * 3 + [0.109951743655322] * 3))
+"""Points (barycentric) and weights (fractions of the area) of Dunavant's degree-4 rule on a triangle."""
 
 
-def mortar_3d(slave: Triangles, master: Triangles, mean_normal: np.ndarray):
-    """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a λ_b) and each slave facet's covered
+def shapes(polygon: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(shape functions, dual basis) (n, q, corners) at ``points`` (n, q, 2) of the 2-D triangle or
+    parallelogram ``polygon`` (n, corners, 2)."""
+    origin, first, last = polygon[:, 0][:, None], polygon[:, 1][:, None], polygon[:, -1][:, None]
+    area = cross2(first - origin, last - origin)
+    xi = cross2(points - origin, last - origin) / area
+    eta = cross2(first - origin, points - origin) / area
+    if polygon.shape[1] == 3:
+        shape = np.stack([1 - xi - eta, xi, eta], axis=-1)
+        return shape, 4 * shape - 1
+    one = [(1 - xi, 2 - 3 * xi), (xi, 3 * xi - 1)]  # along A→B: (shape, dual) of the nodes at 0 and 1
+    two = [(1 - eta, 2 - 3 * eta), (eta, 3 * eta - 1)]  # along A→D
+    corners = ((0, 0), (1, 0), (1, 1), (0, 1))  # A, B, C, D
+    return tuple(np.stack([one[i][k] * two[j][k] for i, j in corners], axis=-1) for k in (0, 1))
+
+
+def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
+    """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a ψ_b) and each slave facet's covered
     fraction, as :func:`convexcontact.fem.mortar.mortar` in 2-D."""
     e, f = candidates(slave, master, mean_normal)
     facing = (slave.normal[e] * master.normal[f]).sum(axis=1) < -FACING
@@ -113,20 +141,24 @@ def mortar_3d(slave: Triangles, master: Triangles, mean_normal: np.ndarray):
     origin, frame = slave.points[e, 0], slave.frame[e]  # (n, 3), (n, 2, 3)
     flat = np.einsum("nkc,njc->nkj", slave.points[e] - origin[:, None], frame)  # slave vertices in its plane
     projected = np.einsum("nkc,njc->nkj", master.points[f] - origin[:, None], frame)
-    polygon, count = projected[:, ::-1], np.full(len(e), 3)  # the master runs clockwise seen from the slave
-    for k in range(3):
-        polygon, count = clip(polygon, count, flat[:, k], flat[:, (k + 1) % 3])
+    corners = slave.nodes.shape[1]
+    polygon, count = projected[:, ::-1], np.full(len(e), master.nodes.shape[1])  # the master runs clockwise here
+    for k in range(corners):
+        polygon, count = clip(polygon, count, flat[:, k], flat[:, (k + 1) % corners])
     overlap = count >= 3
     e, f, flat, projected, polygon, count = (a[overlap] for a in (e, f, flat, projected, polygon, count))
-    # fan triangles (0, k, k + 1) of each intersection, their edge midpoints
+    # fan triangles (0, k, k + 1) of each intersection, Dunavant's points in each
     fan = np.arange(1, polygon.shape[1] - 1)
-    corners = [np.broadcast_to(polygon[:, :1], (len(e), fan.size, 2)), polygon[:, fan], polygon[:, fan + 1]]
-    area = np.where(fan + 1 < count[:, None], cross2(corners[1] - corners[0], corners[2] - corners[0]) / 2, 0.0)
-    midpoints = np.concatenate([(corners[i] + corners[(i + 1) % 3]) / 2 for i in range(3)], axis=1)
-    weight = np.tile(area / 3, 3)  # (n, 3·fan)
-    dual = 4 * barycentric(flat, midpoints) - 1
-    shape = barycentric(projected, midpoints)
+    vertices = np.stack([np.broadcast_to(polygon[:, :1], (len(e), fan.size, 2)), polygon[:, fan], polygon[:, fan + 1]],
+                        axis=2)  # (n, fan, 3, 2)
+    area = np.where(fan + 1 < count[:, None], cross2(vertices[:, :, 1] - vertices[:, :, 0],
+                                                     vertices[:, :, 2] - vertices[:, :, 0]) / 2, 0.0)
+    points, fractions = DUNAVANT
+    at = np.einsum("qk,nfkc->nfqc", points, vertices).reshape(len(e), -1, 2)
+    weight = (area[:, :, None] * fractions).reshape(len(e), -1)
+    dual = shapes(flat, at)[1]
+    shape = shapes(projected, at)[0]
     entries = [(e, np.full_like(e, a), f, np.full_like(f, b), (weight * dual[..., a] * shape[..., b]).sum(axis=1))
-               for a in range(3) for b in range(3)]
+               for a in range(corners) for b in range(master.nodes.shape[1])]
     covered = np.bincount(e, weights=area.sum(axis=1), minlength=slave.measure.size) / slave.measure
     return [np.concatenate(parts) for parts in zip(*entries)], covered
