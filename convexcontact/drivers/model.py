@@ -98,7 +98,8 @@ class Model:
         if driver is not None:
             return driver(self, solver, progress, **options)
         timings = dict(self.timings)
-        if getattr(self.law, "non_penetration", None) == "gauss" and solver == "clarabel" and "tol" not in options:
+        gauss = getattr(self.law, "non_penetration", None) == "gauss"
+        if gauss and solver in ("auto", "clarabel") and "tol" not in options:  # auto: Clarabel here (P is a matrix)
             # more touching points than nodes: an active set the polish cannot settle (dependent rows), so
             # the interior point must be accurate on its own (1e-10: certificate 1e-6; 1e-12: 1e-15)
             options = {**options, "tol": GAUSS_TOL}
