@@ -98,7 +98,7 @@ class Model:
         if driver is not None:
             return driver(self, solver, progress, **options)
         timings = dict(self.timings)
-        gauss = getattr(self.law, "non_penetration", None) == "gauss"
+        gauss = getattr(self.law, "non_penetration", None) == "gauss" and compliance_of(self.law) is None
         if gauss and solver in ("auto", "clarabel") and "tol" not in options:  # auto: Clarabel here (P is a matrix)
             # more touching points than nodes: an active set the polish cannot settle (dependent rows), so
             # the interior point must be accurate on its own (1e-10: certificate 1e-6; 1e-12: 1e-15)

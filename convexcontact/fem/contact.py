@@ -86,6 +86,17 @@ class ContactTrace:
             return self.points.weights * self.points.gap
         return C @ self.gap
 
+    def row_weights(self, C: sp.spmatrix) -> np.ndarray:
+        """The length (area) each row of ``C`` stands for, which turns C(u_N − g) back into a gap: w_i, or
+        Σ_j |C_ij| where ∫ψ_i vanishes (vertices of P2 triangles on the facets of P2 tetrahedra); ω_q at
+        Gauss points."""
+        if self.points is not None and C is self.points.C:
+            return self.points.weights
+        vanishing = self.weights <= 1e-9 * self.weights.max()
+        if not vanishing.any():
+            return self.weights
+        return np.where(vanishing, np.asarray(abs(C).sum(axis=1)).ravel(), self.weights)
+
     def nodal_pressure(self, C: sp.spmatrix, multipliers: np.ndarray) -> np.ndarray:
         """The pressure at the contact nodes: the multipliers themselves, or from Gauss-point multipliers
         the nodal force Cᵀλ over w_i (unique where the point multipliers are not: more points than nodes)."""

@@ -59,15 +59,16 @@ def carrying(rows: sp.spmatrix) -> np.ndarray:
 class Layout:
     """Where each unknown sits in x = (u, [δ_N], [δ_T], [t], [e], [r])."""
 
-    def __init__(self, n: int, contact: ContactTrace, friction: FrictionPoints | None, compliance=None):
+    def __init__(self, n: int, contact: ContactTrace, friction: FrictionPoints | None, compliance=None,
+                 normal_rows: int = 0):
         self.n = n
         self.advance = n if contact.obstacle_coupling is not None else None
         self.shift = n + (self.advance is not None) if contact.tangential_coupling is not None else None
         start = n + (self.advance is not None) + (self.shift is not None)
         self.epigraph = slice(start, start + (friction.count if friction is not None else 0))
-        self.excess = slice(self.epigraph.stop, self.epigraph.stop + (contact.m if compliance else 0))
+        self.excess = slice(self.epigraph.stop, self.epigraph.stop + (normal_rows if compliance else 0))
         powered = compliance is not None and compliance[1] > 1
-        self.power = slice(self.excess.stop, self.excess.stop + (contact.m if powered else 0))
+        self.power = slice(self.excess.stop, self.excess.stop + (normal_rows if powered else 0))
         self.size = self.power.stop
 
     def column(self, index: int | None, values: np.ndarray) -> sp.csr_matrix:
@@ -91,7 +92,7 @@ def normal_rows(contact: ContactTrace, C: sp.spmatrix, layout: Layout):
     if layout.advance is not None:
         A = A + layout.column(layout.advance, C @ contact.obstacle_coupling)
     if layout.excess.stop > layout.excess.start:
-        A = A - selector(layout.excess, layout.size, C)
+        A = A - selector(layout.excess, layout.size, sp.diags(contact.row_weights(C)))
     return A, contact.weighted_gap(C) - C @ contact.normal_offset
 
 
@@ -157,7 +158,7 @@ def primal(
 
     ``compliance`` = (c_N, p) in scaled units switches non-penetration to normal compliance.
     """
-    layout = Layout(f.size, contact, friction, compliance)
+    layout = Layout(f.size, contact, friction, compliance, C.shape[0])
     extra_diag = np.zeros(layout.size - layout.n)
     q = np.zeros(layout.size)
     q[: layout.n] = -f
@@ -168,7 +169,7 @@ def primal(
     A, b = normal_rows(contact, C, layout)
     rows, offsets, cones = [A], [b], [nonnegative(C.shape[0])]
     if compliance is not None:
-        P_diag, q_e, rows_e, b_e, cones_e = compliance_energy(layout, contact.weights, compliance)
+        P_diag, q_e, rows_e, b_e, cones_e = compliance_energy(layout, contact.row_weights(C), compliance)
         extra_diag, q = P_diag[layout.n :], q + q_e
         rows, offsets, cones = rows + rows_e, offsets + b_e, cones + cones_e
     if friction is not None:

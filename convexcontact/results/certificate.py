@@ -67,18 +67,6 @@ class Certificate:
         return {**self.residuals, "worst": self.worst}
 
 
-def lumped(contact: ContactTrace, C: sp.spmatrix) -> np.ndarray:
-    """Weights that turn C(u_N − g) back into a gap: w_i, or Σ_j |C_ij| where ∫ψ_i vanishes
-    (vertices of P2 triangles on the facets of P2 tetrahedra); ω_q at Gauss points."""
-    if contact.points is not None and C is contact.points.C:
-        return contact.points.weights
-    weights = contact.weights
-    vanishing = weights <= 1e-9 * weights.max()
-    if not vanishing.any():
-        return weights
-    return np.where(vanishing, np.asarray(abs(C).sum(axis=1)).ravel(), weights)
-
-
 def normal_displacement(contact: ContactTrace, fields: ContactFields) -> np.ndarray:
     """u_N at the contact nodes, the obstacle's advance included."""
     advance = 0.0 if contact.obstacle_coupling is None else contact.obstacle_coupling * fields.obstacle_advance
@@ -103,9 +91,8 @@ def certify(
 ) -> Certificate:
     """Residuals of the Signorini or normal compliance (and, with ``friction``, Tresca) conditions."""
     lam_N = fields.pressure
-    gap = normal_gap(contact, fields)
     # u_N − g for nodal contact, its projection for weak, its value at each Gauss point
-    weighted_gap = (C @ normal_displacement(contact, fields) - contact.weighted_gap(C)) / lumped(contact, C)
+    weighted_gap = (C @ normal_displacement(contact, fields) - contact.weighted_gap(C)) / contact.row_weights(C)
     contact_force = contact.N.T @ (C.T @ lam_N)
     if friction is not None:
         contact_force = contact_force - friction.R.T @ fields.friction
@@ -122,7 +109,7 @@ def certify(
         }
     else:
         stiffness, exponent = compliance
-        law = stiffness * np.maximum(gap, 0.0) ** exponent
+        law = stiffness * np.maximum(weighted_gap, 0.0) ** exponent  # per node, or per Gauss point
         residuals = {"compliance_law": np.abs(lam_N - law).max(initial=0.0) / p_ref}
     residuals["pressure_sign"] = np.maximum(-lam_N, 0.0).max(initial=0.0) / p_ref
     residuals["equilibrium"] = np.abs(elastic_force - f + contact_force).max(initial=0.0) / f_ref

@@ -254,14 +254,15 @@ def not_unique(fem: FEModel, fields: ContactFields, friction: FrictionPoints | N
     the support: reported as 0), nor among Gauss friction points that stick on more points than the
     nodal DOFs they act on (the nodal friction force Gᵀωλ_T stays unique and is what is reported).
     """
-    from ..scene.model import Coulomb
+    from ..scene.model import Coulomb, compliance_of
 
     contact, reasons = fem.contact, {}
     held = np.diff(sp.csr_matrix(contact.N).indptr) == 0
     if held.any():
         reasons["pressure"] = (f"{held.sum()} contact nodes have a prescribed normal displacement: their contact "
                                "force is the support's reaction, reported as 0")
-    if contact.points is not None and getattr(law, "non_penetration", None) == "gauss":
+    signorini_points = getattr(law, "non_penetration", None) == "gauss" and compliance_of(law) is None
+    if contact.points is not None and signorini_points:  # a penalty's point multipliers c e^p are unique
         points = contact.points
         gap = points.gap - points.interpolation @ normal_displacement(contact, fields)
         active = gap <= SLIP * max(np.abs(fields.u).max(initial=0.0), 1.0)

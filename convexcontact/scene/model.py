@@ -360,17 +360,19 @@ class Signorini:
     non_penetration: str = "nodal"
     order: int | None = None
 
-    NON_PENETRATION = ("nodal", "weak", "gauss")
-
     def __post_init__(self):
-        if self.non_penetration not in self.NON_PENETRATION:
-            raise SceneError("contact.non_penetration", f"got {self.non_penetration!r}",
-                             f"use one of {self.NON_PENETRATION}")
-        if self.order is not None:
-            if self.non_penetration != "gauss":
-                raise SceneError("contact.order", "a Gauss rule's order is for non_penetration = 'gauss'",
-                                 "drop order, or set non_penetration = 'gauss'")
-            object.__setattr__(self, "order", positive_integer(self.order, "contact.order"))
+        _check_points(self, ("nodal", "weak", "gauss"))
+
+
+def _check_points(law, allowed: tuple[str, ...]) -> None:
+    """The ``non_penetration`` of a frictionless law, and the Gauss rule's ``order`` that goes with "gauss"."""
+    if law.non_penetration not in allowed:
+        raise SceneError("contact.non_penetration", f"got {law.non_penetration!r}", f"use one of {allowed}")
+    if law.order is not None:
+        if law.non_penetration != "gauss":
+            raise SceneError("contact.order", "a Gauss rule's order is for non_penetration = 'gauss'",
+                             "drop order, or set non_penetration = 'gauss'")
+        object.__setattr__(law, "order", positive_integer(law.order, "contact.order"))
 
 
 @dataclass(frozen=True)
@@ -381,20 +383,25 @@ class NormalCompliance:
     Σ w_i c_N/(p+1) (u_N,i − g_i)_+^(p+1) is a QP for p = 1 and uses power cones for
     p > 1. c_N → ∞ recovers Signorini. Alone it is a frictionless law; given as
     ``compliance`` to Tresca or Coulomb it replaces their non-penetration.
+    ``non_penetration``: ``"nodal"`` (the energy lumped at the nodes) or ``"gauss"``: the
+    penalty at the Gauss points of Γ_C, Σ_q ω_q c_N/(p+1) (u_N(x_q) − g(x_q))_+^(p+1), the gap
+    evaluated at each point — the penalty codes that integrate their contact term (sfepy's
+    ``dw_contact_*``) solve this problem; ``order`` as for :class:`Signorini`. Alone only.
     """
 
     stiffness: float
     exponent: float = 1.0
+    non_penetration: str = "nodal"
+    order: int | None = None
 
     def __post_init__(self):
+        _check_points(self, ("nodal", "gauss"))
         if finite(self.stiffness, "contact.stiffness") <= 0:
             raise SceneError("contact.stiffness", f"c_N must be positive, got {self.stiffness}")
         if finite(self.exponent, "contact.exponent") < 1:
             raise SceneError("contact.exponent", f"p must be ≥ 1, got {self.exponent}")
         object.__setattr__(self, "stiffness", float(self.stiffness))
         object.__setattr__(self, "exponent", float(self.exponent))
-
-    non_penetration = "nodal"  # the compliance energy is lumped node-wise
 
 
 NodalValues = float | str | np.ndarray | Callable
@@ -523,6 +530,9 @@ class Coulomb:
 def _check_options(law):
     if law.compliance is not None and not isinstance(law.compliance, NormalCompliance):
         raise SceneError("contact.compliance", "expected NormalCompliance(stiffness, exponent)")
+    if law.compliance is not None and law.compliance.non_penetration != "nodal":
+        raise SceneError("contact.compliance", "a friction law's compliance is lumped node-wise",
+                         "give NormalCompliance(stiffness, exponent) without non_penetration")
     if law.compliance is not None and law.non_penetration != "nodal":
         raise SceneError("contact.non_penetration", "normal compliance is lumped node-wise", "use 'nodal'")
     if law.non_penetration not in ("nodal", "weak"):

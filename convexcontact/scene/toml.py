@@ -78,7 +78,7 @@ LAWS = {
     # law name → (model class, its keys in [contact] besides boundary and law); with friction,
     # stiffness (and exponent) switch the normal law to normal compliance
     "signorini": (Signorini, {"non_penetration": TEXT, "order": INTEGER}),
-    "normal_compliance": (NormalCompliance, COMPLIANCE),
+    "normal_compliance": (NormalCompliance, {**COMPLIANCE, "non_penetration": TEXT, "order": INTEGER}),
     "tresca": (Tresca, {"slip_bound": FIELD, **FRICTION_OPTIONS}),
     "coulomb": (Coulomb, {
         "friction": FIELD, "smoothing_radius": NUMBER, "relaxation": NUMBER, "tol": NUMBER,
