@@ -17,7 +17,7 @@ def strips(facets: int, rows: int, ratio: float = 1.3):
     import convexcontact as cc
 
     master = round(ratio * facets)
-    parts = [cc.Part("upper", cc.Rectangle(1.0, rows / facets, facets, rows, origin=(0.0, rows / facets)),
+    parts = [cc.Part("upper", cc.Rectangle(1.0, rows / facets, facets, rows, origin=(0.0, rows / master)),
                      cc.Material(1.0, 0.3)),
              cc.Part("lower", cc.Rectangle(1.0, rows / master, master, rows, origin=(0.0, 0.0)), cc.Material(1.0, 0.3))]
     return cc.bodies_scene(parts, cc.Pair("upper.bottom", master="lower.top"),
