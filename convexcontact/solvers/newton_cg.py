@@ -37,6 +37,8 @@ FORCING = 0.1
 SHIFT = 1e-3
 """δ of the preconditioner relative to P's mean eigenvalue: 1e-1 left 49 CG iterations on a 2-D Tresca
 dual, 1e-2 34, 1e-3 and below 31, as the exact (δ = 0) slab operator."""
+ACCEPT = 0.5
+"""Newton's point is taken outright where its natural residual is below ACCEPT × the least so far."""
 STALL = 0.9
 """A Newton segment that leaves the natural residual above STALL × its value is followed by a gradient one."""
 CG_LIMIT = 5000
@@ -155,6 +157,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         return v + alpha * d, g + alpha * Pd
 
     residual = first = None
+    best = np.inf
     steps = cg_total = 0
     status, word = "failed", "max_iter"
     for steps in range(max_iter + 1):
@@ -179,11 +182,12 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         newton, iterations = _step(P, program.q, sets, v, y, c, max(target, 0.1 * tol * size / c), products,
                                    cache["precondition"])
         cg_total += iterations
-        # Newton's point, projected, is taken where it lowers the natural residual. Elsewhere (full steps cycled
-        # on a Tresca dual) the least f on the segment to it, and where that gains too little a projected-gradient
-        # segment follows; near the answer f's changes are round-off, so that the segment alone stalled
-        # (a 3-D Tresca dual at 2e-10)
-        v, g = segment(v, g, _project(newton, sets), residual)
+        # Newton's point, projected, is taken where it halves the least natural residual so far (so those steps
+        # cannot cycle; near the answer f's changes are round-off, and the segment alone stalled a 3-D Tresca
+        # dual at 2e-10). Elsewhere the least f on the segment to it (full steps cycled on a Tresca dual), and
+        # where that gains too little a projected-gradient segment: f never rises between accepted points
+        best = min(best, residual)
+        v, g = segment(v, g, _project(newton, sets), ACCEPT * best)
         if _natural(v, g, c, sets, program.q)[0] > STALL * residual:
             v, g = segment(v, g, _project(v - c * g, sets))
     x = sets.shift + sets.scale * v
