@@ -249,6 +249,7 @@ def twisted():
     (folded, "inverted cells"),
     (twisted, "inverted cells"),
     (lambda: fe.MeshTri(np.vstack([square().p, 0.1 * square().p[0]]), square().t), "3 coordinates per node"),
+    (lambda: fe.MeshTri2(square().p, square().t), "quadratic mesh given its vertices only"),
 ])
 def test_a_broken_mesh_is_named_with_the_fix(mesh, problem):
     with pytest.raises(cc.SceneError, match=problem) as error:

@@ -194,8 +194,13 @@ def out_of_plane(mesh: fe.Mesh):
 
 def orphan_nodes(mesh: fe.Mesh):
     """Nodes (vertices or, on quadratic meshes, edge and face nodes) that no cell uses."""
-    used = np.zeros(mesh.p.shape[1], bool)
-    used[mesh.dofs.element_dofs.ravel()] = True
+    nodes, cell_nodes = mesh.doflocs.shape[1], mesh.dofs.element_dofs
+    if cell_nodes.max() >= nodes:  # e.g. scikit-fem's MeshTri2(p, t) given the vertices alone
+        return (f"the cells use node {cell_nodes.max()} but the mesh has {nodes} nodes (a quadratic mesh given its "
+                "vertices only?)", "read quadratic meshes from a file that holds their edge nodes, or give "
+                "scikit-fem the mesh's doflocs")
+    used = np.zeros(nodes, bool)
+    used[cell_nodes.ravel()] = True
     if not used.all():
         problem = f"{np.count_nonzero(~used)} of {used.size} nodes belong to no cell (the first: node " \
                   f"{np.flatnonzero(~used)[0]})"
