@@ -261,14 +261,13 @@ def paths(model: Model, solver: str, options: dict, timings: dict):
     solver, then the other solvers at their defaults on each formulation. Only what the user left to
     the driver changes: the formulation if "auto" chose it, the solver if no solver options were given
     (a study that asks for one formulation, solver and tol gets that one)."""
-    yield model, solver, options
+    yield model, solvers.resolve(solver, model.program), options  # the attempt names the solver that ran
     models = [model]
     if model.reason != USER_CHOICE and (other := other_formulation(model, timings)) is not None:
         models.append(other)
-        yield other, solver, options
+        yield other, solvers.resolve(solver, other.program), options
     for name in ALTERNATIVES if not options else ():
-        if name != solver:
-            yield from ((each, name, {}) for each in models)
+        yield from ((each, name, {}) for each in models if name != solvers.resolve(solver, each.program))
 
 
 def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):

@@ -67,10 +67,9 @@ def session(program: ConicProgram, solver: str = "clarabel", **options):
 
     Clarabel keeps its setup, OSQP its factorization and warm start; cvxpy rebuilds.
     """
-    base, _, sub = check_name(solver).partition(":")
+    solver = resolve(solver, program)
+    base, _, sub = solver.partition(":")
     operator = matrix_free(program)
-    if base == "auto":
-        base = solver = "newton-cg" if operator else "clarabel"
     check_options(options, solver)
     if operator and base != "newton-cg":
         raise ValueError(f"solver: {solver} needs P as a matrix, and this program's P is an operator (matrix-free); "
@@ -82,6 +81,13 @@ def session(program: ConicProgram, solver: str = "clarabel", **options):
     if base == "osqp":
         return osqp_direct.Session(program, **options)
     return cvxpy_model.Session(program, solver=sub or None, **options)
+
+
+def resolve(solver: str, program: ConicProgram) -> str:
+    """The solver that runs ``program``: ``auto`` is newton-cg where P is an operator, Clarabel otherwise."""
+    if check_name(solver) != "auto":
+        return solver
+    return "newton-cg" if matrix_free(program) else "clarabel"
 
 
 def matrix_free(program: ConicProgram) -> bool:
