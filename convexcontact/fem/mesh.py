@@ -196,9 +196,9 @@ def orphan_nodes(mesh: fe.Mesh):
     """Nodes (vertices or, on quadratic meshes, edge and face nodes) that no cell uses."""
     nodes, cell_nodes = mesh.doflocs.shape[1], mesh.dofs.element_dofs
     if cell_nodes.max() >= nodes:  # e.g. scikit-fem's MeshTri2(p, t) given the vertices alone
-        return (f"the cells use node {cell_nodes.max()} but the mesh has {nodes} nodes (a quadratic mesh given its "
-                "vertices only?)", "read quadratic meshes from a file that holds their edge nodes, or give "
-                "scikit-fem the mesh's doflocs")
+        problem = (f"the cells use node {cell_nodes.max()} but the mesh has {nodes} nodes (a quadratic mesh given "
+                   "its vertices only?)")
+        return problem, "read quadratic meshes from a file that holds their edge nodes, or give scikit-fem their doflocs"
     used = np.zeros(nodes, bool)
     used[cell_nodes.ravel()] = True
     if not used.all():
