@@ -231,11 +231,11 @@ form)."""
 CLOSED_LIMIT = 2000
 """Most contact unknowns at nodes closed at the start (gap ≤ 0) for a dense W: the dense solvers' work
 grows with the unknowns in contact, the matrix-free dual's hardly. Measured on whole faces (every node
-closed; ratios to one linear solve, dense / matrix-free): 2-D 10⁵ DOFs, Signorini 500 unknowns 2.0 / 2.6,
-1000: 3.3 / 2.5, 2000: 24 / 2.2; Tresca 1000: 4.7 / 5.1, 2000: 10.4 / 3.2, 4000: 169 / 3.2; 3-D 3·10⁴ DOFs,
-Signorini 625: 3.4 / 1.6 (2.5 repeated), 1089: 12.1 / 2.7; Tresca 1875: 11.9 / failed (100 Newton steps),
-3267: 51 / 7.3. On the punch (few nodes closed) the dense W stayed ahead: 2-D Tresca 634 unknowns 1.9 / 4.0,
-1098: 2.2 / 7.0."""
+closed; ratios to one linear solve, dense / matrix-free; docs/performance.md): 2-D 10⁵ DOFs, Signorini
+1000 unknowns 3.3 / 3.3, 2000: 24 / 2.1; Tresca 1000: 4.7 / 5.7, 2000: 10.4 / 4.2, 4000: 169 / 3.7;
+3-D 3·10⁴ DOFs, Signorini 625: 3.4 / 1.6–2.5, 1089: 12.1 / 2.7; Tresca 867: 2.8 / failed, 1875: 11.9 / 9.2,
+3267: 51 / 7.3. On the punch (few nodes closed) the dense W stays ahead: 2-D Tresca 634 unknowns
+1.9 / 4.0, 1098: 2.2 / 7.0."""
 
 MATRIX_FREE = "dual-matrix-free"
 """The dual with W as an operator (one solve with K's factors per product) and newton-cg."""
