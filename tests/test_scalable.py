@@ -161,3 +161,11 @@ def test_whole_face_bench_row_says_what_auto_chose(tmp_path, monkeypatch):
     assert main(["bench", "--scenario", "whole-face", "--sizes", "2000", "--nodes", "41", "--laws", "signorini",
                  "--out", str(tmp_path)]) == 0
     assert (tmp_path / "bench_2d_whole-face.csv").read_text().count("\n") == 2
+
+
+def test_auto_seeds_the_dense_friction_dual_only():
+    """solver 'auto' keeps the frictionless seed of the dense dual (Clarabel), not of the matrix-free one."""
+    dense = cc.prepare(whole_face(2, 41, 1e3, Tresca(slip_bound=0.002)), "dual").program
+    operator = cc.prepare(whole_face(2, 41, 1e3, Tresca(slip_bound=0.002)), "dual-matrix-free").program
+    assert solvers.seedable("auto", {}, dense) and solvers.seedable("clarabel", {})
+    assert not solvers.seedable("auto", {}, operator) and not solvers.seedable("newton-cg", {})

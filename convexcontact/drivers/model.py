@@ -125,7 +125,7 @@ class Model:
         rounds from there replace an interior point on m·d unknowns by one on m (a 3-D Tresca punch,
         1452 unknowns: 0.17 + 0.72 s against 2.06 s), and an interior point still runs if they fail.
         Dual only, whose layout the guess needs."""
-        if self.formulation == "dual" and self.friction is not None and solvers.seedable(solver, options):
+        if self.formulation == "dual" and self.friction is not None and solvers.seedable(solver, options, self.program):
             frictionless, _ = self.frictionless(solver, options)
             if frictionless.solved:
                 session.seed(stick_guess(self.program, frictionless, self.fem.contact))
