@@ -99,10 +99,8 @@ def seedable(solver: str, options: dict, program: ConicProgram | None = None) ->
     """Whether the solver's sessions are worth starting from a guess (``seed``) on ``program`` ("auto" resolved on
     it); cvxpy rebuilds its model every solve. newton-cg can be seeded but is not: from the frictionless answer a
     2-D whole-face Tresca dual took 5.5 s against 3.4 s from its own start (3-D: 3.1 s against 3.6 s)."""
-    base = check_name(solver).split(":", 1)[0]
-    if base == "auto":
-        base = "newton-cg" if program is not None and matrix_free(program) else "clarabel"
-    return base in ("clarabel", "osqp") and options.get("polishing", True)
+    base = (resolve(solver, program) if program is not None else check_name(solver)).split(":", 1)[0]
+    return base in ("clarabel", "osqp", "auto") and options.get("polishing", True)  # auto on no program: Clarabel
 
 
 def solve(program: ConicProgram, solver: str = "clarabel", **options) -> ConicSolution:
