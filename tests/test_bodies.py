@@ -410,3 +410,34 @@ def test_a_mesh_file_part_moved_by_its_offset(tmp_path):
     assert {"upper.corner", "upper.rest"} <= set(moved.body.geometry.subdomains)
     assert "upper.top" in moved.body.geometry.boundaries
     np.testing.assert_allclose(cc.solve(moved).contact.pressure, 0.01, rtol=1e-9)
+
+
+def test_a_whole_interface_in_contact_takes_the_matrix_free_dual(monkeypatch):
+    """Two strips touching along their whole length: the gaps from two meshes are ±1e-11, not 0, and still
+    count as closed, so auto leaves the dense W (condensed onto slave and master columns) for the
+    matrix-free dual past the limit — with the dense dual's answer."""
+    import convexcontact.drivers.model as model_module
+    from convexcontact.studies.bodies_bench import strips
+
+    scene = strips(120, 4)
+    dense = cc.prepare(scene, "dual").solve()
+    monkeypatch.setattr(model_module, "CLOSED_LIMIT", 100)
+    model = cc.prepare(scene)
+    assert "at closed nodes exceed 100" in model.reason
+    result = model.solve()
+    assert result.solver == "newton-cg" and result.certificate.passes(1e-10) and dense.certificate.passes(1e-10)
+    assert np.abs(result.displacement - dense.displacement).max() < 1e-8 * np.abs(dense.displacement).max()
+
+
+def test_the_bench_measures_a_two_body_case(capsys):
+    """``convexcontact bench --scenario two-body``: the punch on its foundation, a certified row against one
+    linear solve of both bodies, and a 3-D request refused by name before any case runs."""
+    from convexcontact.cli import main
+    from convexcontact.studies import bench
+
+    row = bench.measure(2, "signorini", 3000, "auto", "auto", "two-body")
+    assert row["scenario"] == "two-body" and row["status"] == "solved" and row["certificate"] < 1e-10
+    assert row["contact_nodes"] > 10 and row["ratio"] > 0
+    with pytest.raises(SystemExit):
+        main(["bench", "--scenario", "two-body", "--dim", "3"])
+    assert "--scenario two-body" in capsys.readouterr().err

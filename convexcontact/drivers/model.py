@@ -228,6 +228,10 @@ Measured at 6348 rows (3-D Tresca punch, 2.8·10⁵ DOFs, few of them in contact
 linear solve, peak memory 2.3×. Beyond it, the matrix-free dual (or the primal where that has no bound
 form)."""
 
+TOUCHING = 1e-9
+"""A gap (scaled: of the displacement scale) this small counts as closed for :data:`CLOSED_LIMIT`: two
+bodies' meshes that touch have gaps of ±1e-11 from their geometry, not 0."""
+
 CLOSED_LIMIT = 2000
 """Most contact unknowns at nodes closed at the start (gap ≤ 0) for a dense W: the dense solvers' work
 grows with the unknowns in contact, the matrix-free dual's hardly. Measured on whole faces (every node
@@ -256,7 +260,7 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
     if columns == 0:
         return "primal", "no contact node has a free DOF: nothing to condense onto"
     reuse = " and is reused by every Picard step" if isinstance(law, Coulomb) else ""
-    closed = round(unknowns * np.count_nonzero(fem.contact.gap <= 0) / fem.contact.m)
+    closed = round(unknowns * np.count_nonzero(fem.contact.gap <= TOUCHING) / fem.contact.m)
     if (unknowns > DENSE_LIMIT or closed > CLOSED_LIMIT) and matrix_free_applies(fem, law):
         size = (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}" if unknowns > DENSE_LIMIT else
                 f"{closed} contact unknowns at closed nodes exceed {CLOSED_LIMIT}")
