@@ -30,7 +30,7 @@ from ..results.output import check_folder_target
 
 LAWS = ("signorini", "tresca", "coulomb")
 SIZES = {2: (1e4, 1e5, 1e6), 3: (1e4, 1e5, 3e5)}
-SCENARIOS = ("punch", "whole-face")
+SCENARIOS = ("punch", "whole-face", "two-body")
 NODES = {2: (1e3, 4e3), 3: (1e3, 4e3)}
 """Contact nodes of the whole-face cases, by default (``--nodes``)."""
 COLUMNS = ("scenario", "dim", "law", "dofs", "contact_nodes", "unknowns", "formulation", "solver", "status", "iterations",
@@ -70,10 +70,22 @@ def punch_scene(dim: int, law: str, dofs: float):
     return dataclasses.replace(scene, name="punch", contact=contact)
 
 
+def two_body_scene(law: str, dofs: float):
+    """A stiffer cylindrical punch with its own mesh pressed into an elastic foundation (2-D, mortar:
+    :func:`~convexcontact.scene.bodies_library.punch_on_foundation`). Its meshes are graded towards the
+    contact, so ``dofs`` sets the cell size h there by the measured fit dofs ≈ 5·10⁴ (0.001/h)^0.86."""
+    from ..scene.bodies_library import punch_on_foundation
+
+    return punch_on_foundation(0.001 * (5e4 / dofs) ** (1 / 0.86), law=law_of(law))
+
+
 def scene_of(scenario: str, dim: int, law: str, dofs: float, nodes: float | None = None):
-    """The bench's scene: the punch, or the whole face of :func:`~convexcontact.scene.library.whole_face`."""
+    """The bench's scene: the punch, the whole face of :func:`~convexcontact.scene.library.whole_face`, or
+    two bodies (:func:`two_body_scene`, 2-D)."""
     if scenario == "punch":
         return punch_scene(dim, law, dofs)
+    if scenario == "two-body":
+        return two_body_scene(law, dofs)
     from ..scene.library import whole_face
 
     return whole_face(dim, int(nodes), dofs, law_of(law))
@@ -233,21 +245,26 @@ def check_arguments(args) -> None:
     """The solver, formulation, output folder and sizes, before any case runs."""
     from .. import solvers
     from ..fem.mesh import check_size
+    from ..scene.model import Box, Rectangle
 
     solvers.check_name(args.solver)
     if args.formulation not in ("auto", "primal", "dual", "dual-matrix-free"):
         raise ValueError(f"--formulation: unknown {args.formulation!r}; use auto, primal, dual or dual-matrix-free")
     if args.nodes is not None and (args.scenario != "whole-face" or min(args.nodes) < 2):
         raise ValueError("--nodes: give at least 2 contact nodes, with --scenario whole-face")
+    if args.scenario == "two-body" and args.dim != 2:
+        raise ValueError("--scenario two-body: the bench's two-body scene is 2-D; drop --dim 3")
     check_folder_target(Path(args.out), "--out")
     for dofs in args.sizes or SIZES[args.dim]:
         for nodes in nodes_of(args):
-            check_size(scene_of(args.scenario, args.dim, "signorini", dofs, nodes).body)
+            body = scene_of(args.scenario, args.dim, "signorini", dofs, nodes).body
+            if isinstance(body.geometry, (Box, Rectangle)):  # a mesh already built (two bodies) was checked then
+                check_size(body)
 
 
 def nodes_of(args) -> tuple:
     """The contact nodes of the whole-face cases (None for the punch, whose mesh sets them)."""
-    if args.scenario == "punch":
+    if args.scenario != "whole-face":
         return (None,)
     return tuple(args.nodes or NODES[args.dim])
 
@@ -260,7 +277,8 @@ def main(argv=None) -> list:
                         "in 2-D, 1e4 … 3e5 in 3-D)")
     parser.add_argument("--laws", nargs="+", choices=LAWS, default=list(LAWS))
     parser.add_argument("--scenario", choices=SCENARIOS, default="punch",
-                        help="punch (a small contact zone) or whole-face (a block's whole bottom face in contact)")
+                        help="punch (a small contact zone), whole-face (a block's whole bottom face in contact) "
+                        "or two-body (a punch with its own mesh on an elastic foundation, mortar; 2-D)")
     parser.add_argument("--nodes", type=float, nargs="+", default=None,
                         help="whole-face: contact nodes (default: 1e3 4e3), each case at each of --sizes")
     parser.add_argument("--formulation", default="auto", help="auto | primal | dual | dual-matrix-free")
