@@ -281,7 +281,7 @@ def condense(problem: GlobalProblem):
 
 def solve_global(problem: GlobalProblem, solver: str = "clarabel", **options) -> Answer:
     """The global problem, condensed onto its contacts (:func:`condense`) and solved as a local one;
-    v = M⁻¹(H r + f). FClib defines no global merit (``fclib_merit_global`` returns 0, "TODO"): the
+    v = M⁻¹(H r + f). FClib defines no global merit (``fclib_merit_global`` returns 0, marked unfinished there): the
     answer is judged by the merit of its condensed local problem and the equilibrium residual."""
     start = time.perf_counter()
     local, factorization = condense(problem)
