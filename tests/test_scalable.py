@@ -169,3 +169,26 @@ def test_auto_seeds_the_dense_friction_dual_only():
     operator = cc.prepare(whole_face(2, 41, 1e3, Tresca(slip_bound=0.002)), "dual-matrix-free").program
     assert solvers.seedable("auto", {}, dense) and solvers.seedable("clarabel", {})
     assert not solvers.seedable("auto", {}, operator) and not solvers.seedable("newton-cg", {})
+
+
+def test_a_failed_matrix_free_solve_that_auto_chose_gives_way_to_the_primal(monkeypatch):
+    """newton-cg has no convergence guarantee: when it fails on the dual auto chose, the sparse primal answers
+    (the same answer as a direct primal solve) and the reason says so; a formulation the user named is kept."""
+    from convexcontact.conic import ConicSolution
+    from convexcontact.solvers import newton_cg
+
+    scene = whole_face(2, 41, 1e3, Tresca(slip_bound=0.002))
+    monkeypatch.setattr(model_module, "CLOSED_LIMIT", 50)
+
+    def fails(self):
+        n, m = self.program.n_variables, self.program.n_constraints
+        return ConicSolution(x=np.zeros(n), z=np.zeros(m), s=np.zeros(m), status="failed",
+                             solver_status="MaxIterations", iterations=100, solve_time=0.0, solver="newton-cg")
+
+    monkeypatch.setattr(newton_cg.Session, "solve", fails)
+    result = cc.solve(scene)
+    primal = cc.prepare(scene, "primal").solve()
+    assert result.status == "solved" and result.formulation == "primal" and result.solver == "clarabel"
+    assert "newton-cg failed (MaxIterations)" in result.extra["formulation_reason"]
+    assert np.abs(result.displacement - primal.displacement).max() < 1e-9 * np.abs(primal.displacement).max()
+    assert cc.prepare(scene, "dual-matrix-free").solve().status == "failed"

@@ -109,6 +109,11 @@ class Model:
             solution = session.solve()
         with timed(timings, "postprocess"):
             result = self.result(solution, timings, self.slip_bound, extended=options.get("cvxpy_model") is not None)
+        if not result.solved and solver == "auto" and solvers.matrix_free(self.program) and self.reason != CHOSEN:
+            # newton-cg has no convergence guarantee (a Tresca dual on a tall 3-D block, a punch on a foundation
+            # failed after 100 steps): what auto chose gives way to the sparse primal, which Clarabel solves
+            reason = f"{self.reason}; newton-cg failed ({result.solver_status}), so the sparse primal instead"
+            return formulate(self.fem, "primal", dict(self.timings), reason=reason).solve(solver, progress, **options)
         return result
 
     def frictionless(self, solver: str, options: dict) -> tuple[ConicSolution, Recovery]:
@@ -308,7 +313,11 @@ def prepare(scene: Scene, formulation: str = "auto") -> Model:
     return formulate(fem, formulation, timings)
 
 
-def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, reason: str = "chosen by the user"):
+CHOSEN = "chosen by the user"
+"""The reason of a formulation the user named (what the drivers never change)."""
+
+
+def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, reason: str = CHOSEN):
     """The Model of an assembled scene (``condensation``: K's, when already built)."""
     with timed(timings, "formulation"):
         law = fem.scene.contact.law

@@ -32,7 +32,7 @@ from .. import solvers
 from ..fem.mollifier import mollifier
 from ..results.certificate import certify
 from ..scene.model import Coulomb, SceneError, evaluate_field
-from .model import CERTIFIED, LAW_DRIVERS, Model, field_at_points, formulate, timed
+from .model import CERTIFIED, CHOSEN, LAW_DRIVERS, Model, field_at_points, formulate, timed
 
 CYCLE_PERIODS = (2, 3, 4)
 WINDOW = 8
@@ -43,8 +43,6 @@ HALVINGS = 4
 NOISE = 10.0
 """A change of the slip bounds below NOISE × the inner solve's residual (its certificate against
 the bound it was given) is the inner solver's noise: the map has converged as far as it can."""
-USER_CHOICE = "chosen by the user"
-"""``Model.reason`` of a formulation the user named: the driver keeps it."""
 ALTERNATIVES = ("clarabel", "osqp")
 """Solvers tried, at their defaults, after the user's one fails on both formulations."""
 
@@ -263,7 +261,7 @@ def paths(model: Model, solver: str, options: dict, timings: dict):
     (a study that asks for one formulation, solver and tol gets that one)."""
     yield model, solvers.resolve(solver, model.program), options  # the attempt names the solver that ran
     models = [model]
-    if model.reason != USER_CHOICE and (other := other_formulation(model, timings)) is not None:
+    if model.reason != CHOSEN and (other := other_formulation(model, timings)) is not None:
         models.append(other)
         yield other, solvers.resolve(solver, other.program), options
     for name in ALTERNATIVES if not options else ():
