@@ -79,10 +79,14 @@ class ContactTrace:
     def dim(self) -> int:
         return self.coords.shape[1]
 
+    def at_points(self, C: sp.spmatrix) -> bool:
+        """Whether ``C`` is the Gauss points' rows (:class:`ContactPoints`), not the nodes'."""
+        return self.points is not None and C is self.points.C
+
     def weighted_gap(self, C: sp.spmatrix) -> np.ndarray:
         """C g, the gap weighted as the rows of ``C`` weigh u_N; at Gauss points, ω_q g_q with the gap
         evaluated at each point (C interpolates the displacement, not the obstacle)."""
-        if self.points is not None and C is self.points.C:
+        if self.at_points(C):
             return self.points.weights * self.points.gap
         return C @ self.gap
 
@@ -90,7 +94,7 @@ class ContactTrace:
         """The length (area) each row of ``C`` stands for, which turns C(u_N − g) back into a gap: w_i, or
         Σ_j |C_ij| where ∫ψ_i vanishes (vertices of P2 triangles on the facets of P2 tetrahedra); ω_q at
         Gauss points."""
-        if self.points is not None and C is self.points.C:
+        if self.at_points(C):
             return self.points.weights
         vanishing = self.weights <= 1e-9 * self.weights.max()
         if not vanishing.any():
@@ -100,7 +104,7 @@ class ContactTrace:
     def nodal_pressure(self, C: sp.spmatrix, multipliers: np.ndarray) -> np.ndarray:
         """The pressure at the contact nodes: the multipliers themselves, or from Gauss-point multipliers
         the nodal force Cᵀλ over w_i (unique where the point multipliers are not: more points than nodes)."""
-        if self.points is not None and C is self.points.C:
+        if self.at_points(C):
             return (C.T @ multipliers) / self.weights
         return multipliers
 
