@@ -363,16 +363,11 @@ def test_several_pairs_carry_the_patch_pressure_through_a_stack():
     np.testing.assert_allclose(shifted.contact.pressure, 0.01, rtol=1e-8)
 
 
-@pytest.mark.parametrize("change, field", [
-    (lambda: {"contact": [Pair("top.bottom", master="middle.top"), Pair("middle.bottom", master="bottom.top",
-                                                                         law=cc.Coulomb(0.3))]}, "contact[1].law"),
-    (lambda: {"contact": [Pair("top.bottom", master="middle.top"), Pair("top.bottom", master="bottom.top")]},
-     "contact[1].boundary"),
-])
-def test_several_pairs_share_one_law_and_a_slave_each(change, field):
+def test_several_pairs_have_a_slave_each():
+    """(Pairs of different laws: tests/test_mixed_contacts.py.)"""
     with pytest.raises(cc.SceneError) as error:
-        stack_of_three(**change())
-    assert error.value.field == field
+        stack_of_three(contact=[Pair("top.bottom", master="middle.top"), Pair("top.bottom", master="bottom.top")])
+    assert error.value.field == "contact[1].boundary"
 
 
 def test_a_scene_file_with_several_pairs():

@@ -23,7 +23,18 @@ from ..formulations import FORMULATIONS, contact_weights
 from ..formulations.dual import stick_guess
 from ..results.certificate import certify
 from ..results.result import ContactResult, contact_nodes, not_unique
-from ..scene.model import Coulomb, Scene, SceneError, Tresca, compliance_of, evaluate_field, has_friction, of_type
+from ..scene.model import (
+    Coulomb,
+    PerPair,
+    Scene,
+    SceneError,
+    Tresca,
+    compliance_of,
+    evaluate_field,
+    field_at_nodes,
+    has_friction,
+    of_type,
+)
 
 LAW_DRIVERS: dict[type, Callable] = {}
 """Drivers of the laws that are no single convex program, registered by their modules (:mod:`.picard`
@@ -38,10 +49,22 @@ def timed(timings: dict, stage: str):
 
 
 def field_at_points(value, name: str, fem: FEModel, friction: FrictionPoints) -> np.ndarray:
-    """A law's field (constant, formula, callable or nodal array) at the friction points, user units."""
-    if isinstance(value, np.ndarray):
-        return friction.interpolation @ evaluate_field(value, name, fem.contact.coords)
+    """A law's field (constant, formula, callable, nodal array, or one of these per contact pair) at the
+    friction points, user units."""
+    if isinstance(value, (np.ndarray, PerPair)):
+        nodal = field_at_nodes(value, name, fem.contact.coords * fem.scaling.length, getattr(fem.contact, "pieces", ()))
+        return friction.interpolation @ nodal
     return evaluate_field(value, name, friction.coords * fem.scaling.length)  # x, y[, z] columns
+
+
+def frictional_rows(law, contact) -> np.ndarray | None:
+    """The contact nodes that carry friction: those of the frictional pairs when pairs have laws of their own
+    (a :class:`PerPair` field), every node (None) otherwise."""
+    value = law.friction if isinstance(law, Coulomb) else law.slip_bound
+    if not isinstance(value, PerPair):
+        return None
+    return np.concatenate([np.arange(contact.m)[rows] for (rows, *_), part in zip(contact.pieces, value.values)
+                           if part is not None])
 
 
 @dataclass
@@ -324,7 +347,8 @@ def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, 
         C = contact_weights(fem.contact, law.non_penetration)
         friction = slip_bound = epsilon = None
         if has_friction(law):
-            friction = friction_points(fem.contact, fem.mesh, fem.basis, law.quadrature, law.non_penetration)
+            friction = friction_points(fem.contact, fem.mesh, fem.basis, law.quadrature, law.non_penetration,
+                                       frictional_rows(law, fem.contact))
             epsilon = None if law.regularization is None else law.regularization / fem.scaling.displacement
             slip_bound = (
                 field_at_points(law.slip_bound, "contact.slip_bound", fem, friction) / fem.scaling.pressure

@@ -66,11 +66,17 @@ class FrictionPoints:
 
 
 def friction_points(
-    contact: ContactTrace, mesh: fe.Mesh, basis: fe.Basis, quadrature: str, non_penetration: str
+    contact: ContactTrace, mesh: fe.Mesh, basis: fe.Basis, quadrature: str, non_penetration: str,
+    nodes: np.ndarray | None = None,
 ) -> FrictionPoints:
-    """The friction rows for the chosen quadrature and non-penetration form."""
+    """The friction rows for the chosen quadrature and non-penetration form; ``nodes``: the contact nodes
+    that carry friction (nodal quadrature), all when None."""
     if quadrature == "gauss":
         G, weights, coords = gauss_interpolation(mesh, basis, contact.facets, contact.dofs)
+        weighting = sp.diags(weights) @ G
+    elif nodes is not None:  # pairs of which some are frictionless: their nodes get no tangential unknowns
+        G = sp.identity(contact.m, format="csr")[nodes]
+        weights, coords = contact.weights[nodes], contact.coords[nodes]
         weighting = sp.diags(weights) @ G
     else:
         G, weights, coords = sp.identity(contact.m, format="csr"), contact.weights, contact.coords

@@ -131,8 +131,12 @@ def certify(
 
 
 def pair_multipliers(C: sp.spmatrix, fields: ContactFields, friction: FrictionPoints | None):
-    """The weighted multipliers (Cᵀλ_N, w·λ_T) whose forces a pair's rows apply (scaled)."""
-    return C.T @ fields.pressure, None if friction is None else np.tile(friction.weights, friction.dim) * fields.friction
+    """The weighted multipliers (Cᵀλ_N, w·λ_T) whose forces a pair's rows apply (scaled), at the contact nodes
+    (a frictionless pair's nodes have no friction points: w·λ_T = 0 there)."""
+    if friction is None:
+        return C.T @ fields.pressure, None
+    to_nodes = sp.block_diag([friction.interpolation.T] * friction.dim, format="csr")
+    return C.T @ fields.pressure, to_nodes @ (np.tile(friction.weights, friction.dim) * fields.friction)
 
 
 def weighted_slip(friction: FrictionPoints, fields: ContactFields) -> np.ndarray:

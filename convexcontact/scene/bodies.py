@@ -19,7 +19,23 @@ import skfem as fe
 from ..fem.mesh import build_mesh
 from .checks import SceneError, finite_vector, of_type, sequence_of
 from .history import History
-from .model import ELEMENTS, Body, Box, Contact, Dirichlet, Material, MeshFile, Obstacle, Rectangle, Scene, Traction
+from .model import (
+    ELEMENTS,
+    Body,
+    Box,
+    Contact,
+    Coulomb,
+    Dirichlet,
+    Material,
+    MeshFile,
+    Obstacle,
+    PerPair,
+    Rectangle,
+    Scene,
+    Traction,
+    compliance_of,
+    has_friction,
+)
 
 METHODS = ("mortar", "node_to_segment")
 
@@ -118,36 +134,87 @@ class Pair(Contact):
 
 @dataclass(frozen=True)
 class Pairs(Contact):
-    """Several pairs of one law (the scene's program has one): ``boundary`` is the first slave, and each pair
-    takes ``law``, so that :meth:`Scene.with_law` changes them all."""
+    """Several contacts in one scene — pairs of bodies and rigid obstacles under a body's boundary — each with
+    its own law: ``law`` is the one law of the scene's program, :func:`combined_law` of theirs, and
+    :meth:`Scene.with_law` gives every contact the law it is given. ``boundary`` is the first slave."""
 
-    pairs: tuple[Pair, ...] = ()
+    pairs: tuple[Contact, ...] = ()
 
     def __post_init__(self):
         super().__post_init__()
-        pairs = sequence_of(self.pairs, Pair, "contact", "give a list of cc.Pair(slave, master=…)")
-        object.__setattr__(self, "pairs", tuple(replace(pair, law=self.law) for pair in pairs))
+        pairs = sequence_of(self.pairs, Contact, "contact", "give a list of cc.Pair(slave, master=…)")
+        if not same(self.law, combined_law(tuple(pair.law for pair in pairs))):  # Scene.with_law: one law for all
+            pairs = tuple(replace(pair, law=self.law) for pair in pairs)
+        object.__setattr__(self, "pairs", pairs)
 
 
-def one_law(pairs: tuple[Pair, ...]) -> Pairs:
-    """Pairs sharing the first pair's law; another law, or a slave boundary twice, is refused."""
+def several(pairs: tuple[Contact, ...]) -> Pairs:
+    """The contacts of a list, each slave boundary once; a rigid obstacle among them must not need an equation
+    of its own (its depth is given, not its force) and holds a node-wise law, as pairs do."""
     slaves = [pair.boundary for pair in pairs]
     for index, pair in enumerate(pairs):
-        if not same(pair.law, pairs[0].law):
-            raise SceneError(f"contact[{index}].law", f"{type(pair.law).__name__} where contact[0] has "
-                             f"{pairs[0].law!r:.80}", "give every pair the same law: one scene is one program")
         if slaves.index(pair.boundary) != index:
             raise SceneError(f"contact[{index}].boundary", f"{pair.boundary!r} is the slave of two pairs",
                              "give each slave boundary one master")
-    return Pairs(pairs[0].boundary, law=pairs[0].law, pairs=pairs)
+        if isinstance(pair, Pair):
+            continue
+        if pair.obstacle.force is not None or pair.obstacle.tangential_force is not None:
+            raise SceneError(f"contact[{index}].obstacle", "an obstacle among several contacts is moved by its depth",
+                             "give depth instead of force (a force-controlled obstacle only as the scene's one contact)")
+        if getattr(pair.law, "non_penetration", "nodal") != "nodal" or getattr(pair.law, "quadrature", "nodal") != "nodal":
+            raise SceneError(f"contact[{index}].non_penetration", "contacts stacked with pairs are node-wise",
+                             "use non_penetration = 'nodal' and quadrature = 'nodal'")
+    return Pairs(pairs[0].boundary, law=combined_law(tuple(pair.law for pair in pairs)), pairs=pairs)
+
+
+def combined_law(laws: tuple) -> object:
+    """The one law of contacts that each have their own: the friction coefficients (Coulomb) or slip bounds
+    (Tresca) as a :class:`PerPair` field, None on frictionless contacts, whose nodes then get no tangential
+    unknowns. What one program cannot vary from contact to contact must agree: the normal law, and the
+    options of the friction law (one Picard map runs over every Coulomb contact)."""
+    first = laws[0]
+    if all(same(law, first) for law in laws):
+        return first
+    for index, law in enumerate(laws):
+        if not same(compliance_of(law), compliance_of(first)):
+            raise SceneError(f"contact[{index}].law", f"{describe(law)} where contact[0] has {describe(first)}: "
+                             "non-penetration and normal compliance (or two compliances) in one scene",
+                             "give every contact the same normal law; their friction may differ")
+    frictional = [(index, law) for index, law in enumerate(laws) if has_friction(law)]
+    kind, reference = type(frictional[0][1]), frictional[0][1]
+    options = ("quadrature", "regularization") + (COULOMB_OPTIONS if kind is Coulomb else ())
+    for index, law in frictional:
+        if type(law) is not kind:
+            raise SceneError(f"contact[{index}].law", f"{describe(law)} where contact[{frictional[0][0]}] has "
+                             f"{describe(reference)}: Coulomb's slip bounds are the unknowns of a Picard map, Tresca's "
+                             "are given", "use Coulomb on every frictional contact (its friction may differ from "
+                             "contact to contact), or Tresca on every one")
+        for name in options:
+            if not same(getattr(law, name), getattr(reference, name)):
+                raise SceneError(f"contact[{index}].{name}", f"{getattr(law, name)!r:.40} where contact"
+                                 f"[{frictional[0][0]}] has {getattr(reference, name)!r:.40}",
+                                 f"give every frictional contact the same {name}: one program runs over all of them")
+    field_name = "friction" if kind is Coulomb else "slip_bound"
+    values = PerPair(tuple(getattr(law, field_name) if has_friction(law) else None for law in laws))
+    return replace(reference, **{field_name: values})
+
+
+COULOMB_OPTIONS = ("relaxation", "tol", "max_iterations", "initial_pressure")
+"""What one Picard map over several Coulomb contacts needs to be the same on each."""
+
+
+def describe(law) -> str:
+    return f"{law!r:.80}"
 
 
 def same(a, b) -> bool:
-    """Equal laws; fields holding arrays compare element-wise."""
+    """Equal laws or fields; arrays compare element-wise."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and np.array_equal(a, b)
     try:
         return bool(a == b)
     except ValueError:  # numpy arrays in the fields: compare them one by one
-        return type(a) is type(b) and all(np.array_equal(x, y) for x, y in zip(vars(a).values(), vars(b).values()))
+        return type(a) is type(b) and all(same(x, y) for x, y in zip(vars(a).values(), vars(b).values()))
 
 
 def body_of(boundary: str, names: list[str], field_name: str) -> str:
@@ -194,7 +261,7 @@ def bodies_scene(
     history: History | None = None,
 ) -> Scene:
     """A scene of several bodies (see the module's docstring); every body needs a support of its own. ``contact``
-    is one pair, a list of pairs of one law, or a rigid obstacle on a body's boundary.
+    is one pair, a rigid obstacle on a body's boundary (cc.Contact), or a list of them, each with its own law.
     ``history`` names the bodies' boundaries as the scene does, e.g. ``dirichlet[punch.top].ux``."""
     parts = sequence_of(parts, Part, "parts", "give a list of cc.Part(name, geometry, material)")
     names = [part.name for part in parts]
@@ -217,7 +284,8 @@ def bodies_scene(
     dirichlet = sequence_of(dirichlet, Dirichlet, "dirichlet", "give a list of cc.Dirichlet(boundary, ux=…, uy=…)")
     tractions = sequence_of(tractions, Traction, "tractions", "give a list of cc.Traction(boundary, pressure=…)")
     if isinstance(contact, (list, tuple)):
-        contact = one_law(sequence_of(contact, Pair, "contact", "give a list of cc.Pair(slave, master=…, law=…)"))
+        contact = several(sequence_of(contact, Contact, "contact", "give a list of cc.Pair(slave, master=…, law=…) "
+                                      "and cc.Contact(boundary, obstacle, law)"))
     of_type(contact, Contact, "contact", "give cc.Pair(slave, master=…, law=…), a list of them, or "
             "cc.Contact(boundary, obstacle)")
     supported = {body_of(d.boundary, names, f"dirichlet[{d.boundary}].boundary") for d in dirichlet}

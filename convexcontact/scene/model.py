@@ -411,8 +411,38 @@ NodalValues = float | str | np.ndarray | Callable
 FUNCTION_FIX = "return one value per point (or one number) from arrays x, y[, z], e.g. lambda x, y: 0.3 + 0 * x"
 
 
+@dataclass(frozen=True, eq=False)
+class PerPair:
+    """A law's field given contact pair by contact pair: ``values[k]`` (a :data:`NodalValues`) on the
+    nodes of the scene's ``contact[k]``, None where that pair has no friction (docs/bodies.md). Built by
+    :func:`convexcontact.scene.bodies.combined_law` from the pairs' own laws, each already checked."""
+
+    values: tuple
+
+    def __eq__(self, other):
+        return isinstance(other, PerPair) and len(self.values) == len(other.values) and all(
+            type(a) is type(b) and (np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b)
+            for a, b in zip(self.values, other.values))
+
+    __hash__ = None
+
+
+def field_at_nodes(value, field_name: str, coords: np.ndarray, pieces=()) -> np.ndarray:
+    """A field's values at the contact nodes ``coords`` (user units); a :class:`PerPair` field pair by pair
+    on the rows of ``pieces`` (the trace's (rows, …) of each pair), 0 where a pair has none."""
+    if not isinstance(value, PerPair):
+        return evaluate_field(value, field_name, coords)
+    values = np.zeros(len(coords))
+    for index, ((rows, *_), part) in enumerate(zip(pieces, value.values, strict=True)):
+        if part is not None:
+            values[rows] = evaluate_field(part, f"contact[{index}].{field_name.split('.')[-1]}", coords[rows])
+    return values
+
+
 def check_field(value, field_name: str, minimum: float = 0.0):
     """Validate a :data:`NodalValues` field (finite, ≥ ``minimum``); return it unchanged in kind."""
+    if isinstance(value, PerPair):  # its pairs' fields are checked by their own laws
+        return value
     if isinstance(value, str):
         compile_expression(value, field_name)
         return value
