@@ -29,8 +29,8 @@ import scipy.sparse as sp
 import skfem as fe
 
 from ..scene.bodies import Pair, Pairs
-from ..scene.model import SceneError
-from .contact import ContactTrace, tangent_frame
+from ..scene.model import Contact, SceneError
+from .contact import ContactTrace, contact_trace, tangent_frame
 from .mesh import check_boundary
 from .mortar3d import Facets, facets_3d, mortar_3d
 from .scaling import Scaling
@@ -66,9 +66,12 @@ class PairTrace(ContactTrace):
         return force + self.T_full[tangent_rows].T @ tangential[tangent_rows]
 
     def imbalance(self, normal: np.ndarray, tangential: np.ndarray | None = None) -> float:
-        """The largest ‖R_slave + R_master‖ of a pair, relative to ‖R_slave‖ (at least the force of a unit pressure)."""
+        """The largest ‖R_slave + R_master‖ of a pair of bodies, relative to ‖R_slave‖ (at least the force of a unit
+        pressure)."""
         worst = 0.0
         for rows, slave, master in self.pieces:
+            if not master.size:  # a rigid obstacle: its reaction goes to no body
+                continue
             force = self.forces(normal, tangential, rows)
             resultants = force[slave].sum(axis=0), force[master].sum(axis=0)
             scale = max(np.linalg.norm(resultants[0]), self.weights[rows].sum())
@@ -281,6 +284,23 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
     )
 
 
+def obstacle_piece(contact: Contact, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray,
+                   prescribed: np.ndarray) -> PairTrace:
+    """A rigid obstacle under a body's boundary as a piece of a stack of pairs: its trace with no master."""
+    trace = contact_trace(contact, mesh, basis, scaling, free, prescribed)
+    dim = mesh.dim()
+    no_master = sp.coo_matrix((trace.m, 0))
+    frame = [trace.tangents] if trace.bitangents is None else [trace.tangents, trace.bitangents]
+    N_full = relative_rows(trace.normals, trace.dofs, no_master, np.zeros((0, dim), int), basis.N)
+    T_full = sp.vstack([relative_rows(t, trace.dofs, no_master, np.zeros((0, dim), int), basis.N) for t in frame])
+    return PairTrace(**{name: getattr(trace, name) for name in (
+        "facets", "dofs", "coords", "normals", "tangents", "coordinate", "weights", "mass", "N", "T", "normal_offset",
+        "tangent_offset", "gap", "obstacle_coupling", "obstacle_force", "bitangents")},
+        master_dofs=np.zeros((0, dim), int), master_coords=np.zeros((0, dim)), transfer=no_master.tocsr(),
+        N_full=N_full, T_full=T_full.tocsr(), pieces=((slice(None), trace.dofs, np.zeros((0, dim), int)),))
+
+
 def pairs_trace(pairs: Pairs, *arguments) -> PairTrace:
-    """The trace of several pairs (each built by :func:`pair_trace`)."""
-    return stack([pair_trace(pair, *arguments) for pair in pairs.pairs])
+    """The trace of several contacts: pairs (:func:`pair_trace`) and rigid obstacles (:func:`obstacle_piece`)."""
+    return stack([pair_trace(pair, *arguments) if isinstance(pair, Pair) else obstacle_piece(pair, *arguments)
+                  for pair in pairs.pairs])

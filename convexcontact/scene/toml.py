@@ -184,12 +184,15 @@ def _bodies(data: dict, base_dir: Path) -> Scene:
     return scene
 
 
-def _pair(table, index: int) -> Pair:
-    """One ``[[contact]]`` table of several: a pair."""
-    if not isinstance(table.get("master"), str):
-        raise SceneError(f"contact[{index}].master", "missing: several [[contact]] tables are pairs of bodies",
-                         "name the master boundary, e.g. master = 'foundation.top'")
-    return _contact(table, {}, PAIR_KEYS)
+def _pair(table, index: int) -> Contact:
+    """One ``[[contact]]`` table of several: a pair (``master``) or a rigid obstacle (``obstacle = {shape = …}``)."""
+    table = dict(_table(table, f"contact[{index}]", None))  # a copy: the user's table keeps its obstacle
+    obstacle = table.pop("obstacle", None)
+    if obstacle is None and not isinstance(table.get("master"), str):
+        raise SceneError(f"contact[{index}].master", "missing: each [[contact]] table of several is a pair of bodies "
+                         "or a rigid obstacle", "name the master boundary, e.g. master = 'foundation.top', or give "
+                         "obstacle = { shape = 'flat', gap = 0.0 }")
+    return _contact(table, obstacle or {}, PAIR_KEYS)
 
 
 def _body(table, base_dir: Path, path: str = "body", extra: dict | None = None) -> Body:
