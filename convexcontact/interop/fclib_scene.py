@@ -51,6 +51,8 @@ def check_exportable(model: Model) -> None:
          "the nonlocal law is not FClib's local Coulomb law", "use smoothing_radius = 0"),
         (model.epsilon is None, "contact.regularization", "FClib's law is exact", "drop the regularization"),
         (model.compliance is None, "contact.compliance", "FClib's law is non-penetration", "drop the compliance"),
+        (model.friction is None or model.friction.count == model.fem.contact.m, "contact.law",
+         "each FClib contact carries friction", "give every contact Coulomb's law (friction = 0 where frictionless)"),
     ]
     for ok, name, why, fix in checks:
         if not ok:

@@ -12,7 +12,7 @@ import numpy as np
 from matplotlib.collections import PolyCollection
 
 from ..analytic import hertz_plane_strain, hertz_pressure, hertz_sphere
-from ..scene.model import Coulomb, Material, Tresca, evaluate_field
+from ..scene.model import Coulomb, Material, Tresca, field_at_nodes, has_friction
 from .fields_out import element_stress, vertex_displacement
 
 
@@ -71,46 +71,60 @@ def symmetry_factor(result) -> int:
 
 def friction_bound(result) -> tuple[np.ndarray, str] | None:
     """The nodal slip bound to draw against λ_T: s for Tresca, F λ_N for Coulomb."""
-    law, contact = result.scene.contact.law, result.contact
+    law, contact, pieces = result.scene.contact.law, result.contact, getattr(result.fem.contact, "pieces", ())
     if isinstance(law, Tresca):
-        return evaluate_field(law.slip_bound, "contact.slip_bound", contact.coords), "±s (slip bound)"
+        return field_at_nodes(law.slip_bound, "contact.slip_bound", contact.coords, pieces), "±s (slip bound)"
     if isinstance(law, Coulomb):
-        return evaluate_field(law.friction, "contact.friction", contact.coords) * contact.pressure, "±F λ_N"
+        return field_at_nodes(law.friction, "contact.friction", contact.coords, pieces) * contact.pressure, "±F λ_N"
     return None
 
 
 def contact_tractions(result, path):
     """Contact pressure and friction traction along Γ_C (2-D) or against the distance from the punch
     axis (3-D, friction as ‖λ_T‖): Hertz curve for punches, slip bounds and stick (blue) / slip
-    (orange) zones with friction."""
+    (orange) zones with friction; one panel per contact of a scene that has several."""
+    contacts, pieces = getattr(result.scene.contact, "pairs", ()), getattr(result.fem.contact, "pieces", ())
+    panels = [(slice(None), f"{result.scene.name}: contact tractions", True)]
+    if len(pieces) > 1:
+        panels = [(rows, f"{c.boundary} on {getattr(c, 'master', '') or 'the rigid obstacle'}: {type(c.law).__name__}",
+                   has_friction(c.law)) for (rows, *_), c in zip(pieces, contacts)]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 4 * len(panels)), squeeze=False, layout="constrained")
+    for ax, (rows, title, friction) in zip(axes[:, 0], panels):
+        draw_tractions(ax, result, rows, hertz=len(panels) == 1, friction=friction)
+        ax.set_title(title)
+    fig.savefig(path, dpi=150, bbox_inches="tight")
+    plt.close(fig)
+
+
+def draw_tractions(ax, result, rows, hertz: bool, friction: bool):
+    """The tractions of the contact nodes ``rows`` on ``ax`` (see :func:`contact_tractions`)."""
     contact = result.contact
     radial = result.fem.dim == 3
-    coordinate = contact.radius if radial else contact.coordinate
+    coordinate = (contact.radius if radial else contact.coordinate)[rows]
     order = np.argsort(coordinate)
     s = coordinate[order]
     style = "o" if radial else "o-"  # 3-D nodes at one radius are not a curve
-    fig, ax = plt.subplots(figsize=(7, 4))
-    ax.plot(s, contact.pressure[order], style, ms=3, label="λ_N (pressure)")
-    bound = friction_bound(result)
+    ax.plot(s, contact.pressure[rows][order], style, ms=3, label="λ_N (pressure)")
+    bound = friction_bound(result) if friction else None
     if bound is not None:
-        values, label = bound
-        friction = contact.friction_magnitude if radial else contact.friction
+        values, label = bound[0][rows], bound[1]
+        friction = (contact.friction_magnitude if radial else contact.friction)[rows]
         ax.plot(s, friction[order], "s" if radial else "s-", ms=3, label="‖λ_T‖" if radial else "λ_T (friction traction)")
         ax.plot(s, values[order], "k.", ms=2) if radial else ax.plot(s, values[order], "k:", lw=1, label=label)
         if not radial:
             ax.plot(s, -values[order], "k:", lw=1)
-            status = contact.status[order]
+            status = contact.status[rows][order]
             for name, color in (("stick", "tab:blue"), ("slip", "tab:orange")):
                 inside = np.char.startswith(status.astype(str), name)
                 ax.fill_between(s, 0, 1, where=inside, color=color, alpha=0.12, transform=ax.get_xaxis_transform(),
                                 label=f"{name} zone")
-    reference = hertz_reference(result)
+    reference = hertz_reference(result) if hertz else None
     if reference is not None:
         a, p0 = reference
         center = 0.0 if radial else result.scene.contact.obstacle.center
         x = np.linspace(0.0 if radial else center - 1.5 * a, center + 1.5 * a, 400)
         ax.plot(x, hertz_pressure(x - center, a, p0), "k--", lw=1, label=f"Hertz (a = {a:.4g}, p₀ = {p0:.4g})")
-    closed = s[contact.status[order] != "open"]
+    closed = s[contact.status[rows][order] != "open"]
     if closed.size:
         span = 1.5 * max(closed.max() - closed.min(), 1e-12) / 2 + 0.2 * np.ptp(closed)
         ax.set_xlim(0.0 if radial else closed.mean() - span, (1.5 * closed.max()) if radial else closed.mean() + span)
@@ -118,9 +132,6 @@ def contact_tractions(result, path):
     ax.set_ylabel("traction")
     ax.axhline(0, color="0.7", lw=0.5)
     ax.legend(fontsize=8)
-    ax.set_title(f"{result.scene.name}: contact tractions")
-    fig.savefig(path, dpi=150, bbox_inches="tight")
-    plt.close(fig)
 
 
 def picard_convergence(result, path):
