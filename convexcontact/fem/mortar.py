@@ -41,6 +41,12 @@ COVERED = 1e-9
 """Relative round-off by which the master's projections may fall short of (or exceed) a slave facet."""
 
 
+def quadratic(basis: fe.Basis) -> bool:
+    """Whether the basis has nodes besides the vertices on the facets (P2, Q2), a mesh's vertices or not (a
+    quadratic mesh's ``p`` holds its edge nodes too)."""
+    element = basis.elem.elem
+    return element.facet_dofs + getattr(element, "edge_dofs", 0) > 0
+
 
 def lagrange(degree: int, t: np.ndarray) -> np.ndarray:
     """The Lagrange shape functions of a straight facet of ``degree`` 1 or 2 at ``t`` ∈ [0, 1] (start → end),
@@ -166,7 +172,7 @@ def segments(mesh: fe.Mesh, facets: np.ndarray, basis: fe.Basis, field_name: str
     nodes[inward] = nodes[inward, ::-1]
     start, end = mesh.p[:, nodes[:, 0]].T, mesh.p[:, nodes[:, 1]].T
     length = np.linalg.norm(end - start, axis=1)
-    if basis.N != dim * mesh.p.shape[1]:  # P2/Q2: one node in the middle of each facet
+    if quadratic(basis):  # P2/Q2: one node in the middle of each facet
         middle = basis.facet_dofs[0, facets] // dim
         offset = np.linalg.norm(basis.doflocs[:, dim * middle].T - (start + end) / 2, axis=1) / length
         if offset.max() > STRAIGHT:
@@ -297,7 +303,7 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
                prescribed: np.ndarray) -> PairTrace:
     """The trace of a contact pair: slave nodes, their normals and weights, N, T and the gap from geometry."""
     dim = mesh.dim()
-    if dim == 3 and basis.N != dim * mesh.p.shape[1]:
+    if dim == 3 and quadratic(basis):
         raise SceneError("parts.element", QUADRATIC_3D, "use P1 tetrahedra or Q1 hexahedra for a 3-D pair "
                          "(P2 and Q2 pairs are built in 2-D)")
     if dim == 3 and pair.method == "node_to_segment":
