@@ -96,6 +96,16 @@ def test_quadratic_elements_see_the_kinks_of_faceted_cylinders():
     assert excess[1] > 0.05 and excess[0] / excess[1] == pytest.approx(2.0, rel=0.1)
 
 
+def test_coulomb_on_a_quadratic_pair():
+    """A stiff P2 punch (E = 10, R = 1) on a P2 foundation (E = 1), F = 0.3: Picard converges to a certified answer
+    with a stick zone flanked by slip both ways, the resultants balanced."""
+    result = cc.solve(two_cylinders(0.02, radii=(1.0, np.inf), moduli=(10.0, 1.0), approach=0.01, law=cc.Coulomb(0.3),
+                                    width=1.0, master_h=0.026, element="P2"))
+    assert result.status == "solved" and result.certificate.passes(1e-8)
+    assert {"stick", "slip+", "slip-"} <= set(result.contact.status)
+    assert result.certificate.residuals["pair_balance"] < 1e-12
+
+
 def quadratic_block(cells: int, y: float = 0.0, bend: float = 0.0) -> fe.MeshTri2:
     """A unit block as a quadratic mesh, its edge nodes moved up by ``bend`` · sin(πx) (0: straight edges)."""
     linear = build_mesh(cc.Body(cc.Rectangle(1.0, 1.0, cells, cells, origin=(0.0, y))))
