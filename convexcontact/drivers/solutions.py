@@ -138,8 +138,8 @@ def supported(model: Model) -> None:
     checks = [
         (model.fem.dim == 2, "contact", "the enumeration covers 2-D contact (the 3-D cone is not polyhedral)"),
         (law.quadrature == "nodal", "contact.quadrature", "use quadrature = 'nodal'"),
-        (model.friction.count == contact.m, "contact.law", "give every contact Coulomb's law (friction = 0 where "
-         "frictionless): the enumeration pairs each node's normal and tangential unknowns"),
+        (model.friction.count == contact.m, "contact.law",
+         "give every contact Coulomb's law (friction = 0 where frictionless): each node's unknowns are paired"),
         (law.smoothing_radius == 0, "contact.smoothing_radius", "the nonlocal law is not enumerated: use 0"),
         (law.regularization is None, "contact.regularization", "the regularized law is smooth: drop it"),
         (law.compliance is None, "contact.compliance", "use non-penetration (Signorini) as the normal law"),

@@ -5,10 +5,12 @@ tangent t_i; master nodes k:
 
     u_N,i = n_i·(u_i − Σ_k Π_ik u_k),   u_T,i = t_i·(u_i − Σ_k Π_ik u_k),   g_i = n_i·(Σ_k Π_ik x_k − x_i).
 
-- ``mortar``: Π = D⁻¹M with the dual (biorthogonal) multiplier basis of the slave facets (on a facet
-  A→B, φ*_A = 2ψ_A − ψ_B): D_ij = ∫φ*_i ψ_j = δ_ij w_i with w_i = ∫ψ_i, and M_ik = ∫φ*_i (φ_k∘π)
-  over the intersections of each slave facet with the master facets projected on it along its
-  normal (two Gauss points per intersection: the integrand is quadratic). C(u_N − g) ≤ 0 with
+- ``mortar``: Π = D⁻¹M with the dual (biorthogonal) multiplier basis of the slave facets, φ*_a = Σ_b A_ab ψ_b
+  with A = D_e M_e⁻¹ on each facet (P1/Q1, a facet A→B: φ*_A = 2ψ_A − ψ_B; P2/Q2 in 2-D: the three nodes of a
+  straight quadratic facet, whose ∫ψ = h/6, h/6, 2h/3 are positive): D_ij = ∫φ*_i ψ_j = δ_ij w_i with
+  w_i = ∫ψ_i, and M_ik = ∫φ*_i (φ_k∘π) over the intersections of each slave facet with the master facets
+  projected on it along its normal (Gauss with p + 1 points per intersection: the integrand has degree 2p
+  for elements of degree p). C(u_N − g) ≤ 0 with
   C = diag(w) is then ∫φ*_i ([u]·n_i − g) ds ≤ 0, a weak non-penetration; the slave nodes get
   the forces w_i λ_i n_i, the master nodes −Σ_i M_ik λ_i n_i. As Σ_k M_ik = w_i the resultants
   balance, and a linear field is reproduced exactly: the contact patch test passes.
@@ -38,7 +40,36 @@ from .scaling import Scaling
 COVERED = 1e-9
 """Relative round-off by which the master's projections may fall short of (or exceed) a slave facet."""
 
-GAUSS = np.array([-1.0, 1.0]) / np.sqrt(3.0)
+
+def quadratic(basis: fe.Basis) -> bool:
+    """Whether the basis has nodes besides the vertices on the facets (P2, Q2), a mesh's vertices or not (a
+    quadratic mesh's ``p`` holds its edge nodes too)."""
+    element = basis.elem.elem
+    return element.facet_dofs + getattr(element, "edge_dofs", 0) > 0
+
+
+def lagrange(degree: int, t: np.ndarray) -> np.ndarray:
+    """The Lagrange shape functions of a straight facet of ``degree`` 1 or 2 at ``t`` ∈ [0, 1] (start → end),
+    stacked last in the order of :attr:`Segments.nodes`: start, end[, middle]."""
+    if degree == 1:
+        return np.stack([1 - t, t], axis=-1)
+    return np.stack([(1 - t) * (1 - 2 * t), t * (2 * t - 1), 4 * t * (1 - t)], axis=-1)
+
+
+def gauss(points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Legendre points on [0, 1] and weights summing to 1 (exact for degree 2·points − 1)."""
+    t, w = np.polynomial.legendre.leggauss(points)
+    return (t + 1) / 2, w / 2
+
+
+def dual_coefficients(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """A = D M⁻¹ of the reference facet (φ*_a = Σ_b A_ab ψ_b, so that ∫φ*_a ψ_b = δ_ab ∫ψ_b) and the
+    fractions ∫ψ_a / |e| (D's diagonal): [[2, −1], [−1, 2]] and ½, ½ for degree 1; 1/6, 1/6, 2/3 for 2."""
+    t, w = gauss(degree + 1)
+    psi = lagrange(degree, t)
+    mass = psi.T @ (w[:, None] * psi)
+    shares = mass.sum(axis=1)
+    return shares[:, None] * np.linalg.inv(mass), shares
 
 
 @dataclass
@@ -106,7 +137,7 @@ def stack(traces: list[PairTrace]) -> PairTrace:
 class Segments:
     """Straight boundary facets, oriented so that the outward normal is the tangent turned clockwise."""
 
-    nodes: np.ndarray  # (facets, 2) vertex indices, start → end
+    nodes: np.ndarray  # (facets, 2 or 3) the basis's nodes: start, end[, middle] (P2/Q2)
     start: np.ndarray  # (facets, 2)
     end: np.ndarray
     measure: np.ndarray  # lengths
@@ -117,9 +148,25 @@ class Segments:
     def size(self) -> np.ndarray:
         return self.measure
 
+    @property
+    def degree(self) -> int:
+        return self.nodes.shape[1] - 1
 
-def segments(mesh: fe.Mesh, facets: np.ndarray) -> Segments:
-    """The ``facets`` of a 2-D mesh as oriented segments (their cell on the left of start → end)."""
+    @property
+    def shares(self) -> np.ndarray:
+        """∫ψ_a / |e| of each node of a facet."""
+        return dual_coefficients(self.degree)[1]
+
+
+STRAIGHT = 1e-9
+"""How far (relative to its facet's length) a quadratic facet's middle node may lie from the midpoint."""
+
+
+def segments(mesh: fe.Mesh, facets: np.ndarray, basis: fe.Basis, field_name: str) -> Segments:
+    """The ``facets`` of a 2-D mesh as oriented segments (their cell on the left of start → end). A node is the
+    basis's (a DOF's index over d): a vertex, or on P2/Q2 facets the middle node, which must lie at the
+    midpoint (a curved quadratic facet is refused: its projection and its Jacobian are not built)."""
+    dim = mesh.dim()
     nodes = mesh.facets[:, facets].T.copy()
     centroid = mesh.p[:, mesh.t[:, mesh.f2t[0, facets]]].mean(axis=1).T
     start, end = mesh.p[:, nodes[:, 0]].T, mesh.p[:, nodes[:, 1]].T
@@ -128,6 +175,15 @@ def segments(mesh: fe.Mesh, facets: np.ndarray) -> Segments:
     nodes[inward] = nodes[inward, ::-1]
     start, end = mesh.p[:, nodes[:, 0]].T, mesh.p[:, nodes[:, 1]].T
     length = np.linalg.norm(end - start, axis=1)
+    if quadratic(basis):  # P2/Q2: one node in the middle of each facet
+        middle = basis.facet_dofs[0, facets] // dim
+        offset = np.linalg.norm(basis.doflocs[:, dim * middle].T - (start + end) / 2, axis=1) / length
+        if offset.max() > STRAIGHT:
+            raise SceneError(field_name, f"{np.count_nonzero(offset > STRAIGHT)} quadratic facets are curved (a "
+                             f"middle node up to {offset.max():.2g} of its facet's length off the midpoint): a "
+                             "pair's facets must be straight", "give the body a straight-sided mesh (a linear "
+                             "mesh: P2/Q2 add the middle nodes), finer where the boundary curves")
+        nodes = np.column_stack([nodes, middle])
     tangent = (end - start) / length[:, None]
     return Segments(nodes, start, end, length, tangent, np.column_stack([tangent[:, 1], -tangent[:, 0]]))
 
@@ -150,7 +206,8 @@ def overlapping(lo_s, hi_s, lo_m, hi_m, margin: float) -> tuple[np.ndarray, np.n
 
 def mortar(slave: Segments, master: Segments, along: np.ndarray, margin: float):
     """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a φ_b) and each slave facet's covered
-    fraction."""
+    fraction: one Gauss rule on every intersection, exact for the product of the slave's dual and the master's
+    shape functions (degree 2 for P1/Q1, 4 for P2/Q2)."""
     ends = [np.column_stack([s.start @ along, s.end @ along]) for s in (slave, master)]
     e, f = overlapping(ends[0].min(1), ends[0].max(1), ends[1].min(1), ends[1].max(1), margin)
     t, length = slave.tangent[e], slave.measure[e]
@@ -160,15 +217,15 @@ def mortar(slave: Segments, master: Segments, along: np.ndarray, margin: float):
     hi = np.minimum(np.maximum(xi_start, xi_end), 1.0)
     keep = ((slave.normal[e] * master.normal[f]).sum(axis=1) < 0) & (hi > lo + COVERED)
     e, f, lo, hi, xi_start, xi_end, length = (a[keep] for a in (e, f, lo, hi, xi_start, xi_end, length))
-    xi = (lo + hi)[:, None] / 2 + np.outer(hi - lo, GAUSS) / 2
+    points, fractions = gauss((slave.degree + master.degree) // 2 + 1)
+    xi = lo[:, None] + np.outer(hi - lo, points)
     eta = (xi - xi_start[:, None]) / (xi_end - xi_start)[:, None]
-    weight = ((hi - lo) * length / 2)[:, None]
-    dual = (2 - 3 * xi, 3 * xi - 1)
-    shape = (1 - eta, eta)
-    entries = [(e, np.full_like(e, a), f, np.full_like(f, b), (weight * dual[a] * shape[b]).sum(axis=1))
-               for a in (0, 1) for b in (0, 1)]
+    weight = np.outer((hi - lo) * length, fractions)
+    dual = lagrange(slave.degree, xi) @ dual_coefficients(slave.degree)[0].T  # (pairs, points, slave nodes)
+    values = np.einsum("nq,nqa,nqb->nab", weight, dual, lagrange(master.degree, eta))
+    a, b = np.indices(values.shape[1:]).reshape(2, -1)
     covered = np.bincount(e, weights=hi - lo, minlength=slave.measure.size)
-    return [np.concatenate(parts) for parts in zip(*entries)], covered
+    return [np.repeat(e, a.size), np.tile(a, e.size), np.repeat(f, a.size), np.tile(b, e.size), values.ravel()], covered
 
 
 def node_to_segment(coords, normals, master: Segments, along: np.ndarray, margin: float):
@@ -185,7 +242,9 @@ def node_to_segment(coords, normals, master: Segments, along: np.ndarray, margin
     nearest = np.lexsort((np.abs(distance), i))
     first = nearest[np.r_[True, i[nearest][1:] != i[nearest][:-1]]]
     i, f, eta = i[first], f[first], eta[first]
-    return [np.concatenate(parts) for parts in zip((i, f, np.zeros_like(f), 1 - eta), (i, f, np.ones_like(f), eta))]
+    values = lagrange(master.degree, eta)
+    b = np.arange(values.shape[1])
+    return np.repeat(i, b.size), np.repeat(f, b.size), np.tile(b, i.size), values.ravel()
 
 
 def relative_rows(vectors, dofs, transfer: sp.coo_matrix, master_dofs, ndofs: int) -> sp.csr_matrix:
@@ -198,20 +257,21 @@ def relative_rows(vectors, dofs, transfer: sp.coo_matrix, master_dofs, ndofs: in
 
 
 def slave_nodes(slave: Segments | Facets) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The slave boundary's vertices, each facet's node numbers among them, the weights w_i = ∫ψ_i and the
-    nodal normals n_i ∝ ∫ψ_i n ds (the facets' normals averaged with the weights of ψ_i)."""
-    vertices, local = np.unique(slave.nodes, return_inverse=True)
+    """The slave boundary's nodes, each facet's node numbers among them, the weights w_i = ∫ψ_i and the
+    nodal normals n_i ∝ ∫ψ_i n ds (the facets' normals averaged with the weights of ψ_i: a middle node takes its
+    facet's normal), as :mod:`.contact` weighs a single body's nodes."""
+    nodes, local = np.unique(slave.nodes, return_inverse=True)
     corners, dim = slave.nodes.shape[1], slave.normal.shape[1]
     local = local.reshape(-1, corners)
-    share = np.repeat(slave.measure / corners, corners)
+    share = np.outer(slave.measure, slave.shares).ravel()
     weights = np.bincount(local.ravel(), weights=share)
     summed = np.column_stack([np.bincount(local.ravel(), share * np.repeat(slave.normal[:, j], corners))
                               for j in range(dim)])
-    return vertices, local, weights, summed / np.linalg.norm(summed, axis=1, keepdims=True)
+    return nodes, local, weights, summed / np.linalg.norm(summed, axis=1, keepdims=True)
 
 
 def transfer_matrix(pair: Pair, slave, master, local, weights, normals, coords):
-    """Π (slave nodes × master nodes) of the pair's method, the master's vertices, and which slave nodes keep
+    """Π (slave nodes × master nodes) of the pair's method, the master's nodes, and which slave nodes keep
     their rows."""
     masters, master_local = np.unique(master.nodes, return_inverse=True)
     master_local = master_local.reshape(master.nodes.shape)
@@ -236,23 +296,30 @@ def transfer_matrix(pair: Pair, slave, master, local, weights, normals, coords):
     return sp.diags(1.0 / weights) @ mass, masters, ok
 
 
+QUADRATIC_3D = ("3-D pairs of P2/Q2 elements are not built: the quadratic triangle's vertex shape functions "
+                "integrate to zero (∫ψ_i = 0 on a P2 tetrahedron's face), so no dual (biorthogonal) multiplier basis "
+                "with a diagonal D exists — it needs a modified basis (Lamichhane–Wohlmuth; Popp et al.); the 9-node "
+                "faces of Q2 hexahedra have one (all ∫ψ_i > 0) but their clipping and integration are not built")
+
+
 def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray,
                prescribed: np.ndarray) -> PairTrace:
     """The trace of a contact pair: slave nodes, their normals and weights, N, T and the gap from geometry."""
     dim = mesh.dim()
-    if basis.N != dim * mesh.p.shape[1]:
-        raise SceneError("contact.master", "contact pairs are built for P1 and Q1 elements (flat facets, nodes at the "
-                         "vertices)", "use P1 or Q1 elements")
+    if dim == 3 and quadratic(basis):
+        raise SceneError("parts.element", QUADRATIC_3D, "use P1 tetrahedra or Q1 hexahedra for a 3-D pair "
+                         "(P2 and Q2 pairs are built in 2-D)")
     if dim == 3 and pair.method == "node_to_segment":
         raise SceneError("contact.method", "node-to-segment is built in 2-D", "use method = 'mortar'")
     facets = check_boundary(mesh, pair.boundary, "contact.boundary")
     if dim == 2:
-        slave, master = segments(mesh, facets), segments(mesh, check_boundary(mesh, pair.master, "contact.master"))
+        slave = segments(mesh, facets, basis, "contact.boundary")
+        master = segments(mesh, check_boundary(mesh, pair.master, "contact.master"), basis, "contact.master")
     else:
         slave = facets_3d(mesh, facets, "contact.boundary")
         master = facets_3d(mesh, check_boundary(mesh, pair.master, "contact.master"), "contact.master")
-    vertices, local, weights, normals = slave_nodes(slave)
-    coords = mesh.p[:, vertices].T
+    nodes, local, weights, normals = slave_nodes(slave)
+    coords = basis.doflocs[:, dim * nodes].T
     transfer, masters, ok = transfer_matrix(pair, slave, master, local, weights, normals, coords)
     if not ok.any():
         raise SceneError("contact.master", f"no facet of {pair.master!r} faces {pair.boundary!r} (they lie side by "
@@ -261,8 +328,8 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
     left_out = (f"{np.count_nonzero(~ok)} of {ok.size} nodes of {pair.boundary!r} have no master facet under their "
                 "whole support: they are left out of the contact (make the larger boundary the master)")
     transfer, normals, weights, coords = sp.coo_matrix(transfer[ok]), normals[ok], weights[ok], coords[ok]
-    dofs, master_dofs = basis.nodal_dofs[:, vertices[ok]].T, basis.nodal_dofs[:, masters].T
-    master_coords = mesh.p[:, masters].T
+    dofs, master_dofs = dim * nodes[ok, None] + np.arange(dim), dim * masters[:, None] + np.arange(dim)
+    master_coords = basis.doflocs[:, master_dofs[:, 0]].T
     tangents, bitangents, mean_tangent = tangent_frame(normals, weights)
     N_full = relative_rows(normals, dofs, transfer, master_dofs, basis.N)
     frame = [tangents] if bitangents is None else [tangents, bitangents]

@@ -36,6 +36,11 @@ class Facets:
     normal: np.ndarray
     frame: np.ndarray
 
+    @property
+    def shares(self) -> np.ndarray:
+        """∫ψ_a / |e| of each corner: a third (triangle), a quarter (parallelogram)."""
+        return np.full(self.nodes.shape[1], 1.0 / self.nodes.shape[1])
+
 
 def facets_3d(mesh: fe.Mesh, facets: np.ndarray, field_name: str) -> Facets:
     """The ``facets`` of a tetrahedral or hexahedral mesh, numbered outwards; warped or non-parallelogram

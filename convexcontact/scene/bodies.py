@@ -75,15 +75,44 @@ class Part:
             raise SceneError(field_name, str(error)[len(error.field) + 2:]) from None
 
     def mesh(self) -> fe.Mesh:
-        """The part's mesh in user units, checked and placed."""
+        """The part's mesh in user units, checked, straight-sided (:func:`straight_sided`) and placed."""
         with self.named():
-            mesh = build_mesh(Body(self.geometry, self.element, self.plane))
+            mesh = straight_sided(build_mesh(Body(self.geometry, self.element, self.plane)))
         if self.offset is None:
             return mesh
         if len(self.offset) != mesh.dim():
             raise SceneError(f"parts[{self.name}].offset", f"{len(self.offset)} numbers for a {mesh.dim()}-D body",
                              f"give {mesh.dim()} numbers")
         return mesh.translated(self.offset)
+
+
+LINEAR = {fe.MeshTri2: (fe.MeshTri1, fe.ElementTriP2), fe.MeshQuad2: (fe.MeshQuad1, fe.ElementQuad2),
+          fe.MeshTet2: (fe.MeshTet1, fe.ElementTetP2), fe.MeshHex2: (fe.MeshHex1, fe.ElementHex2)}
+"""Each quadratic mesh's linear mesh, and the element whose nodes are the quadratic mesh's."""
+
+STRAIGHT = 1e-9
+"""How far (relative to the mesh's extent) a quadratic mesh's edge node may lie from where a straight-sided cell
+puts it."""
+
+
+def straight_sided(mesh: fe.Mesh) -> fe.Mesh:
+    """A quadratic mesh whose edge (face, cell) nodes lie where straight-sided cells put them, as its linear mesh —
+    P2/Q2 elements add those nodes back; a linear mesh as it is. Bodies are joined as linear meshes, and a pair's
+    quadratic facets must be straight (their projection and mortar integrals are built for straight facets), so a
+    curved quadratic mesh is refused (``body.geometry``, named as the part's by :meth:`Part.named`)."""
+    if type(mesh) not in LINEAR:
+        return mesh
+    kind, element = LINEAR[type(mesh)]
+    vertices = mesh.t.max() + 1  # a quadratic mesh numbers its vertices first
+    linear = kind(mesh.p[:, :vertices], mesh.t, _boundaries=mesh.boundaries, _subdomains=mesh.subdomains)
+    offset = np.abs(fe.CellBasis(linear, element(), intorder=1).doflocs - mesh.doflocs).max() / np.ptp(mesh.p, axis=1).max()
+    if offset > STRAIGHT:
+        raise SceneError("body.geometry", f"a {type(mesh).__name__} with curved edges (a node "
+                         f"{offset:.2g} of the body's size off where a straight-sided cell puts it): bodies are "
+                         "joined as straight-sided meshes, and a contact pair's quadratic facets must be straight",
+                         "give a mesh with straight edges (gmsh: element order 1; element = 'P2' or 'Q2' adds the "
+                         "middle nodes), finer where the boundary curves")
+    return linear
 
 
 @dataclass(frozen=True)
@@ -277,10 +306,10 @@ def bodies_scene(
     if len({m.dim() for m in meshes}) > 1:
         raise SceneError("parts.geometry", "2-D and 3-D bodies mixed", "give every body the same dimension")
     for part, mesh in zip(parts, meshes):
-        if mesh.doflocs.shape[1] != mesh.p.shape[1] or type(mesh) is not type(meshes[0]):
+        if type(mesh) is not type(meshes[0]):
             raise SceneError(f"parts[{part.name}].geometry", f"a {type(mesh).__name__} among "
-                             f"{type(meshes[0]).__name__} bodies: only linear meshes of one kind are joined",
-                             "give every body a linear mesh of one cell type (P2/Q2 elements run on them too)")
+                             f"{type(meshes[0]).__name__} bodies: only meshes of one kind are joined",
+                             "give every body a mesh of one cell type (P2/Q2 elements run on linear meshes too)")
     dirichlet = sequence_of(dirichlet, Dirichlet, "dirichlet", "give a list of cc.Dirichlet(boundary, ux=…, uy=…)")
     tractions = sequence_of(tractions, Traction, "tractions", "give a list of cc.Traction(boundary, pressure=…)")
     if isinstance(contact, (list, tuple)):

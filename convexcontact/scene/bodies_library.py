@@ -52,7 +52,7 @@ def two_cylinders(h: float = 0.01, radii=(1.0, 1.0), moduli=(1.0, 1.0), nu=(0.3,
     ``approach``: the back of each is moved by half of it towards the other, with its x fixed (plane strain
     Hertz, docs/bodies.md). ``master_h``: the lower body's cell size (default ``h``: non-matching all the same,
     the faces differ). ``shift``: the upper back's x displacement (Cattaneo–Mindlin)."""
-    quads = element == "Q1"
+    quads = element in ("Q1", "Q2")
     parts = [Part("upper", cylinder_mesh(h, radii[0], width, height, True, quads=quads),
                   Material(E=moduli[0], nu=nu[0]), element),
              Part("lower", cylinder_mesh(master_h or h, radii[1], width, height, False, quads=quads),

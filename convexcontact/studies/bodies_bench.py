@@ -12,14 +12,16 @@ import dataclasses
 import time
 
 
-def strips(facets: int, rows: int, ratio: float = 1.3):
-    """Two strips of square P1 cells, ``facets`` against about ``ratio`` × ``facets`` across the interface."""
+def strips(facets: int, rows: int, ratio: float = 1.3, element: str = "P1"):
+    """Two strips of square cells of ``element`` (P1, P2: triangles; Q1, Q2), ``facets`` against about ``ratio`` ×
+    ``facets`` across the interface."""
     import convexcontact as cc
 
     master = round(ratio * facets)
     parts = [cc.Part("upper", cc.Rectangle(1.0, rows / facets, facets, rows, origin=(0.0, rows / master)),
-                     cc.Material(1.0, 0.3)),
-             cc.Part("lower", cc.Rectangle(1.0, rows / master, master, rows, origin=(0.0, 0.0)), cc.Material(1.0, 0.3))]
+                     cc.Material(1.0, 0.3), element),
+             cc.Part("lower", cc.Rectangle(1.0, rows / master, master, rows, origin=(0.0, 0.0)), cc.Material(1.0, 0.3),
+                     element)]
     return cc.bodies_scene(parts, cc.Pair("upper.bottom", master="lower.top"),
                            dirichlet=[cc.Dirichlet("lower.bottom", ux=0.0, uy=0.0),
                                       cc.Dirichlet("upper.top", ux=0.0, uy=-1e-4)], name="strips")
@@ -46,13 +48,13 @@ def timed(function, *args) -> float:
     return time.perf_counter() - start
 
 
-def mortar_assembly(facets: int = 10_000, rows: int = 8, dim: int = 2) -> dict:
+def mortar_assembly(facets: int = 10_000, rows: int = 8, dim: int = 2, element: str = "P1") -> dict:
     """Seconds to build the pair's trace (mortar, and node-to-segment in 2-D) and the stiffness K of the same mesh;
-    in 3-D about ``facets`` slave triangles (``rows`` unused)."""
+    in 3-D about ``facets`` slave triangles (``rows`` and ``element`` unused)."""
     from convexcontact.fem.assembly import assemble, stiffness
     from convexcontact.fem.mortar import pair_trace
 
-    scene = strips(facets, rows) if dim == 2 else slabs(round((facets / 2) ** 0.5))
+    scene = strips(facets, rows, element=element) if dim == 2 else slabs(round((facets / 2) ** 0.5))
     fem = assemble(scene)
     arguments = (fem.mesh, fem.basis, fem.scaling, fem.free, fem.prescribed)
     out = {"slave_facets": fem.mesh.boundaries["upper.bottom"].size,
@@ -78,3 +80,29 @@ def two_body_solve(h: float = 0.004, solver: str = "clarabel") -> dict:
     return {"dofs": fem.n_free, "contact_nodes": fem.contact.m, "formulation": model.formulation,
             "linear": linear, "contact": contact, "contact_per_linear": contact / linear,
             "certificate": result.certificate.worst}
+
+
+def hertz_errors(h: float, element: str = "P2", faceted_master: bool = True) -> dict:
+    """Two cylinders against plane-strain Hertz (docs/bodies.md, Quadratic pairs): the peak's and the fitted p₀'s
+    relative errors (p² = p₀²(1 − x²/a²) over p > 0.3 p_max), the closed zone's half-width and a.
+    ``faceted_master``: a flat slave on a cylinder R₂ = 2 faceted four times finer; else two faceted cylinders
+    R₁ = R₂ = 4 meshed alike. R = 2 and E* = 1/(2(1 − 0.3²)) in both."""
+    import numpy as np
+
+    import convexcontact as cc
+
+    if faceted_master:
+        scene = cc.bodies_library.two_cylinders(h, radii=(np.inf, 2.0), approach=0.006, width=3.0, height=2.0,
+                                                master_h=h / 4, element=element)
+    else:
+        scene = cc.bodies_library.two_cylinders(h, radii=(4.0, 4.0), approach=0.006, width=4.0, height=2.0,
+                                                element=element)
+    result = cc.solve(scene)
+    a = np.sqrt(4 * result.normal_force * 2.0 / (np.pi * 0.5 / (1 - 0.3**2)))
+    p0 = 2 * result.normal_force / (np.pi * a)
+    s, p = result.contact.coordinate, result.contact.pressure
+    inside = p > 0.3 * p.max()
+    (c0, _), *_ = np.linalg.lstsq(np.column_stack([np.ones(inside.sum()), s[inside] ** 2]), p[inside] ** 2, rcond=None)
+    return {"peak": result.max_pressure / p0 - 1, "fitted_p0": np.sqrt(c0) / p0 - 1,
+            "half_width": result.contact_half_width, "a": a, "certificate": result.certificate.worst,
+            "pair_balance": result.certificate.residuals["pair_balance"]}
