@@ -49,10 +49,23 @@ BEYOND_CRITICAL = [(hild_critical_friction(NU), 3.0, -1.0), (2.5, 3.0, 0.3), (4.
 
 
 @pytest.mark.parametrize(("friction", "F1", "F2"), BEYOND_CRITICAL)
-def test_hild_unique_solution_beyond_critical_friction(friction, F1, F2):
-    """The cycling map is run again at ω = ½ and converges to Prop. 4.1's solution."""
+def test_anderson_mixing_converges_where_the_plain_map_cycles(friction, F1, F2):
+    """The default map (Anderson mixing) reaches Prop. 4.1's solution; up to F = 2.5 at ω = 1, where the plain map
+    cycles (at F = 4 it oscillates too, and ω = ½ then converges in 3 steps)."""
     (solution,) = hild_one_triangle_solutions(F1, F2, friction, E, NU, LENGTH)
     result = cc.solve(triangle_scene(F1, F2, Coulomb(friction=friction)))
+    assert result.status == "solved" and result.certificate.passes(1e-6), result.message
+    close, distance = matches_one_of(result, [solution], tol=1e-7)
+    assert close, distance
+    first = result.extra["picard"]["attempts"][0]
+    assert first["relaxation"] == 1.0 and (first["outcome"] == "converged") == (friction < 4)
+
+
+@pytest.mark.parametrize(("friction", "F1", "F2"), BEYOND_CRITICAL)
+def test_hild_unique_solution_beyond_critical_friction(friction, F1, F2):
+    """The plain map cycles; it is run again at ω = ½ and converges to Prop. 4.1's solution."""
+    (solution,) = hild_one_triangle_solutions(F1, F2, friction, E, NU, LENGTH)
+    result = cc.solve(triangle_scene(F1, F2, Coulomb(friction=friction, acceleration=0)))
     assert result.status == "solved", result.message
     assert result.certificate.passes(1e-6)
     close, distance = matches_one_of(result, [solution], tol=1e-7)
@@ -64,7 +77,7 @@ def test_hild_unique_solution_beyond_critical_friction(friction, F1, F2):
 
 def test_attempts_are_in_the_summary_and_the_table():
     friction, F1, F2 = BEYOND_CRITICAL[0]
-    result = cc.solve(triangle_scene(F1, F2, Coulomb(friction=friction)))
+    result = cc.solve(triangle_scene(F1, F2, Coulomb(friction=friction, acceleration=0)))
     summary = json.loads(json.dumps(result.summary()))
     attempts = summary["picard"]["attempts"]
     assert [a["relaxation"] for a in attempts] == [1.0, 0.5]
@@ -76,7 +89,7 @@ def test_attempts_are_in_the_summary_and_the_table():
 
 def test_a_map_that_cannot_converge_is_reported_not_converged():
     """Beyond uniqueness, within a budget the map cannot meet: not converged, with attempts and history."""
-    result = cc.solve(triangle_scene(10.0, -1.0, Coulomb(friction=4.0, max_iterations=10)))
+    result = cc.solve(triangle_scene(10.0, -1.0, Coulomb(friction=4.0, max_iterations=10, acceleration=0)))
     assert result.status == "not converged"
     picard = result.extra["picard"]
     assert picard["outcome"] == UNFINISHED and len(result.extra["history"]) == 10

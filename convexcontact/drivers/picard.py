@@ -132,9 +132,9 @@ UNFINISHED = "not converged (still decreasing: raise max_iterations)"
 
 
 def rank(iterate: tuple) -> tuple:
-    """Order of iterates (Coulomb residual, iteration, solution, …): usable inner answers first (solved, or
-    inaccurate by the solver's own measure), then by residual."""
-    return not iterate[2].solved, iterate[0]
+    """Order of iterates (Coulomb residual, iteration, solution, …): certified ones first, among them those the
+    inner solver called solved, then usable inner answers (inaccurate by the solver's own measure), then by residual."""
+    return not certified(iterate), iterate[2].status != "solved", not iterate[2].solved, iterate[0]
 
 
 def certified(iterate: tuple) -> bool:
@@ -163,8 +163,9 @@ class Attempt:
 
     @property
     def answer(self) -> tuple | None:
-        """The fixed point (last iterate) of a converged run if certified, else the best iterate."""
-        return self.last if self.outcome == "converged" and certified(self.last) else self.best
+        """The fixed point (last iterate) of a converged run if certified and solved, else the best iterate."""
+        last = self.last
+        return last if self.outcome == "converged" and certified(last) and last[2].status == "solved" else self.best
 
     @property
     def solved(self) -> bool:
@@ -214,6 +215,7 @@ def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, histo
         return s
     model.seed(session, attempt.solver, attempt.options)
     states, changes, noise = [s], [], []
+    mixing = Anderson(law.acceleration)
     attempt.outcome = UNFINISHED
     for k in steps:
         start = time.perf_counter()
@@ -237,13 +239,34 @@ def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, histo
         attempt.keep((coulomb_residual, k, solution, fields, target))
         if progress is not None:
             progress(k, changes[-1])
-        s = (1.0 - attempt.relaxation) * s + attempt.relaxation * target
+        s = mixing.step(s, target, attempt.relaxation)
         states.append(s)
         found = outcome(changes, attempt.stop, states) or inaccurate(noise)
         if found is not None:
             attempt.outcome = found
             break
     return s
+
+
+class Anderson:
+    """Anderson mixing of the map s ↦ Φ(s) (Walker & Ni 2011): the next s combines the last steps so that
+    the combined residual Φ(s) − s is least, then takes the relaxed step from there. A residual that grows
+    restarts it from the plain step; slip bounds stay ≥ 0 (a negative one is no cone)."""
+
+    def __init__(self, depth: int):
+        self.depth, self.points, self.residuals = depth, [], []
+
+    def step(self, s: np.ndarray, target: np.ndarray, relaxation: float) -> np.ndarray:
+        residual = target - s
+        if self.residuals and np.linalg.norm(residual) > np.linalg.norm(self.residuals[-1]):
+            self.points, self.residuals = [], []
+        self.points, self.residuals = (self.points + [s])[-self.depth - 1:], (self.residuals + [residual])[-self.depth - 1:]
+        plain = s + relaxation * residual
+        if self.depth == 0 or len(self.points) < 2:
+            return plain
+        dS, dR = np.diff(self.points, axis=0).T, np.diff(self.residuals, axis=0).T
+        gamma = np.linalg.lstsq(dR, residual, rcond=None)[0]
+        return np.maximum(plain - (dS + relaxation * dR) @ gamma, 0.0)
 
 
 def other_formulation(model: Model, timings: dict) -> Model | None:

@@ -527,7 +527,8 @@ class Coulomb:
     s ← (1 − ω) s + ω F·S(λ_N(s)), each step an exact Tresca program. ``smoothing_radius``
     ρ > 0 gives Oden–Duvaut's nonlocal law (S the mollifier ω_ρ along Γ_C); ρ = 0 is the
     local law. ``initial_pressure``: None starts from the frictionless (Signorini)
-    pressures, as Oden's algorithm III; otherwise a field of pressures.
+    pressures, as Oden's algorithm III; otherwise a field of pressures. ``acceleration``:
+    how many earlier steps Anderson mixing combines with the relaxed one (0: the plain map).
     """
 
     friction: NodalValues = 0.0
@@ -540,6 +541,7 @@ class Coulomb:
     max_iterations: int = 100
     initial_pressure: NodalValues | None = None
     compliance: NormalCompliance | None = None
+    acceleration: int = 5
 
     def __post_init__(self):
         object.__setattr__(self, "friction", check_field(self.friction, "contact.friction"))
@@ -551,6 +553,8 @@ class Coulomb:
         if finite(self.tol, "contact.tol") <= 0:
             raise SceneError("contact.tol", "must be positive")
         positive_integer(self.max_iterations, "contact.max_iterations")
+        if self.acceleration != 0:
+            positive_integer(self.acceleration, "contact.acceleration", "give 0 (the plain map) or a depth such as 5")
         if self.initial_pressure is not None:
             object.__setattr__(
                 self, "initial_pressure", check_field(self.initial_pressure, "contact.initial_pressure")

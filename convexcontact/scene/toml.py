@@ -82,7 +82,7 @@ LAWS = {
     "tresca": (Tresca, {"slip_bound": FIELD, **FRICTION_OPTIONS}),
     "coulomb": (Coulomb, {
         "friction": FIELD, "smoothing_radius": NUMBER, "relaxation": NUMBER, "tol": NUMBER,
-        "max_iterations": INTEGER, "initial_pressure": FIELD, **FRICTION_OPTIONS,
+        "max_iterations": INTEGER, "initial_pressure": FIELD, "acceleration": INTEGER, **FRICTION_OPTIONS,
     }),
 }
 
