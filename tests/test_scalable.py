@@ -56,6 +56,20 @@ def test_newton_cg_agrees_with_clarabel_on_random_programs(bounds, balls, size):
         assert (radius >= np.linalg.norm(answer.z[bounds:].reshape(-1, 1 + size)[:, 1:], axis=1) - 1e-12).all()
 
 
+@pytest.mark.parametrize("law, most_steps", [(Signorini(), 8), (Tresca(0.002), 100)])
+def test_newton_cg_steps_scale_with_the_rows_of_a_dense_w(law, most_steps):
+    """The dense W of a mortar pair on graded meshes (rows differ in scale): with a step length per variable
+    newton-cg agrees with Clarabel, Signorini in a few Newton steps (29 with one length), Tresca at all (it
+    failed after 100)."""
+    model = cc.prepare(cc.bodies_library.punch_on_foundation(0.01, law=law), "dual")
+    newton, interior = model.solve("newton-cg"), model.solve("clarabel")
+    assert newton.status == "solved" and newton.iterations <= most_steps and newton.certificate.worst < 1e-10
+    p = interior.contact.pressure.max()
+    np.testing.assert_allclose(newton.contact.pressure, interior.contact.pressure, atol=1e-8 * p)
+    if law != Signorini():
+        np.testing.assert_allclose(newton.contact.friction, interior.contact.friction, atol=1e-8 * p)
+
+
 def test_delassus_operator_is_the_dense_w():
     """W r and W R through K's factors equal the dense W = B K⁻¹ Bᵀ; the slab approximation over the whole body
     is W itself."""
