@@ -145,6 +145,21 @@ def test_programs_not_in_bound_form_are_refused():
         solvers.solve(operator, "clarabel")
 
 
+def test_auto_condenses_densely_only_onto_columns_that_fit(monkeypatch):
+    """A pair condenses onto slave and master DOFs: few unknowns can mean many columns (the two-body bench at
+    1.4e6 DOFs ran out of memory with 9816 unknowns, 34,762 columns). Beyond COLUMN_LIMIT, no dense W."""
+    scene = cc.bodies_library.punch_on_foundation(0.05)
+    assert cc.prepare(scene).formulation == "dual"
+    columns = model_module.contact_columns(cc.prepare(scene, "primal").fem).size
+    monkeypatch.setattr(model_module, "COLUMN_LIMIT", columns - 1)
+    model = cc.prepare(scene)
+    assert model.formulation == "dual" and solvers.matrix_free(model.program)
+    assert f"the {columns} DOFs to condense onto exceed {columns - 1}" in model.reason
+    forced = cc.prepare(cc.scene.library.hertz_punch(20))  # a force-controlled obstacle: no bound form
+    monkeypatch.setattr(model_module, "COLUMN_LIMIT", 1)
+    assert cc.prepare(cc.scene.library.hertz_punch(20)).formulation == "primal" != forced.formulation
+
+
 def test_auto_goes_matrix_free_for_large_closed_zones(monkeypatch):
     """The rule, not the timing: beyond CLOSED_LIMIT unknowns at closed nodes (or DENSE_LIMIT in all) auto applies
     W through K's factors and says why; a punch closing few nodes keeps the dense W; a force-controlled obstacle

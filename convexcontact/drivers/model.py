@@ -269,6 +269,12 @@ closed; ratios to one linear solve, dense / matrix-free; docs/performance.md): 2
 3267: 51 / 7.3. On the punch (few nodes closed) the dense W stays ahead: 2-D Tresca 634 unknowns
 1.9 / 4.0, 1098: 2.2 / 7.0."""
 
+COLUMN_LIMIT = 15000
+"""Most columns K is condensed onto for a dense W (the contact DOFs; a pair's slave and master DOFs): the
+Schur complement is dense, 8·c² bytes (1.8 GB at the limit) before PARDISO's own copies. The two-body
+bench at 1.4·10⁶ DOFs has 9816 unknowns, under DENSE_LIMIT, but 34,762 columns: its condensation passed
+18 GB and was stopped. Beyond it, the matrix-free dual (or the primal where that has no bound form)."""
+
 MATRIX_FREE = "dual-matrix-free"
 """The dual with W as an operator (one solve with K's factors per product) and newton-cg."""
 
@@ -289,15 +295,15 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
         return "primal", "no contact node has a free DOF: nothing to condense onto"
     reuse = " and is reused by every Picard step" if isinstance(law, Coulomb) else ""
     closed = round(unknowns * np.count_nonzero(fem.contact.gap <= TOUCHING) / fem.contact.m)
-    if (unknowns > DENSE_LIMIT or closed > CLOSED_LIMIT) and matrix_free_applies(fem, law):
-        size = (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}" if unknowns > DENSE_LIMIT else
-                f"{closed} contact unknowns at closed nodes exceed {CLOSED_LIMIT}")
-        return MATRIX_FREE, (f"{size}: W = B K⁻¹ Bᵀ is applied through one factorization of K{reuse}, never formed "
-                             "(a dense W would cost more), and newton-cg solves the dual")
-    if unknowns > DENSE_LIMIT:
-        return "primal", (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}: the dense condensed program would "
-                          "cost more than the sparse one (a force-controlled obstacle or a regularized friction "
-                          "has no matrix-free dual)")
+    too_large = (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}" if unknowns > DENSE_LIMIT else
+                 f"{closed} contact unknowns at closed nodes exceed {CLOSED_LIMIT}" if closed > CLOSED_LIMIT else
+                 f"the {columns} DOFs to condense onto exceed {COLUMN_LIMIT}" if columns > COLUMN_LIMIT else None)
+    if too_large and matrix_free_applies(fem, law):
+        return MATRIX_FREE, (f"{too_large}: W = B K⁻¹ Bᵀ is applied through one factorization of K{reuse}, never "
+                             "formed (a dense W would cost more), and newton-cg solves the dual")
+    if too_large and (unknowns > DENSE_LIMIT or columns > COLUMN_LIMIT):
+        return "primal", (f"{too_large}: the dense condensed program would cost more than the sparse one (a "
+                          "force-controlled obstacle or a regularized friction has no matrix-free dual)")
     if 4 * columns > fem.n_free:
         return "primal", f"the contact nodes carry {columns} of the {fem.n_free} DOFs: too many to gain by condensing"
     return "dual", (f"{unknowns} contact unknowns beside {fem.n_free} DOFs: K is condensed onto Γ_C once "
