@@ -70,7 +70,7 @@ def tensor_mesh(*axes: np.ndarray, quads: bool = False) -> fe.Mesh:
     for i, (axis, names) in enumerate(zip(axes, BOUNDARY_NAMES[dim])):
         for name, value in zip(names, (axis.min(), axis.max())):
             sides[name] = lambda p, i=i, value=value: np.abs(p[i] - value) < tol
-    return mesh.with_boundaries(sides)
+    return same_topology(mesh.with_boundaries(sides), mesh)
 
 
 def rectangle(geometry: Rectangle, quads: bool) -> fe.Mesh:
@@ -272,6 +272,25 @@ def cell_measures(mesh: fe.Mesh) -> np.ndarray:
               fe.MeshHex: fe.ElementHex1}
     element = next(element for kind, element in linear.items() if isinstance(mesh, kind))
     return fe.CellBasis(mesh, element(), intorder=2).dx.sum(axis=1)
+
+
+TOPOLOGY = ("_facets", "_t2f", "_f2t", "_edges", "_t2e")
+"""skfem's cached connectivity of a mesh (built on first use; private names, so each is copied only if present)."""
+
+
+def same_topology(new: fe.Mesh, old: fe.Mesh) -> fe.Mesh:
+    """``new`` (``old`` scaled, or with boundaries named) given the connectivity skfem already built for ``old``:
+    skfem's ``scaled`` and ``with_boundaries`` make a mesh that builds its facets again — 0.7 s each at 10⁶
+    DOFs in 2-D, twice in an assembly of 8.7 s — though neither changes the cells."""
+    for name in TOPOLOGY:
+        if name in vars(old):
+            setattr(new, name, vars(old)[name])
+    return new
+
+
+def scaled(mesh: fe.Mesh, factor: float) -> fe.Mesh:
+    """``mesh`` with its coordinates times ``factor``."""
+    return same_topology(mesh.scaled([factor] * mesh.dim()), mesh)
 
 
 def vector_basis(mesh: fe.Mesh, element: str, intorder: int | None = None) -> fe.Basis:
