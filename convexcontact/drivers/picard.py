@@ -3,7 +3,8 @@
     s^{k+1} = (1 − ω) s^k + ω F·S(λ_N(s^k)),
 
 λ_N(s) the pressure of the exact Tresca program with slip bound s (Oden's
-algorithm III/IV, Hild's map Φ). Only the slip bounds change between steps: the
+algorithm III/IV, Hild's map Φ), its steps combined by Anderson mixing (:class:`Anderson`;
+``Coulomb(acceleration=0)`` runs the plain map). Only the slip bounds change between steps: the
 program, the factorization (dual) and the solver's setup are built once, and each
 step updates the data of one solver session (OSQP also warm-starts).
 
