@@ -102,3 +102,21 @@ def test_bench_measures_a_case_and_the_command_writes_its_table(tmp_path, capsys
     assert (tmp_path / "bench_2d.csv").read_text().count("\n") == 2
     assert (tmp_path / "bench_2d.png").exists()
     json.dumps(row)  # plain data: the case runs in a subprocess that prints it as JSON
+
+
+def test_the_seeding_frictionless_program_reuses_the_friction_programs_w(monkeypatch):
+    """The frictionless seed's B = C N is the friction program's first rows: one W = B K⁻¹ Bᵀ is formed, and the
+    frictionless W is its leading block — equal to the W formed on its own."""
+    from convexcontact.fem.factorization import Condensation
+
+    formed = []
+    schur = Condensation.schur
+    monkeypatch.setattr(Condensation, "schur", lambda self, B: formed.append(B.shape[0]) or schur(self, B))
+    model = cc.prepare(hertz_punch(40, law=cc.Tresca(slip_bound=0.002)), "dual")
+    result = model.solve("clarabel")
+    assert result.status == "solved" and result.certificate.worst < 1e-10
+    m = model.fem.contact.m
+    assert formed == [model.program.P.shape[0]] and formed[0] > m  # the friction W only
+    frictionless = model.C @ model.fem.contact.N
+    leading, alone = model.condensation.schur(frictionless), schur(model.condensation.factorization, frictionless)
+    assert np.abs(leading - alone).max() <= 1e-13 * np.abs(alone).max()  # the same sums, other BLAS blocks

@@ -392,11 +392,13 @@ def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, 
 
 class Reused:
     """K's factorization or condensation, keeping the last W = B K⁻¹ Bᵀ: a sweep over the law's
-    coefficients rebuilds the dual program with the same B, and W is then not recomputed."""
+    coefficients rebuilds the dual program with the same B, and W is then not recomputed; nor is it for
+    the frictionless program that seeds a friction solve, whose B = C N is the friction program's first rows
+    (its W is the leading block)."""
 
     def __init__(self, factorization: Factorization):
         self.factorization = factorization
-        self._key, self._W = None, None
+        self._key, self._W, self._B = None, None, None
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self.factorization.solve(b)
@@ -407,8 +409,15 @@ class Reused:
     def schur(self, B: sp.spmatrix) -> np.ndarray:
         B = sp.csr_matrix(B)
         key = (B.shape, B.indptr.tobytes(), B.indices.tobytes(), B.data.tobytes())
-        if key != self._key:
-            self._key, self._W = key, self.factorization.schur(B)
+        if key == self._key:
+            return self._W
+        m = B.shape[0]
+        if self._B is not None and m < self._B.shape[0] and B.shape[1] == self._B.shape[1] \
+                and (self._B[:m] != B).nnz == 0:
+            block = self._W[:m, :m]
+            block.flags.writeable = False  # a view of the kept W
+            return block
+        self._key, self._W, self._B = key, self.factorization.schur(B), B
         return self._W
 
 
