@@ -398,7 +398,7 @@ class Reused:
 
     def __init__(self, factorization: Factorization):
         self.factorization = factorization
-        self._key, self._W, self._B = None, None, None
+        self._B, self._W = None, None
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self.factorization.solve(b)
@@ -407,17 +407,15 @@ class Reused:
         return self.factorization.delassus(B, K)
 
     def schur(self, B: sp.spmatrix) -> np.ndarray:
-        B = sp.csr_matrix(B)
-        key = (B.shape, B.indptr.tobytes(), B.indices.tobytes(), B.data.tobytes())
-        if key == self._key:
-            return self._W
+        B, kept = sp.csr_matrix(B), self._B
         m = B.shape[0]
-        if self._B is not None and m < self._B.shape[0] and B.shape[1] == self._B.shape[1] \
-                and (self._B[:m] != B).nnz == 0:
+        if kept is not None and B.shape[1] == kept.shape[1] and m <= kept.shape[0] and (kept[:m] != B).nnz == 0:
+            if m == kept.shape[0]:
+                return self._W
             block = self._W[:m, :m]
             block.flags.writeable = False  # a view of the kept W
             return block
-        self._key, self._W, self._B = key, self.factorization.schur(B), B
+        self._B, self._W = B, self.factorization.schur(B)
         return self._W
 
 

@@ -138,7 +138,7 @@ def stiffness(basis: fe.Basis, lame: tuple[np.ndarray, np.ndarray]) -> sp.csr_ma
     Summed by hand rather than as a scikit-fem BilinearForm: the form evaluates its integrand
     once per pair of local DOFs (36 for P1 triangles, 576 for Q1 hexahedra), each pass over every element
     with its own temporaries; one batched product per block of elements does the same sums
-    (tests/test_fast_assembly.py checks it against the form)."""
+    (tests/test_stiffness.py checks it against the form)."""
     lam, mu = lame
     nloc, nel = basis.element_dofs.shape
     data = np.empty((nel, nloc, nloc))
