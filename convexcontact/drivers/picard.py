@@ -24,13 +24,15 @@ from __future__ import annotations
 import hashlib
 import itertools
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
 
 from .. import solvers
+from ..conic import ConicSolution
 from ..fem.mollifier import mollifier
+from ..formulations.dual import normal_multipliers
 from ..results.certificate import certify
 from ..scene.model import Coulomb, SceneError, evaluate_field
 from .model import CERTIFIED, CHOSEN, LAW_DRIVERS, Model, field_at_points, formulate, timed
@@ -49,8 +51,8 @@ ALTERNATIVES = ("clarabel", "osqp")
 
 
 def pressure_map(model: Model):
-    """s(λ_N) = F · G S λ_N at the friction points (scaled units), and the slip bound of a unit
-    pressure (the scale below which changes of s are measured absolutely)."""
+    """s(λ_N) = F · G S max(λ_N, 0) at the friction points (scaled units), the slip bound of a unit
+    pressure (the scale below which changes of s are measured absolutely), and F · G S as a matrix."""
     law: Coulomb = model.law
     fem, friction = model.fem, model.friction
     coefficient = field_at_points(law.friction, "contact.friction", fem, friction)
@@ -62,7 +64,9 @@ def pressure_map(model: Model):
         smoothed = pressure if smoothing is None else smoothing @ pressure
         return coefficient * (friction.interpolation @ np.maximum(smoothed, 0.0))
 
-    return bound, max(coefficient.max(initial=0.0), 1e-300)
+    linear = sp.diags(coefficient) @ friction.interpolation @ (sp.identity(fem.contact.m) if smoothing is None
+                                                                else sp.csr_matrix(smoothing))
+    return bound, max(coefficient.max(initial=0.0), 1e-300), sp.csr_matrix(linear)
 
 
 def initial_pressure(model: Model, solver: str, options: dict) -> np.ndarray:
@@ -206,7 +210,7 @@ def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, histo
             progress) -> np.ndarray:
     """Run the map from the slip bounds ``s`` for at most ``steps``; fill ``attempt``, return the last bounds."""
     model, law = attempt.model, attempt.model.law
-    bound, unit_bound = pressure_bound
+    bound, unit_bound, linear = pressure_bound
     try:
         session = reused_session(model, attempt.solver, attempt.options)
     except solvers.ConeNotSupported as error:  # OSQP and a 3-D cone: the user's choice is the user's error
@@ -218,10 +222,20 @@ def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, histo
     states, changes, noise = [s], [], []
     mixing = Anderson(law.acceleration)
     attempt.outcome = UNFINISHED
+    newton = newton_session(model, session, s) if law.newton else None  # the Coulomb problem's own Newton, once
     for k in steps:
         start = time.perf_counter()
         session.update(**model.bound_update(s))
-        solution = session.solve()
+        solution = None
+        if newton is not None and (newton is session or attempt.last is not None):  # it has a start
+            solution = coulomb_newton(model, newton, linear, attempt.last)
+            newton = None
+            if solution.solved:  # a fixed point of the map: the next bounds are the ones it reached
+                s = solution.info["radii"]
+            else:
+                solution = None
+        by_newton = solution is not None
+        solution = solution or session.solve()
         inner = time.perf_counter() - start
         timings["solve"] = timings.get("solve", 0.0) + inner
         if not solution.solved:
@@ -236,7 +250,7 @@ def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, histo
         attempt.iterations += 1
         history.append({"iteration": k, "relative_change": changes[-1], "coulomb_residual": coulomb_residual,
                         "inner_residual": inner_residual, "inner_iterations": solution.iterations,
-                        "inner_time": inner, "relaxation": attempt.relaxation})
+                        "inner_time": inner, "relaxation": attempt.relaxation, "coulomb_newton": by_newton})
         attempt.keep((coulomb_residual, k, solution, fields, target))
         if progress is not None:
             progress(k, changes[-1])
@@ -247,6 +261,29 @@ def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, histo
             attempt.outcome = found
             break
     return s
+
+
+def newton_session(model: Model, session, s: np.ndarray):
+    """A newton-cg session for the Coulomb problem's own Newton solve (:func:`coulomb_newton`): the map's own
+    session where it is one, else one on the program with slip bounds ``s``; None where it does not apply (the
+    primal, whose slip bounds are no linear map of its unknowns; a program not in bound form)."""
+    if model.formulation != "dual":
+        return None
+    if isinstance(session, solvers.newton_cg.Session):
+        return session
+    try:
+        return solvers.newton_cg.Session(replace(model.program, **model.bound_update(s)))
+    except ValueError:  # a force-controlled obstacle's equality
+        return None
+
+
+def coulomb_newton(model: Model, newton, linear: sp.spmatrix, last: tuple | None) -> ConicSolution:
+    """The Coulomb problem's answer by Newton's method on the dual whose ball radii move with its unknowns,
+    s = F G S λ_N (a quasi-variational inequality), from the map's ``last`` iterate or the session's own start.
+    Where it stalls the answer is "failed" and the map goes on: Newton's method is only local."""
+    if last is not None:
+        newton.seed(last[2])
+    return newton.coupled(linear @ normal_multipliers(model.program, model.C, model.fem.contact))
 
 
 class Anderson:
@@ -291,8 +328,9 @@ def paths(model: Model, solver: str, options: dict, timings: dict):
     if model.reason != CHOSEN and (other := other_formulation(model, timings)) is not None:
         models.append(other)
         yield other, solvers.resolve(solver, other.program), options
-    for name in ALTERNATIVES if not options else ():
-        yield from ((each, name, {}) for each in models if name != solvers.resolve(solver, each.program))
+    for name in ALTERNATIVES if not options else ():  # these need P as a matrix
+        yield from ((each, name, {}) for each in models
+                    if name != solvers.resolve(solver, each.program) and not solvers.matrix_free(each.program))
 
 
 def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):

@@ -107,6 +107,13 @@ def dual(
     return program, recover, bound_update
 
 
+def normal_multipliers(program: ConicProgram, C: sp.spmatrix, contact: ContactTrace) -> sp.csr_matrix:
+    """λ_N, as the recovery reports it, as a linear map of the dual's unknowns: their first m, 0 at a row that
+    carries nothing."""
+    m = C.shape[0]
+    return sp.diags(carrying(C @ contact.N).astype(float)) @ sp.eye(m, program.n_variables, format="csr")
+
+
 def stick_guess(program: ConicProgram, frictionless: ConicSolution, contact: ContactTrace) -> ConicSolution:
     """A first guess for the frictional dual ``program`` from the answer of its frictionless counterpart
     (the same trace without the tangential force): its pressures and obstacle advance, no friction

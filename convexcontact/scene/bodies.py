@@ -228,7 +228,7 @@ def combined_law(laws: tuple) -> object:
     return replace(reference, **{field_name: values})
 
 
-COULOMB_OPTIONS = ("relaxation", "tol", "max_iterations", "initial_pressure", "acceleration")
+COULOMB_OPTIONS = ("relaxation", "tol", "max_iterations", "initial_pressure", "acceleration", "newton")
 """What one Picard map over several Coulomb contacts needs to be the same on each."""
 
 

@@ -529,6 +529,9 @@ class Coulomb:
     local law. ``initial_pressure``: None starts from the frictionless (Signorini)
     pressures, as Oden's algorithm III; otherwise a field of pressures. ``acceleration``:
     how many earlier steps Anderson mixing combines with the relaxed one (0: the plain map).
+    ``newton``: on the dual, seek the fixed point once by Newton's method on the Coulomb problem
+    itself, from the map's first step (the matrix-free dual: from the start); the map goes on where
+    it stalls. False runs the map alone.
     """
 
     friction: NodalValues = 0.0
@@ -542,6 +545,7 @@ class Coulomb:
     initial_pressure: NodalValues | None = None
     compliance: NormalCompliance | None = None
     acceleration: int = 5
+    newton: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "friction", check_field(self.friction, "contact.friction"))
@@ -555,6 +559,8 @@ class Coulomb:
         positive_integer(self.max_iterations, "contact.max_iterations")
         if self.acceleration != 0:
             positive_integer(self.acceleration, "contact.acceleration", "give 0 (the plain map) or a depth such as 5")
+        if not isinstance(self.newton, bool):
+            raise SceneError("contact.newton", f"expected true or false, got {self.newton!r}")
         if self.initial_pressure is not None:
             object.__setattr__(
                 self, "initial_pressure", check_field(self.initial_pressure, "contact.initial_pressure")

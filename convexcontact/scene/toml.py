@@ -37,6 +37,7 @@ from .model import (
 )
 
 NUMBER, INTEGER, TEXT, PAIR = "a number", "an integer", "a string", "two numbers [a, b]"
+BOOLEAN = "true or false"
 TRIPLE, INTEGERS3 = "three numbers [a, b, c]", "three integers [nx, ny, nz]"
 VECTOR, POINT = "two or three numbers (2-D or 3-D)", "a number (2-D) or a point [x, y, z] (3-D)"
 FIELD = "a number or a formula in x and y"
@@ -82,7 +83,8 @@ LAWS = {
     "tresca": (Tresca, {"slip_bound": FIELD, **FRICTION_OPTIONS}),
     "coulomb": (Coulomb, {
         "friction": FIELD, "smoothing_radius": NUMBER, "relaxation": NUMBER, "tol": NUMBER,
-        "max_iterations": INTEGER, "initial_pressure": FIELD, "acceleration": INTEGER, **FRICTION_OPTIONS,
+        "max_iterations": INTEGER, "initial_pressure": FIELD, "acceleration": INTEGER, "newton": BOOLEAN,
+        **FRICTION_OPTIONS,
     }),
 }
 
@@ -290,6 +292,7 @@ def _check_type(value, kind: str, path: str) -> None:
     ok = {
         NUMBER: number(value),
         INTEGER: isinstance(value, int) and not isinstance(value, bool),
+        BOOLEAN: isinstance(value, bool),
         TEXT: isinstance(value, str),
         PAIR: isinstance(value, list) and len(value) == 2 and all(number(x) for x in value),
         TRIPLE: isinstance(value, list) and len(value) == 3 and all(number(x) for x in value),

@@ -43,6 +43,8 @@ STALL = 0.9
 """A Newton segment that leaves the natural residual above STALL × its value is followed by a gradient one."""
 CG_LIMIT = 5000
 """CG iterations per Newton step before it gives up (the step then still uses its last iterate)."""
+GMRES_RESTART = 50
+"""Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
 
 def check_settings(names) -> None:
@@ -61,15 +63,24 @@ class _Bounds:
     bounds: np.ndarray  # variables with v ≥ 0
     balls: np.ndarray  # (k, p) variables of each ball
     radius: np.ndarray  # (k,)
+    coupling: sp.csr_matrix | None = None  # radii that move: ρ = coupling v + radius (in v), see coupled()
+
+    def radii(self, v: np.ndarray) -> np.ndarray:
+        """The balls' radii at v."""
+        return self.radius if self.coupling is None else np.maximum(self.coupling @ v + self.radius, 0.0)
 
 
-def _bounds(program: ConicProgram, form: BoundForm) -> _Bounds:
+def _bounds(program: ConicProgram, form: BoundForm, coupling: sp.spmatrix | None = None) -> _Bounds:
     scale, shift = np.ones(program.n_variables), np.zeros(program.n_variables)
     rows = np.concatenate([form.bound_rows, form.ball_rows.ravel()])
     columns = np.concatenate([form.bound_vars, form.ball_vars.ravel()])
     coef = np.concatenate([form.bound_coef, form.ball_coef.ravel()])
     scale[columns], shift[columns] = -1.0 / coef, program.b[rows] / coef
-    return _Bounds(scale, shift, form.bound_vars, form.ball_vars, program.b[form.ball_radius_rows])
+    if coupling is None:
+        return _Bounds(scale, shift, form.bound_vars, form.ball_vars, program.b[form.ball_radius_rows])
+    coupling = sp.csr_matrix(coupling)  # ρ = coupling x = coupling (shift + scale ⊙ v)
+    return _Bounds(scale, shift, form.bound_vars, form.ball_vars, coupling @ shift,
+                   sp.csr_matrix(coupling @ sp.diags(scale)))
 
 
 def bound_form_of(program: ConicProgram) -> BoundForm:
@@ -105,6 +116,16 @@ class Session:
         if self._start is None:
             self._start = guess.x
 
+    def coupled(self, coupling: sp.spmatrix, max_iter: int = 30) -> ConicSolution:
+        """:func:`coupled` from the last answer, with this session's preconditioner; the session's program then
+        holds the radii reached, and the next solve starts from its answer."""
+        solution = coupled(self.program, coupling, self._start, self._tol, max_iter, self._verbose, self._cache)
+        if solution.solved:
+            self.update(b=self.program.b.copy())
+            self.program.b[self._form.ball_radius_rows] = solution.info["radii"]
+            self._start = solution.x
+        return solution
+
     def solve(self) -> ConicSolution:
         solution = newton_cg(self.program, self._form, self._start, self._tol, self._max_iter, self._verbose,
                              self._progress, self._cache)
@@ -113,18 +134,37 @@ class Session:
         return solution
 
 
+def coupled(program: ConicProgram, coupling: sp.spmatrix, start: np.ndarray, tol: float | None = None,
+            max_iter: int = 30, verbose: bool = False, cache: dict | None = None) -> ConicSolution:
+    """Newton's method from ``start`` on the program whose ball radii move with x: ‖v_k‖ ≤ (coupling x)_k,
+    a quasi-variational inequality (no f is minimized: the Newton system is not symmetric, GMRES solves it,
+    and a step is taken where it lowers the natural residual). ``coupling`` (balls × variables) may not
+    involve the balls' own variables. The answer is that of the program whose radius rows hold the radii
+    it reached (also ``info["radii"]``); "failed" (solver status "stalled") where no step lowers the residual: without a convexity
+    argument Newton's method is local, so start near the answer (a fixed point of x ↦ the program's answer
+    with radii coupling x)."""
+    form = bound_form_of(program)
+    coupling = sp.csr_matrix(coupling)
+    if coupling.shape != (form.ball_vars.shape[0], program.n_variables):
+        raise ValueError(f"newton-cg: coupling has shape {coupling.shape}, expected one row per ball and one column "
+                         f"per variable, {(form.ball_vars.shape[0], program.n_variables)}")
+    if np.isin(coupling.indices, form.ball_vars).any():
+        raise ValueError("newton-cg: a radius may not depend on the balls' own variables")
+    return newton_cg(program, form, start, tol or TOL, max_iter, verbose, None, cache, coupling)
+
+
 def solve(program: ConicProgram, **options) -> ConicSolution:
     """Solve a bound-form ``program`` (P a matrix or a scipy LinearOperator); options as :class:`Session`."""
     return Session(program, **options).solve()
 
 
 def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_iter: int, verbose=False,
-              progress=None, cache: dict | None = None) -> ConicSolution:
+              progress=None, cache: dict | None = None, coupling: sp.spmatrix | None = None) -> ConicSolution:
     """Newton's method on the natural map from ``start`` (x; None: the projected gradient step from 0);
-    ``cache`` keeps the preconditioner for the next solve of a session."""
+    ``cache`` keeps the preconditioner for the next solve of a session; ``coupling``: see :func:`coupled`."""
     began = time.perf_counter()
     P = spla.aslinearoperator(program.P)
-    sets = _bounds(program, form)
+    sets = _bounds(program, form, coupling)
     products = [0]
 
     def gradient(v):  # ∇f in v: scale ⊙ (P x + q)
@@ -157,6 +197,16 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         alpha = min(1.0, max(0.0, -slope / curve)) if curve > 0 else float(slope < 0)
         return v + alpha * d, g + alpha * Pd
 
+    def backtrack(v, g, towards, residual):
+        """Without an f (moving balls), the first of 1, ½, …, 1/16 of the way to ``towards`` (projected)
+        whose natural residual is below ``residual``; ``v`` itself where none is."""
+        for alpha in 0.5 ** np.arange(5):
+            w = _project(v + alpha * (towards - v), sets)
+            gw = gradient(w)
+            if _natural(w, gw, c, sets, program.q)[0] < residual:
+                return w, gw, True
+        return v, g, False
+
     residual = first = None
     best = np.inf
     steps = cg_total = 0
@@ -183,15 +233,26 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         newton, iterations = _step(P, program.q, sets, v, y, c, max(target, 0.1 * tol * size / np.max(c)), products,
                                    cache["precondition"])
         cg_total += iterations
+        best = min(best, residual)
+        if sets.coupling is not None:
+            v, g, moved = backtrack(v, g, newton, residual)
+            if not moved:
+                word = "stalled"
+                break
+            continue
         # Newton's point, projected, is taken where it halves the least natural residual so far (so those steps
         # cannot cycle; near the answer f's changes are round-off, and the segment alone stalled a 3-D Tresca
         # dual at 2e-10). Elsewhere the least f on the segment to it (full steps cycled on a Tresca dual), and
         # where that gains too little a projected-gradient segment: f never rises between accepted points
-        best = min(best, residual)
         v, g = segment(v, g, _project(newton, sets), ACCEPT * best)
         if _natural(v, g, c, sets, program.q)[0] > STALL * residual:
             v, g = segment(v, g, _project(v - c * g, sets))
     x = sets.shift + sets.scale * v
+    info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual}
+    if sets.coupling is not None:  # the program of the radii reached: x is its answer
+        b = program.b.copy()
+        b[form.ball_radius_rows] = info["radii"] = sets.radii(v)
+        program = replace(program, b=b)
     z = np.zeros(program.n_constraints)
     z[form.bound_rows] = np.maximum(g[form.bound_vars], 0.0)  # P x + q + Aᵀz = 0 with a = −1 / scale, z ≥ 0
     z[form.ball_rows] = g[form.ball_vars]
@@ -199,8 +260,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     if status != "solved" and residual is not None and residual <= 1e3 * tol:
         status = "inaccurate"
     return ConicSolution(x=x, z=z, s=program.b - program.A @ x, status=status, solver_status=word, iterations=steps,
-                         solve_time=time.perf_counter() - began, solver="newton-cg",
-                         info={"products": products[0], "cg_iterations": cg_total, "natural_residual": residual})
+                         solve_time=time.perf_counter() - began, solver="newton-cg", info=info)
 
 
 def _preconditioner(approximation, scale: np.ndarray, shift: float):
@@ -227,38 +287,42 @@ def _step_lengths(P, sets: _Bounds, c: float):
 
 
 def _natural(v, g, c, sets: _Bounds, q):
-    """The natural residual ‖v − Π(v − c∇f)‖∞ relative to the answer's scale, v − c∇f and that scale."""
+    """The natural residual ‖v − Π(v − c∇f)‖∞ relative to the answer's scale, v − c∇f and that scale
+    (Π onto the sets at v, where radii move)."""
     y = v - c * g
     size = max(np.abs(v).max(initial=0.0), (c * np.abs(sets.scale * q)).max(initial=0.0), 1e-300)
-    return np.abs(v - _project(y, sets)).max(initial=0.0) / size, y, size
+    return np.abs(v - _project(y, sets, sets.radii(v))).max(initial=0.0) / size, y, size
 
 
-def _project(y: np.ndarray, sets: _Bounds) -> np.ndarray:
-    """Π onto v_bounds ≥ 0 and ‖v_ball‖ ≤ ρ (other variables are free)."""
+def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> np.ndarray:
+    """Π onto v_bounds ≥ 0 and ‖v_ball‖ ≤ ρ (other variables are free); ρ = ``radius``, or where radii move
+    the radii at y's projected bounds (then the point is in its own sets)."""
     v = y.copy()
     v[sets.bounds] = np.maximum(y[sets.bounds], 0.0)
+    radius = sets.radii(v) if radius is None else radius
     ball = y[sets.balls]
     norm = np.linalg.norm(ball, axis=1)
-    outside = norm > sets.radius
+    outside = norm > radius
     if outside.any():
-        v[sets.balls[outside]] = sets.radius[outside, None] * unit_rows(ball[outside])
+        v[sets.balls[outside]] = radius[outside, None] * unit_rows(ball[outside])
     return v
 
 
 def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition):
-    """The Newton step from v (y = v − c∇f): the new v and the CG iterations it took."""
+    """The Newton step from v (y = v − c∇f): the new v and the CG (GMRES, where radii move) iterations it took."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
     held[sets.bounds[y[sets.bounds] < 0]] = True  # held at 0
+    radius = sets.radii(v)
     ball = y[sets.balls]
     norm = np.linalg.norm(ball, axis=1)
-    point = np.flatnonzero(sets.radius <= 0)  # a ball of radius 0 is its centre
-    sphere = np.flatnonzero((norm > sets.radius) & (sets.radius > 0))
+    point = np.flatnonzero(radius <= 0)  # a ball of radius 0 is its centre
+    sphere = np.flatnonzero((norm > radius) & (radius > 0))
     held[sets.balls[point].ravel()] = True
     held[sets.balls[sphere].ravel()] = True
     free = np.flatnonzero(~held)
-    rho = sets.radius[sphere]
+    rho = radius[sphere]
     p = sets.balls.shape[1]
     bases = np.zeros((0, p, max(p - 1, 0)))
     if sphere.size:
@@ -269,19 +333,25 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition):
     curvature = np.repeat((norm[sphere] - rho) / (c_sphere * rho), t)
     # v = new + Z ξ: ξ holds the free variables, then t tangent coordinates per sphere
     sphere_vars = sets.balls[sphere]
+    moving = None if sets.coupling is None else sets.coupling[sphere]
+    if moving is not None:  # the sphere's radius at the new point: ρ(new + Z ξ), linear in the free variables
+        directions = unit_rows(ball[sphere])
+        new[sphere_vars] = (moving @ new + sets.radius[sphere])[:, None] * directions
 
     def expand(xi):
         out = np.zeros(n)
         out[free] = xi[:free.size]
         if k:
             out[sphere_vars] += np.einsum("kpt,kt->kp", bases, xi[free.size:].reshape(k, t))
+            if moving is not None:
+                out[sphere_vars] += (moving @ out)[:, None] * directions
         return out
 
     def restrict(w):
         tangent = np.einsum("kpt,kp->kt", bases, w[sphere_vars]).ravel() if k else np.zeros(0)
         return np.concatenate([w[free], tangent])
 
-    def hessian(xi):  # Zᵀ P̃ Z ξ + curvature on the tangent coordinates
+    def hessian(xi):  # Zᵀ P̃ Z ξ + curvature on the tangent coordinates (restrict is not expand's transpose where radii move)
         products[0] += 1
         Pv = sets.scale * P.matvec(sets.scale * expand(xi))
         return restrict(Pv) + np.concatenate([np.zeros(free.size), curvature * xi[free.size:]])
@@ -294,7 +364,12 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition):
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
             (size, size), matvec=lambda xi: restrict(precondition(expand(xi))), dtype=float)
-        xi, _ = spla.cg(H, rhs, x0=restrict(v - new), rtol=0.0, atol=target, maxiter=CG_LIMIT, M=M,
-                        callback=lambda _: count.__setitem__(0, count[0] + 1))
+        callback = lambda *_: count.__setitem__(0, count[0] + 1)
+        if moving is None:
+            xi, _ = spla.cg(H, rhs, x0=restrict(v - new), rtol=0.0, atol=target, maxiter=CG_LIMIT, M=M,
+                            callback=callback)
+        else:
+            xi, _ = spla.gmres(H, rhs, x0=restrict(v - new), rtol=0.0, atol=target, restart=GMRES_RESTART,
+                               maxiter=CG_LIMIT // GMRES_RESTART, M=M, callback=callback, callback_type="pr_norm")
         new = new + expand(xi)
     return new, count[0]

@@ -1,0 +1,96 @@
+"""Newton's method on the Coulomb problem itself: the dual whose friction balls have radii F·λ_N that move
+with the unknowns, against the Picard map's fixed point and against Clarabel on the Tresca program of the
+radii Newton reached (a fixed point of the map), judged by the certificate."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import convexcontact as cc
+from convexcontact import solvers
+from convexcontact.conic import ConicProgram, nonnegative, soc
+from convexcontact.scene.library import whole_face
+from convexcontact.scene.model import Coulomb, SceneError
+from convexcontact.solvers import newton_cg
+
+
+def coulomb_like(rng, nodes: int, size: int, friction: float):
+    """min ½xᵀPx + qᵀx over x_N ≥ 0 and ‖x_T,k‖ ≤ s_k (P random SPD, the balls after the bounds, their radius
+    rows first), and the coupling s = F x_N."""
+    n = nodes * (1 + size)
+    G = rng.standard_normal((n, n))
+    P = G @ G.T / n + 0.05 * np.eye(n)
+    rows, cones = [-sp.eye(nodes, n)], [nonnegative(nodes)]
+    for k in range(nodes):
+        rows.append(sp.vstack([sp.csr_matrix((1, n)), -sp.eye(size, n, nodes + k * size)]))
+        cones.append(soc(1 + size))
+    q = rng.standard_normal(n)
+    q[:nodes] = -np.abs(q[:nodes]) - 0.5  # pressed: most x_N > 0
+    program = ConicProgram(sp.csc_matrix(P), q, sp.vstack(rows).tocsc(), np.zeros(nodes * (2 + size)), tuple(cones))
+    return program, friction * sp.eye(nodes, n, format="csr")
+
+
+@pytest.mark.parametrize("size", [1, 2])
+def test_newton_reaches_a_fixed_point_of_the_tresca_map_on_random_programs(size):
+    """Intervals (2-D friction) and discs (3-D): Newton's answer x is the Tresca answer for the radii F x_N it
+    reached (Clarabel on that program, an independent solve), and the radii it reports are F x_N."""
+    rng = np.random.default_rng(size)
+    program, coupling = coulomb_like(rng, 12, size, 0.3)
+    answer = newton_cg.coupled(program, coupling, None)
+    assert answer.status == "solved" and answer.info["natural_residual"] <= newton_cg.TOL
+    radii = answer.info["radii"]
+    np.testing.assert_allclose(radii, coupling @ answer.x, rtol=0, atol=1e-14)
+    norm = np.linalg.norm(answer.x[12:].reshape(12, size), axis=1)
+    slipping = np.isclose(norm, radii, rtol=1e-9, atol=0) & (radii > 0)
+    assert slipping.any() and (norm < radii * (1 - 1e-9)).any()  # the balls move: points slip, others stick
+    b = program.b.copy()
+    b[12 + np.arange(12) * (1 + size)] = radii
+    tresca = solvers.solve(dataclasses.replace(program, b=b), "clarabel", tol=1e-12)
+    assert np.abs(tresca.x - answer.x).max() < 1e-8 * np.abs(answer.x).max()
+
+
+def test_bad_couplings_are_refused():
+    program, coupling = coulomb_like(np.random.default_rng(0), 4, 1, 0.3)
+    with pytest.raises(ValueError, match="one row per ball"):
+        newton_cg.coupled(program, coupling[:3], None)
+    with pytest.raises(ValueError, match="balls' own variables"):
+        newton_cg.coupled(program, sp.eye(4, 8, 4), None)
+
+
+@pytest.mark.parametrize("formulation, dim, nodes, dofs", [
+    ("dual", 2, 61, 2e3), ("dual-matrix-free", 2, 61, 2e3), ("dual-matrix-free", 3, 49, 6e2), ("dual", 3, 49, 6e2),
+])
+def test_newton_gives_the_maps_fixed_point(formulation, dim, nodes, dofs):
+    """Whole-face Coulomb: Newton's answer is the plain Picard map's fixed point (tol 1e-10), certified to
+    1e-10 where the map's own stops at its tolerance, in fewer inner solves."""
+    law = Coulomb(friction=0.3, tol=1e-10)
+    scene = whole_face(dim, nodes, dofs, law)
+    newton = cc.prepare(scene, formulation).solve()
+    picard = cc.prepare(scene.with_law(dataclasses.replace(law, newton=False)), formulation).solve()
+    assert newton.status == picard.status == "solved"
+    assert newton.extra["history"][-1]["coulomb_newton"]
+    assert not any(step["coulomb_newton"] for step in picard.extra["history"])
+    assert len(newton.extra["history"]) < len(picard.extra["history"])
+    assert newton.certificate.worst <= 1e-10
+    scale = np.abs(picard.contact.pressure).max()
+    assert np.abs(newton.contact.pressure - picard.contact.pressure).max() < 1e-8 * scale
+    assert np.abs(newton.contact.friction - picard.contact.friction).max() < 1e-8 * scale
+
+
+def test_a_stalled_newton_leaves_the_map_to_converge(monkeypatch):
+    """Newton's method is local: where it fails, the map goes on from where it was, and converges."""
+    original = newton_cg.Session.coupled
+    monkeypatch.setattr(newton_cg.Session, "coupled", lambda self, coupling: original(self, coupling, max_iter=1))
+    scene = whole_face(2, 61, 2e3, Coulomb(friction=0.3))
+    result = cc.prepare(scene, "dual").solve()
+    assert result.status == "solved" and result.certificate.worst <= 1e-6
+    assert not any(step["coulomb_newton"] for step in result.extra["history"])
+    assert len(result.extra["history"]) > 2
+
+
+def test_newton_option_is_checked():
+    with pytest.raises(SceneError) as error:
+        Coulomb(friction=0.3, newton="yes")
+    assert error.value.field == "contact.newton"
