@@ -24,7 +24,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -206,9 +206,10 @@ def residual(model: Model, fields, bound: np.ndarray) -> float:
                    model.compliance).worst
 
 
-def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, history: list, timings: dict,
-            progress) -> np.ndarray:
-    """Run the map from the slip bounds ``s`` for at most ``steps``; fill ``attempt``, return the last bounds."""
+def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, timings: dict, progress) -> np.ndarray:
+    """Run the map from the slip bounds ``s`` for at most ``steps``; fill ``attempt``, return the last bounds.
+    ``s`` may be a function giving them: it is called only if Newton's method does not answer from the start
+    (the frictionless solve it makes is then not needed)."""
     model, law = attempt.model, attempt.model.law
     bound, unit_bound, linear = pressure_bound
     try:
@@ -219,14 +220,12 @@ def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, histo
         attempt.outcome = f"refused ({error})"
         return s
     model.seed(session, attempt.solver, attempt.options)
-    states, changes, noise = [s], [], []
+    states, changes, noise = [] if callable(s) else [s], [], []
     mixing = Anderson(law.acceleration)
     attempt.outcome = UNFINISHED
-    newton = newton_session(model, session, s) if law.newton else None  # the Coulomb problem's own Newton, once
+    newton = newton_session(model, session) if law.newton else None  # the Coulomb problem's own Newton, once
     for k in steps:
-        start = time.perf_counter()
-        session.update(**model.bound_update(s))
-        solution = None
+        start, solution = time.perf_counter(), None
         if newton is not None and (newton is session or attempt.last is not None):  # it has a start
             solution = coulomb_newton(model, newton, linear, attempt.last)
             newton = None
@@ -235,7 +234,14 @@ def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, histo
             else:
                 solution = None
         by_newton = solution is not None
-        solution = solution or session.solve()
+        if solution is None:
+            if callable(s):
+                paused = time.perf_counter()
+                s = s()
+                states.append(s)
+                start += time.perf_counter() - paused
+            session.update(**model.bound_update(s))
+            solution = session.solve()
         inner = time.perf_counter() - start
         timings["solve"] = timings.get("solve", 0.0) + inner
         if not solution.solved:
@@ -263,16 +269,17 @@ def iterate(attempt: Attempt, s: np.ndarray, steps: range, pressure_bound, histo
     return s
 
 
-def newton_session(model: Model, session, s: np.ndarray):
+def newton_session(model: Model, session):
     """A newton-cg session for the Coulomb problem's own Newton solve (:func:`coulomb_newton`): the map's own
-    session where it is one, else one on the program with slip bounds ``s``; None where it does not apply (the
-    primal, whose slip bounds are no linear map of its unknowns; a program not in bound form)."""
+    session where it is one, else one on the model's program (whose radius rows Newton's coupling replaces);
+    None where it does not apply (the primal, whose slip bounds are no linear map of its unknowns; a program
+    not in bound form)."""
     if model.formulation != "dual":
         return None
     if isinstance(session, solvers.newton_cg.Session):
         return session
     try:
-        return solvers.newton_cg.Session(replace(model.program, **model.bound_update(s)))
+        return solvers.newton_cg.Session(model.program)
     except ValueError:  # a force-controlled obstacle's equality
         return None
 
@@ -340,7 +347,11 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
     timings = dict(model.timings)
     with timed(timings, "initial"):
         pressure_bound = pressure_map(model)
-        s = pressure_bound[0](initial_pressure(model, solver, options))
+
+    def s():  # the first slip bounds, made only where Newton's method does not answer from the start
+        with timed(timings, "initial"):
+            return pressure_bound[0](initial_pressure(model, solver, options))
+
     history, attempts = [], []
     tries = paths(model, solver, options, timings)
     path, relaxation, halvings = next(tries), law.relaxation, 0
