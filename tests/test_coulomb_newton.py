@@ -94,3 +94,12 @@ def test_newton_option_is_checked():
     with pytest.raises(SceneError) as error:
         Coulomb(friction=0.3, newton="yes")
     assert error.value.field == "contact.newton"
+
+
+def test_a_named_solver_runs_its_own_map():
+    """A study that names its solver compares that solver's map: Newton answers only for "auto"."""
+    scene = whole_face(2, 61, 2e3, Coulomb(friction=0.3))
+    named = cc.prepare(scene, "dual").solve("clarabel")
+    left = cc.prepare(scene, "dual").solve()
+    assert named.solver == "clarabel" and not any(step["coulomb_newton"] for step in named.extra["history"])
+    assert left.solver == "newton-cg" and [step["coulomb_newton"] for step in left.extra["history"]] == [True]

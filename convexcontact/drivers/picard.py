@@ -162,6 +162,7 @@ class Attempt:
     stop: float = 0.0  # the change it stopped at: max(tol, NOISE × inner residual)
     time: float = 0.0
     required: bool = False  # the user's own formulation and solver: errors of its setup are raised
+    newton: bool = False  # first try Newton's method on the Coulomb problem itself (coulomb_newton)
     best: tuple | None = None  # (Coulomb residual, iteration, solution, fields, bound) of its best iterate
     last: tuple | None = None
     failed: object = None  # the inner solution that failed, if one did
@@ -212,23 +213,31 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
     (the frictionless solve it makes is then not needed)."""
     model, law = attempt.model, attempt.model.law
     bound, unit_bound, linear = pressure_bound
+    session = None
+
+    def opened():  # the map's solver session, made where it is needed (not where Newton answers at once)
+        nonlocal session
+        if session is None:
+            session = reused_session(model, attempt.solver, attempt.options)
+            model.seed(session, attempt.solver, attempt.options)
+        return session
+
     try:
-        session = reused_session(model, attempt.solver, attempt.options)
+        newton = newton_session(model, attempt, opened) if attempt.newton else None
+        if newton is None:
+            opened()
     except solvers.ConeNotSupported as error:  # OSQP and a 3-D cone: the user's choice is the user's error
         if attempt.required:
             raise
         attempt.outcome = f"refused ({error})"
         return s
-    model.seed(session, attempt.solver, attempt.options)
     states, changes, noise = [] if callable(s) else [s], [], []
     mixing = Anderson(law.acceleration)
     attempt.outcome = UNFINISHED
-    newton = newton_session(model, session) if law.newton else None  # the Coulomb problem's own Newton, once
     for k in steps:
         start, solution = time.perf_counter(), None
-        if newton is not None and (newton is session or attempt.last is not None):  # it has a start
-            solution = coulomb_newton(model, newton, linear, attempt.last)
-            newton = None
+        if newton is not None:  # once, from its start (the map's first answer is no better: measured)
+            solution, newton = coulomb_newton(model, newton, linear), None
             if solution.solved:  # a fixed point of the map: the next bounds are the ones it reached
                 s = solution.info["radii"]
             else:
@@ -240,7 +249,7 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
                 s = s()
                 states.append(s)
                 start += time.perf_counter() - paused
-            session.update(**model.bound_update(s))
+            opened().update(**model.bound_update(s))
             solution = session.solve()
         inner = time.perf_counter() - start
         timings["solve"] = timings.get("solve", 0.0) + inner
@@ -269,27 +278,27 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
     return s
 
 
-def newton_session(model: Model, session):
+def newton_session(model: Model, attempt: Attempt, opened):
     """A newton-cg session for the Coulomb problem's own Newton solve (:func:`coulomb_newton`): the map's own
-    session where it is one, else one on the model's program (whose radius rows Newton's coupling replaces);
-    None where it does not apply (the primal, whose slip bounds are no linear map of its unknowns; a program
-    not in bound form)."""
+    session where it is one (``opened()``), else one on the model's program (whose radius rows Newton's coupling
+    replaces) started where the map's session would start; None where it does not apply (the primal, whose slip
+    bounds are no linear map of its unknowns; a program not in bound form)."""
     if model.formulation != "dual":
         return None
-    if isinstance(session, solvers.newton_cg.Session):
-        return session
+    if attempt.solver == "newton-cg":
+        return opened()
     try:
-        return solvers.newton_cg.Session(model.program)
+        newton = solvers.newton_cg.Session(model.program)
     except ValueError:  # a force-controlled obstacle's equality
         return None
+    model.seed(newton, attempt.solver, attempt.options)  # every point sticking under the frictionless pressure
+    return newton
 
 
-def coulomb_newton(model: Model, newton, linear: sp.spmatrix, last: tuple | None) -> ConicSolution:
+def coulomb_newton(model: Model, newton, linear: sp.spmatrix) -> ConicSolution:
     """The Coulomb problem's answer by Newton's method on the dual whose ball radii move with its unknowns,
-    s = F G S λ_N (a quasi-variational inequality), from the map's ``last`` iterate or the session's own start.
-    Where it stalls the answer is "failed" and the map goes on: Newton's method is only local."""
-    if last is not None:
-        newton.seed(last[2])
+    s = F G S λ_N (a quasi-variational inequality), from the session's start. Where it stalls the answer is
+    "failed" and the map goes on: Newton's method is only local."""
     return newton.coupled(linear @ normal_multipliers(model.program, model.C, model.fem.contact))
 
 
@@ -356,7 +365,10 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
     tries = paths(model, solver, options, timings)
     path, relaxation, halvings = next(tries), law.relaxation, 0
     while path is not None and len(history) < law.max_iterations:
-        attempt = Attempt(*path, relaxation, required=not attempts)
+        # Newton's method once, in the first attempt, where the user left the solver to the driver (a study that
+        # names a solver gets that solver's map)
+        newton = law.newton and not attempts and solver in ("auto", "newton-cg")
+        attempt = Attempt(*path, relaxation, required=not attempts, newton=newton)
         attempts.append(attempt)
         start = time.perf_counter()
         end = iterate(attempt, s, range(len(history) + 1, law.max_iterations + 1), pressure_bound, history, timings,
