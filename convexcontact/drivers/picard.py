@@ -4,7 +4,8 @@
 
 λ_N(s) the pressure of the exact Tresca program with slip bound s (Oden's
 algorithm III/IV, Hild's map Φ), its steps combined by Anderson mixing (:class:`Anderson`;
-``Coulomb(acceleration=0)`` runs the plain map). Only the slip bounds change between steps: the
+``Coulomb(acceleration=0)`` runs the plain map). On the dual, Newton's method on the Coulomb
+problem itself is tried first (:func:`coulomb_newton`); the map runs where it stalls. Only the slip bounds change between steps: the
 program, the factorization (dual) and the solver's setup are built once, and each
 step updates the data of one solver session (OSQP also warm-starts).
 

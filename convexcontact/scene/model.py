@@ -529,9 +529,9 @@ class Coulomb:
     local law. ``initial_pressure``: None starts from the frictionless (Signorini)
     pressures, as Oden's algorithm III; otherwise a field of pressures. ``acceleration``:
     how many earlier steps Anderson mixing combines with the relaxed one (0: the plain map).
-    ``newton``: on the dual, seek the fixed point once by Newton's method on the Coulomb problem
-    itself, from the map's first step (the matrix-free dual: from the start); the map goes on where
-    it stalls. False runs the map alone.
+    ``newton``: on the dual, with the solver left to the driver, seek the fixed point first by
+    Newton's method on the Coulomb problem itself; the map runs where it stalls. False runs the map
+    alone.
     """
 
     friction: NodalValues = 0.0
