@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 import convexcontact as cc
 from convexcontact import solvers
@@ -33,12 +34,15 @@ def coulomb_like(rng, nodes: int, size: int, friction: float):
 
 
 @pytest.mark.parametrize("size", [1, 2])
-def test_newton_reaches_a_fixed_point_of_the_tresca_map_on_random_programs(size):
-    """Intervals (2-D friction) and discs (3-D): Newton's answer x is the Tresca answer for the radii F x_N it
-    reached (Clarabel on that program, an independent solve), and the radii it reports are F x_N."""
+@pytest.mark.parametrize("operator", [False, True])
+def test_newton_reaches_a_fixed_point_of_the_tresca_map_on_random_programs(size, operator):
+    """Intervals (2-D friction) and discs (3-D), P a matrix (dense LU steps) or an operator (GMRES): Newton's
+    answer x is the Tresca answer for the radii F x_N it reached (Clarabel on that program, an independent
+    solve), and the radii it reports are F x_N."""
     rng = np.random.default_rng(size)
     program, coupling = coulomb_like(rng, 12, size, 0.3)
-    answer = newton_cg.coupled(program, coupling, None)
+    P = spla.aslinearoperator(program.P.toarray()) if operator else program.P
+    answer = newton_cg.coupled(dataclasses.replace(program, P=P), coupling, None)
     assert answer.status == "solved" and answer.info["natural_residual"] <= newton_cg.TOL
     radii = answer.info["radii"]
     np.testing.assert_allclose(radii, coupling @ answer.x, rtol=0, atol=1e-14)

@@ -23,6 +23,7 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -43,6 +44,10 @@ STALL = 0.9
 """A Newton segment that leaves the natural residual above STALL × its value is followed by a gradient one."""
 CG_LIMIT = 5000
 """CG iterations per Newton step before it gives up (the step then still uses its last iterate)."""
+DIRECT_LIMIT = 3000
+"""Unknowns of a Newton system solved by a dense LU where P is a matrix: a dense W's systems (a mortar pair on graded
+meshes) took hundreds of unpreconditioned Krylov iterations per step, and an inexact direction stalled the Coulomb
+Newton; beyond, the LU's n³ outweighs the Krylov products."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
@@ -165,6 +170,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     began = time.perf_counter()
     P = spla.aslinearoperator(program.P)
     sets = _bounds(program, form, coupling)
+    matrix = None if isinstance(program.P, spla.LinearOperator) else (  # P̃ where P is a matrix
+        sp.diags(sets.scale) @ sp.csr_matrix(program.P) @ sp.diags(sets.scale))
     products = [0]
 
     def gradient(v):  # ∇f in v: scale ⊙ (P x + q)
@@ -231,7 +238,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             break
         target = FORCING * min(1.0, residual / first) * residual * size / np.max(c)
         newton, iterations = _step(P, program.q, sets, v, y, c, max(target, 0.1 * tol * size / np.max(c)), products,
-                                   cache["precondition"])
+                                   cache["precondition"], matrix)
         cg_total += iterations
         best = min(best, residual)
         if sets.coupling is not None:
@@ -308,8 +315,9 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
     return v
 
 
-def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition):
-    """The Newton step from v (y = v − c∇f): the new v and the CG (GMRES, where radii move) iterations it took."""
+def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=None):
+    """The Newton step from v (y = v − c∇f): the new v and the CG (GMRES, where radii move) iterations it took;
+    where P is a matrix (``matrix`` = P̃) and the system has at most DIRECT_LIMIT unknowns, a dense LU instead."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
@@ -360,7 +368,13 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition):
     products[0] += 1
     size = free.size + k * t
     count = [0]
-    if size:
+    if size and matrix is not None and size <= DIRECT_LIMIT:
+        Z = _expansion(n, free, sphere_vars, bases, None if moving is None else (directions, moving))
+        R = Z if moving is None else _expansion(n, free, sphere_vars, bases)
+        H = (R.T @ (matrix @ Z)).toarray()
+        H[free.size:, free.size:] += np.diag(curvature)
+        new = new + Z @ scipy.linalg.solve(H, rhs, check_finite=False)
+    elif size:
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
             (size, size), matvec=lambda xi: restrict(precondition(expand(xi))), dtype=float)
@@ -373,3 +387,21 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition):
                                maxiter=CG_LIMIT // GMRES_RESTART, M=M, callback=callback, callback_type="pr_norm")
         new = new + expand(xi)
     return new, count[0]
+
+
+def _expansion(n: int, free, sphere_vars, bases, coupling=None) -> sp.csr_matrix:
+    """Z (n × unknowns) of v = new + Z ξ: the free variables, t tangent coordinates per sphere, and where radii
+    move (``coupling`` = (directions, rows of the coupling)) each sphere's radial motion with the free variables."""
+    k, p, t = bases.shape
+    rows = [free, np.repeat(sphere_vars.ravel(), t)]
+    columns = [np.arange(free.size), np.broadcast_to(free.size + np.arange(k * t).reshape(k, 1, t), (k, p, t)).ravel()]
+    values = [np.ones(free.size), bases.ravel()]
+    if coupling is not None:
+        directions, moving = coupling
+        radial = sp.coo_matrix(sp.csr_matrix(moving)[:, free])
+        for j in range(p):
+            rows.append(sphere_vars[radial.row, j])
+            columns.append(radial.col)
+            values.append(directions[radial.row, j] * radial.data)
+    return sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))),
+                         shape=(n, free.size + k * t))
