@@ -12,7 +12,7 @@ import scipy.sparse.linalg as spla
 import convexcontact as cc
 from convexcontact import solvers
 from convexcontact.conic import ConicProgram, nonnegative, soc
-from convexcontact.scene.library import whole_face
+from convexcontact.scene.library import punch_3d, whole_face
 from convexcontact.scene.model import Coulomb, SceneError
 from convexcontact.solvers import newton_cg
 
@@ -107,3 +107,17 @@ def test_a_named_solver_runs_its_own_map():
     left = cc.prepare(scene, "dual").solve()
     assert named.solver == "clarabel" and not any(step["coulomb_newton"] for step in named.extra["history"])
     assert left.solver == "newton-cg" and [step["coulomb_newton"] for step in left.extra["history"]] == [True]
+
+
+def test_newton_on_a_singular_delassus_operator():
+    """The quarter 3-D punch: multipliers at nodes whose DOFs the symmetry planes hold make W singular (a dense
+    LU of a Tresca Newton system failed there); Newton's answer is the map's, certified."""
+    scene = punch_3d(cells=6, law=Coulomb(friction=0.3, tol=1e-10))
+    model = cc.prepare(scene, "dual")
+    assert np.abs(model.program.P.diagonal()).min() == 0.0
+    newton = model.solve()
+    picard = model.solve("clarabel")
+    assert newton.extra["history"][-1]["coulomb_newton"] and newton.certificate.worst <= 1e-10
+    scale = np.abs(picard.contact.pressure).max()
+    assert np.abs(newton.contact.pressure - picard.contact.pressure).max() < 1e-8 * scale
+    assert np.abs(newton.contact.friction - picard.contact.friction).max() < 1e-8 * scale

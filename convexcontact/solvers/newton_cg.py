@@ -368,13 +368,20 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
     products[0] += 1
     size = free.size + k * t
     count = [0]
-    if size and matrix is not None and size <= DIRECT_LIMIT:
+    direct = size and matrix is not None and size <= DIRECT_LIMIT
+    if direct:
         Z = _expansion(n, free, sphere_vars, bases, None if moving is None else (directions, moving))
         R = Z if moving is None else _expansion(n, free, sphere_vars, bases)
         H = (R.T @ (matrix @ Z)).toarray()
         H[free.size:, free.size:] += np.diag(curvature)
-        new = new + Z @ scipy.linalg.solve(H, rhs, check_finite=False)
-    elif size:
+        # a relative 1e-14 on the diagonal: W is singular where a multiplier's DOFs are all held (a 3-D
+        # punch's symmetry planes); such a variable then stays where it is
+        H[np.diag_indices(size)] += 1e-14 * np.abs(H).max(initial=0.0)
+        try:
+            new = new + Z @ scipy.linalg.solve(H, rhs, check_finite=False)
+        except np.linalg.LinAlgError:  # H = 0: Krylov below
+            direct = False
+    if size and not direct:
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
             (size, size), matvec=lambda xi: restrict(precondition(expand(xi))), dtype=float)
