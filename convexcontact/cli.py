@@ -40,7 +40,12 @@ def table(result) -> str:
             ]
         if "picard" in s:
             picard = s["picard"]
-            rows.append(("Picard map", f'{picard["outcome"]} after {picard["iterations"]} iterations'))
+            newton = picard["attempts"][0].get("newton")
+            answered = newton is not None and newton.startswith("solved") and picard["iterations"] == 1
+            rows.append(("Picard map", "not run: Newton's method answered" if answered else
+                         f'{picard["outcome"]} after {picard["iterations"]} iterations'))
+            if newton:
+                rows.append(("Newton (Coulomb)", newton))
             rows.append(("Picard attempts", "; ".join(f'{a["formulation"]}/{a["solver"]} ω={a["relaxation"]:g}: '
                                                       f'{a["outcome"]} ({a["iterations"]})' for a in picard["attempts"])))
         rows += [

@@ -92,6 +92,7 @@ def test_a_stalled_newton_leaves_the_map_to_converge(monkeypatch):
     assert result.status == "solved" and result.certificate.worst <= 1e-6
     assert not any(step["coulomb_newton"] for step in result.extra["history"])
     assert len(result.extra["history"]) > 2
+    assert result.extra["picard"]["attempts"][0]["newton"] == "max_iter after 1 Newton steps"
 
 
 def test_newton_option_is_checked():
@@ -107,6 +108,8 @@ def test_a_named_solver_runs_its_own_map():
     left = cc.prepare(scene, "dual").solve()
     assert named.solver == "clarabel" and not any(step["coulomb_newton"] for step in named.extra["history"])
     assert left.solver == "newton-cg" and [step["coulomb_newton"] for step in left.extra["history"]] == [True]
+    assert named.extra["picard"]["attempts"][0]["newton"] is None
+    assert left.extra["picard"]["attempts"][0]["newton"].startswith("solved after")
 
 
 def test_newton_on_a_singular_delassus_operator():

@@ -164,6 +164,7 @@ class Attempt:
     time: float = 0.0
     required: bool = False  # the user's own formulation and solver: errors of its setup are raised
     newton: bool = False  # first try Newton's method on the Coulomb problem itself (coulomb_newton)
+    newton_outcome: str | None = None
     best: tuple | None = None  # (Coulomb residual, iteration, solution, fields, bound) of its best iterate
     last: tuple | None = None
     failed: object = None  # the inner solution that failed, if one did
@@ -191,7 +192,8 @@ class Attempt:
     def record(self) -> dict:
         return {"formulation": self.model.formulation, "solver": self.solver, "relaxation": self.relaxation,
                 "outcome": self.outcome, "iterations": self.iterations, "stop_change": self.stop,
-                "best_residual": None if self.best is None else self.best[0], "time": self.time}
+                "best_residual": None if self.best is None else self.best[0], "time": self.time,
+                "newton": self.newton_outcome}
 
 
 def inaccurate(noise: list[float]) -> str | None:
@@ -239,6 +241,8 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
         start, solution = time.perf_counter(), None
         if newton is not None:  # once, from its start (the map's first answer is no better: measured)
             solution, newton = coulomb_newton(model, newton, linear), None
+            attempt.newton_outcome = (f"{'solved' if solution.solved else solution.solver_status} after "
+                                      f"{solution.iterations} Newton steps")
             if solution.solved:  # a fixed point of the map: the next bounds are the ones it reached
                 s = solution.info["radii"]
             else:
