@@ -63,13 +63,15 @@ def test_bad_couplings_are_refused():
         newton_cg.coupled(program, sp.eye(4, 8, 4), None)
 
 
-@pytest.mark.parametrize("formulation, dim, nodes, dofs", [
-    ("dual", 2, 61, 2e3), ("dual-matrix-free", 2, 61, 2e3), ("dual-matrix-free", 3, 49, 6e2), ("dual", 3, 49, 6e2),
+@pytest.mark.parametrize("formulation, dim, nodes, dofs, options", [
+    ("dual", 2, 61, 2e3, {}), ("dual-matrix-free", 2, 61, 2e3, {}), ("dual-matrix-free", 3, 49, 6e2, {}),
+    ("dual", 3, 49, 6e2, {}),
+    ("dual", 2, 61, 2e3, {"smoothing_radius": 0.05}),  # nonlocal: s = F S λ_N, S the mollifier
 ])
-def test_newton_gives_the_maps_fixed_point(formulation, dim, nodes, dofs):
+def test_newton_gives_the_maps_fixed_point(formulation, dim, nodes, dofs, options):
     """Whole-face Coulomb: Newton's answer is the plain Picard map's fixed point (tol 1e-10), certified to
     1e-10 where the map's own stops at its tolerance, in fewer inner solves."""
-    law = Coulomb(friction=0.3, tol=1e-10)
+    law = Coulomb(friction=0.3, tol=1e-10, **options)
     scene = whole_face(dim, nodes, dofs, law)
     newton = cc.prepare(scene, formulation).solve()
     picard = cc.prepare(scene.with_law(dataclasses.replace(law, newton=False)), formulation).solve()
@@ -81,6 +83,15 @@ def test_newton_gives_the_maps_fixed_point(formulation, dim, nodes, dofs):
     scale = np.abs(picard.contact.pressure).max()
     assert np.abs(newton.contact.pressure - picard.contact.pressure).max() < 1e-8 * scale
     assert np.abs(newton.contact.friction - picard.contact.friction).max() < 1e-8 * scale
+
+
+def test_friction_at_gauss_points_runs_the_map():
+    """More friction points than nodes leave λ_T not unique (W singular on it): Newton stalled there, so the map
+    runs alone, and its answer is certified."""
+    law = Coulomb(friction=0.3, quadrature="gauss")
+    result = cc.prepare(whole_face(2, 61, 2e3, law), "dual").solve()
+    assert result.status == "solved" and result.certificate.worst <= 1e-8
+    assert result.extra["picard"]["attempts"][0]["newton"] is None
 
 
 def test_a_stalled_newton_leaves_the_map_to_converge(monkeypatch):

@@ -287,9 +287,10 @@ def newton_session(model: Model, attempt: Attempt, opened):
     """A newton-cg session for the Coulomb problem's own Newton solve (:func:`coulomb_newton`): the map's own
     session where it is one (``opened()``), else one on the model's program (whose radius rows Newton's coupling
     replaces) started where the map's session would start; None where it does not apply (the primal, whose slip
-    bounds are no linear map of its unknowns; a program not in bound form)."""
-    if model.formulation != "dual":
-        return None
+    bounds are no linear map of its unknowns; a program not in bound form; friction at Gauss points, where
+    Newton stalled on the singular systems)."""
+    if model.formulation != "dual" or model.friction.count > model.fem.contact.m:
+        return None  # more friction points than nodes (Gauss points): λ_T is not unique, W singular on it
     if attempt.solver == "newton-cg":
         return opened()
     try:
