@@ -121,6 +121,8 @@ def test_a_named_solver_runs_its_own_map():
     assert left.solver == "newton-cg" and [step["coulomb_newton"] for step in left.extra["history"]] == [True]
     assert named.extra["picard"]["attempts"][0]["newton"] is None
     assert left.extra["picard"]["attempts"][0]["newton"].startswith("solved after")
+    residuals = left.extra["history"][0]["newton_residuals"]  # what the Picard plot draws
+    assert residuals[-1] <= newton_cg.TOL < residuals[0]
 
 
 def test_newton_on_a_singular_delassus_operator():

@@ -270,7 +270,8 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
         attempt.iterations += 1
         history.append({"iteration": k, "relative_change": changes[-1], "coulomb_residual": coulomb_residual,
                         "inner_residual": inner_residual, "inner_iterations": solution.iterations,
-                        "inner_time": inner, "relaxation": attempt.relaxation, "coulomb_newton": by_newton})
+                        "inner_time": inner, "relaxation": attempt.relaxation, "coulomb_newton": by_newton,
+                        **({"newton_residuals": solution.info["residuals"]} if by_newton else {})})
         attempt.keep((coulomb_residual, k, solution, fields, target))
         if progress is not None:
             progress(k, changes[-1])

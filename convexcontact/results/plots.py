@@ -135,16 +135,21 @@ def draw_tractions(ax, result, rows, hertz: bool, friction: bool):
 
 
 def picard_convergence(result, path):
-    """Relative change of the slip bounds and Coulomb residual per Picard iteration."""
+    """Relative change of the slip bounds and Coulomb residual per Picard iteration, and the natural residual of
+    each Newton step where Newton's method on the Coulomb problem answered."""
     history = result.extra["history"]
     k = [h["iteration"] for h in history]
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.semilogy(k, [h["relative_change"] for h in history], "o-", label="relative change of s")
     ax.semilogy(k, [h["coulomb_residual"] for h in history], "s-", label="Coulomb residual (certificate)")
+    newton = next((h["newton_residuals"] for h in history if h.get("newton_residuals")), None)
+    if newton is not None:
+        ax.semilogy(range(len(newton)), newton, "^-", label="Newton on the Coulomb problem: natural residual")
     ax.axhline(result.scene.contact.law.tol, color="k", ls=":", label="tol")
-    ax.set_xlabel("Picard iteration")
+    ax.set_xlabel("Picard iteration" + (" / Newton step" if newton is not None else ""))
     ax.legend()
-    ax.set_title(f"{result.scene.name}: Picard map — {result.extra['picard']['outcome']}")
+    method = "Newton's method" if newton is not None else "Picard map"
+    ax.set_title(f"{result.scene.name}: {method} — {result.extra['picard']['outcome']}")
     fig.savefig(path, dpi=150, bbox_inches="tight")
     plt.close(fig)
 

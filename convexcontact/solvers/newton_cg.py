@@ -215,7 +215,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         return v, g, False
 
     residual = first = None
-    best = np.inf
+    best, history = np.inf, []
     steps = cg_total = 0
     status, word = "failed", "max_iter"
     for steps in range(max_iter + 1):
@@ -224,6 +224,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             g = gradient(v)
             residual, y, size = _natural(v, g, c, sets, program.q)
         first = first or residual
+        history.append(residual)
         if verbose:
             print(f"newton-cg {steps:3d}  natural residual {residual:.2e}  products {products[0]}")
         if progress is not None:
@@ -255,7 +256,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if _natural(v, g, c, sets, program.q)[0] > STALL * residual:
             v, g = segment(v, g, _project(v - c * g, sets))
     x = sets.shift + sets.scale * v
-    info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual}
+    info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history}
     if sets.coupling is not None:  # the program of the radii reached: x is its answer
         b = program.b.copy()
         b[form.ball_radius_rows] = info["radii"] = sets.radii(v)
