@@ -287,18 +287,19 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
 def newton_session(model: Model, attempt: Attempt, opened):
     """A newton-cg session for the Coulomb problem's own Newton solve (:func:`coulomb_newton`): the map's own
     session where it is one (``opened()``), else one on the model's program (whose radius rows Newton's coupling
-    replaces) started where the map's session would start; None where it does not apply (the primal, whose slip
+    replaces) started from its last answer, or where the map's session would start; None where it does not apply (the primal, whose slip
     bounds are no linear map of its unknowns; a program not in bound form; friction at Gauss points, where
     Newton stalled on the singular systems)."""
     if model.formulation != "dual" or model.friction.count > model.fem.contact.m:
         return None  # more friction points than nodes (Gauss points): λ_T is not unique, W singular on it
     if attempt.solver == "newton-cg":
         return opened()
-    try:
-        newton = solvers.newton_cg.Session(model.program)
+    try:  # kept like the map's session: a load history's or a sweep's next solve starts from this answer
+        newton = reused_session(model, "newton-cg", {})
     except ValueError:  # a force-controlled obstacle's equality
         return None
-    model.seed(newton, attempt.solver, attempt.options)  # every point sticking under the frictionless pressure
+    newton.update(q=model.program.q, b=model.program.b)
+    model.seed(newton, attempt.solver, attempt.options)  # at first: every point sticking, frictionless pressure
     return newton
 
 
