@@ -106,11 +106,17 @@ def load_mesh(geometry: MeshFile) -> fe.Mesh:
     return mesh
 
 
-BYTES_PER_DOF = {2: 5.5e3, 3: 6.0e4}
-"""Peak memory of a solve per free DOF (Signorini, default path; peak RSS growth of the process), measured:
-2-D 4.4 kB at 2.6·10⁴ DOFs, 3.7 kB at 10⁵, 5.5 kB at 10⁶ (issue 12); 3-D 15 kB at 5.8·10³, 14 kB at 2.6·10⁴,
-57 kB at 1.6·10⁵ (issue 12) — the factorization's fill-in grows faster in 3-D. The constants are those of the
-largest sizes, where a refusal can happen."""
+BYTES_PER_DOF = {2: 5.5e3, 3: 6.1e3}
+"""2-D: peak memory of a contact solve per free DOF, measured 4.4 kB at 2.6·10⁴ DOFs, 3.7 kB at 10⁵, 5.5 kB at
+10⁶ (issue 12; the 2-D separators are small). 3-D: a linear solve's, besides the separator term."""
+BYTES_PER_SEPARATOR = 47.0
+"""3-D: the factorization's fill grows with the square of the largest nested-dissection separator (its dense
+front), s DOFs across the body's smallest section. Fitted to the linear solve's peak of a Q1 cube (the 3-D
+punch, 2.8·10⁵ DOFs, s = 6348: 3.57 GB) and a flat block (2.75·10⁵ DOFs, s = 3366: 2.18 GB); it predicts a
+third, 1.5·10⁵ DOFs and s = 2376, to 3 % (1.2 GB, measured 1.17 GB). A constant per DOF fitted to a dense
+contact solve (60 kB) refused a 1.1·10⁶-DOF flat block that needs about 8 GB."""
+CONTACT_FACTOR = 2.0
+"""3-D: a contact solve's peak over its linear solve's: 1.1–1.5 on the matrix-free dual, up to 2.3 on a dense W."""
 
 
 def available_memory() -> float:
@@ -122,14 +128,24 @@ def available_memory() -> float:
     return next((float(line.split()[1]) * 1024 for line in lines if line.startswith("MemAvailable:")), float("inf"))
 
 
-def check_memory(dofs: float, dim: int, field_name: str, what: str, fix: str) -> None:
-    """Refuse a problem of ``dofs`` unknowns that would not fit in this machine's memory (:data:`BYTES_PER_DOF`),
-    with the estimate and the fix (nx = ny = 10⁵ died in a 74 GiB MemoryError after minutes)."""
-    need, have = dofs * BYTES_PER_DOF[dim], available_memory()
+def check_memory(dofs: float, dim: int, field_name: str, what: str, fix: str, separator: float | None = None) -> None:
+    """Refuse a problem of ``dofs`` unknowns that would not fit in this machine's memory, with the estimate and
+    the fix (nx = ny = 10⁵ died in a 74 GiB MemoryError after minutes). ``separator``: DOFs across the body's
+    smallest section (3-D; a cube's where unknown)."""
+    need, have = memory_need(dofs, dim, separator), available_memory()
     if need > have:
         raise SceneError(field_name, f"{what} make about {dofs:.2g} DOFs, which need about {need / 2**30:.3g} GiB; "
                          f"this machine has {have / 2**30:.3g} GiB available",
-                         f"{fix} (about {have / BYTES_PER_DOF[dim]:.2g} DOFs fit)")
+                         f"{fix} (about {dofs * have / need:.2g} DOFs of this shape fit)")
+
+
+def memory_need(dofs: float, dim: int, separator: float | None = None) -> float:
+    """Bytes a contact solve of ``dofs`` unknowns needs at its peak (:data:`BYTES_PER_DOF`,
+    :data:`BYTES_PER_SEPARATOR`, :data:`CONTACT_FACTOR`)."""
+    if dim == 2:
+        return dofs * BYTES_PER_DOF[2]
+    separator = separator if separator is not None else 3 * (dofs / 3) ** (2 / 3)  # a cube's
+    return CONTACT_FACTOR * (dofs * BYTES_PER_DOF[3] + BYTES_PER_SEPARATOR * separator**2)
 
 
 def check_size(body: Body) -> None:
@@ -137,10 +153,11 @@ def check_size(body: Body) -> None:
     geometry = body.geometry
     cells = (geometry.nx, geometry.ny) if isinstance(geometry, Rectangle) else geometry.cells
     per_cell = 2 if body.element in ("P2", "Q2") else 1
-    dofs = len(cells) * float(np.prod([per_cell * n + 1 for n in cells]))
+    nodes = sorted(per_cell * n + 1 for n in cells)
+    dofs = len(cells) * float(np.prod(nodes))
     names = "nx, ny" if len(cells) == 2 else "cells"
     check_memory(dofs, len(cells), f"body.{names.split(',')[0]}", f"{names} = {list(cells)}",
-                 "use fewer cells, or grading to refine only where contact is")
+                 "use fewer cells, or grading to refine only where contact is", 3.0 * nodes[0] * nodes[1])
 
 
 def check_mesh_size(mesh: fe.Mesh, element: str, source: str) -> fe.Mesh:
