@@ -405,9 +405,10 @@ def test_the_memory_estimate_knows_a_flat_block_from_a_cube(monkeypatch):
     """3-D fill grows with the largest separator: a flat 1.1·10⁶-DOF block fits in 23 GiB (measured: issue 12's
     whole-face bench), a cube of fewer DOFs does not."""
     from convexcontact.fem.mesh import check_size
+    from convexcontact.scene.model import Box
 
     monkeypatch.setattr("convexcontact.fem.mesh.available_memory", lambda: 23 * 2**30)
-    check_size(cc.Body(cc.Box(cells=(224, 224, 6)), "Q1"))
+    check_size(cc.Body(Box(cells=(224, 224, 6)), "Q1"))
     with pytest.raises(cc.SceneError, match="of this shape fit") as error:
-        check_size(cc.Body(cc.Box(cells=(80, 80, 80)), "Q1"))
+        check_size(cc.Body(Box(cells=(80, 80, 80)), "Q1"))
     assert error.value.field == "body.cells"
