@@ -143,11 +143,11 @@ def coupled(program: ConicProgram, coupling: sp.spmatrix, start: np.ndarray, tol
             max_iter: int = 30, verbose: bool = False, cache: dict | None = None) -> ConicSolution:
     """Newton's method from ``start`` on the program whose ball radii move with x: ‖v_k‖ ≤ (coupling x)_k,
     a quasi-variational inequality (no f is minimized: the Newton system is not symmetric, GMRES solves it,
-    and a step is taken where it lowers the natural residual). ``coupling`` (balls × variables) may not
-    involve the balls' own variables. The answer is that of the program whose radius rows hold the radii
-    it reached (also ``info["radii"]``); "failed" (solver status "stalled") where no step lowers the residual: without a convexity
-    argument Newton's method is local, so start near the answer (a fixed point of x ↦ the program's answer
-    with radii coupling x)."""
+    and a step is taken where it lowers the natural residual, towards Newton's point or else the projected
+    gradient's). ``coupling`` (balls × variables) may not involve the balls' own variables. The answer is that
+    of the program whose radius rows hold the radii it reached (also ``info["radii"]``); "failed" (solver
+    status "stalled") where no step lowers the residual: without a convexity argument Newton's method is local,
+    so start near the answer (a fixed point of x ↦ the program's answer with radii coupling x)."""
     form = bound_form_of(program)
     coupling = sp.csr_matrix(coupling)
     if coupling.shape != (form.ball_vars.shape[0], program.n_variables):
@@ -244,6 +244,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         best = min(best, residual)
         if sets.coupling is not None:
             v, g, moved = backtrack(v, g, newton, residual)
+            if not moved:  # a projected-gradient segment, as for a fixed f: Newton stalled on a punch with F = 2
+                v, g, moved = backtrack(v, g, _project(v - c * g, sets), residual)
             if not moved:
                 word = "stalled"
                 break
