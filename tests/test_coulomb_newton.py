@@ -137,3 +137,18 @@ def test_newton_on_a_singular_delassus_operator():
     scale = np.abs(picard.contact.pressure).max()
     assert np.abs(newton.contact.pressure - picard.contact.pressure).max() < 1e-8 * scale
     assert np.abs(newton.contact.friction - picard.contact.friction).max() < 1e-8 * scale
+
+
+def test_a_step_towards_the_projected_gradient_gets_newton_past_a_stall():
+    """The 2-D punch with F = 2: no step towards Newton's point lowered the natural residual after 2 Newton steps;
+    one towards the projected gradient's does, and Newton reaches the map's fixed point."""
+    from convexcontact.studies.bench import punch_scene
+
+    scene = punch_scene(2, "coulomb", 1e4).with_law(Coulomb(friction=2.0, tol=1e-10))
+    newton = cc.solve(scene)
+    picard = cc.solve(scene.with_law(Coulomb(friction=2.0, tol=1e-10, newton=False)))
+    assert newton.extra["picard"]["attempts"][0]["newton"].startswith("solved after")
+    assert newton.certificate.worst <= 1e-10 and picard.status == "solved"
+    scale = np.abs(picard.contact.pressure).max()
+    assert np.abs(newton.contact.pressure - picard.contact.pressure).max() < 1e-8 * scale
+    assert np.abs(newton.contact.friction - picard.contact.friction).max() < 1e-8 * scale
