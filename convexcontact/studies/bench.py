@@ -36,7 +36,7 @@ SCENARIOS = ("punch", "whole-face", "two-body")
 NODES = {2: (1e3, 4e3), 3: (1e3, 4e3)}
 """Contact nodes of the whole-face cases, by default (``--nodes``)."""
 COLUMNS = ("scenario", "dim", "law", "dofs", "contact_nodes", "unknowns", "formulation", "solver", "status", "iterations",
-           "assembly", "linear", "condensation", "contact_solve", "contact_total", "ratio", "end_to_end", "memory_linear_mb",
+           "coulomb_newton", "assembly", "linear", "condensation", "contact_solve", "contact_total", "ratio", "end_to_end", "memory_linear_mb",
            "memory_contact_mb", "memory_ratio", "certificate")
 
 
@@ -148,6 +148,7 @@ def measure(dim: int, law: str, dofs: float, formulation: str, solver: str, scen
         "unknowns": unknowns, "formulation": MATRIX_FREE if solvers.matrix_free(model.program) else model.formulation,
         "solver": result.solver, "status": result.status,
         "iterations": result.extra.get("picard", {}).get("iterations", result.iterations),
+        "coulomb_newton": (result.extra.get("picard", {}).get("attempts") or [{}])[0].get("newton") or "",
         "assembly": assembly, "linear": linear, "condensation": timings.get("condensation", 0.0),
         "contact_solve": result.timings.get("solve", 0.0), "contact_total": total, "ratio": total / linear,
         "end_to_end": (assembly + total) / (assembly + linear),
@@ -207,7 +208,7 @@ def format_row(row: dict) -> str:
             f"(condensation {row['condensation']:.2f}, solve {row['contact_solve']:.2f})  ratio {row['ratio']:5.2f}  "
             f"end-to-end {row['end_to_end']:5.2f}  "
             f"memory {row['memory_contact_mb']:.0f}/{row['memory_linear_mb']:.0f} MB = {row['memory_ratio']:.2f}  "
-            f"certificate {row['certificate']:.1e}")
+            f"certificate {row['certificate']:.1e}" + (f"  Newton {row['coulomb_newton']}" if row.get("coulomb_newton") else ""))
 
 
 def write_csv(rows: list, path) -> Path:
