@@ -152,3 +152,15 @@ def test_a_step_towards_the_projected_gradient_gets_newton_past_a_stall():
     scale = np.abs(picard.contact.pressure).max()
     assert np.abs(newton.contact.pressure - picard.contact.pressure).max() < 1e-8 * scale
     assert np.abs(newton.contact.friction - picard.contact.friction).max() < 1e-8 * scale
+
+
+@pytest.mark.parametrize("newton", [True, False])
+def test_a_coulomb_solve_whose_inner_solves_all_fail_is_reported(newton):
+    """newton-cg held to one step (the user's max_iter, which bounds Newton's Coulomb solve too): every solve
+    fails, and the result says so with the failed solve's certificate against its own slip bounds (this raised a
+    TypeError: no slip bounds to certify against)."""
+    scene = whole_face(2, 61, 2e3, Coulomb(friction=0.3, newton=newton))
+    result = cc.prepare(scene, "dual-matrix-free").solve("newton-cg", max_iter=1)
+    assert result.status == "failed" and result.solver_status == "max_iter"
+    assert result.certificate is not None and result.certificate.worst > 1e-6
+    assert result.extra["picard"]["attempts"][0]["outcome"] == "failed (inner solve max_iter)"

@@ -167,7 +167,7 @@ class Attempt:
     newton_outcome: str | None = None
     best: tuple | None = None  # (Coulomb residual, iteration, solution, fields, bound) of its best iterate
     last: tuple | None = None
-    failed: object = None  # the inner solution that failed, if one did
+    failed: tuple | None = None  # (inner solution, its slip bounds) of a solve that failed, if one did
 
     @property
     def answer(self) -> tuple | None:
@@ -259,7 +259,7 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
         inner = time.perf_counter() - start
         timings["solve"] = timings.get("solve", 0.0) + inner
         if not solution.solved:
-            attempt.outcome, attempt.failed = f"failed (inner solve {solution.solver_status})", solution
+            attempt.outcome, attempt.failed = f"failed (inner solve {solution.solver_status})", (solution, s)
             break
         fields = model.recover(solution)
         target = bound(fields.pressure)
@@ -400,7 +400,10 @@ def report(attempts: list[Attempt], history: list, timings: dict, law: Coulomb):
     tried = [attempt for attempt in attempts if attempt.best is not None]
     failed = [attempt for attempt in attempts if attempt.failed is not None]
     chosen = final if final.solved else min(tried, key=lambda attempt: rank(attempt.best), default=None) or failed[-1]
-    _, iteration, solution, fields, bound = chosen.answer or (None, None, chosen.failed, None, None)
+    if chosen.answer is not None:
+        _, iteration, solution, fields, bound = chosen.answer
+    else:  # only a failed inner solve: reported, and certified, against the slip bounds it was given
+        iteration, fields, (solution, bound) = None, None, chosen.failed
     extra = {"picard": {"outcome": final.outcome, "iterations": len(history), "relaxation": final.relaxation,
                         "tol": law.tol, "stop_change": final.stop, "reported_iteration": iteration,
                         "attempts": [attempt.record() for attempt in attempts]}, "history": history}

@@ -123,8 +123,9 @@ class Session:
 
     def coupled(self, coupling: sp.spmatrix, max_iter: int = 30) -> ConicSolution:
         """:func:`coupled` from the last answer, with this session's preconditioner; the session's program then
-        holds the radii reached, and the next solve starts from its answer."""
-        solution = coupled(self.program, coupling, self._start, self._tol, max_iter, self._verbose, self._cache)
+        holds the radii reached, and the next solve starts from its answer. The session's max_iter bounds it too."""
+        solution = coupled(self.program, coupling, self._start, self._tol, min(max_iter, self._max_iter), self._verbose,
+                           self._cache)
         if solution.solved:
             self.update(b=self.program.b.copy())
             self.program.b[self._form.ball_radius_rows] = solution.info["radii"]
