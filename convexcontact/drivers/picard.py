@@ -5,9 +5,9 @@
 λ_N(s) the pressure of the exact Tresca program with slip bound s (Oden's
 algorithm III/IV, Hild's map Φ), its steps combined by Anderson mixing (:class:`Anderson`;
 ``Coulomb(acceleration=0)`` runs the plain map). On the dual, Newton's method on the Coulomb
-problem itself is tried first (:func:`coulomb_newton`); the map runs where it stalls. Only the slip bounds change between steps: the
-program, the factorization (dual) and the solver's setup are built once, and each
-step updates the data of one solver session (OSQP also warm-starts).
+problem itself is tried first (:func:`coulomb_newton`); the map runs where it stalls. Only the
+slip bounds change between steps: the program, the factorization (dual) and the solver's setup
+are built once, and each step updates the data of one solver session (OSQP also warm-starts).
 
 The map converges only for small enough F (Hild); otherwise it may stagnate, cycle
 or diverge. The driver adapts: an oscillating, cycling or diverging map is run again with
@@ -286,10 +286,10 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
 
 def newton_session(model: Model, attempt: Attempt, opened):
     """A newton-cg session for the Coulomb problem's own Newton solve (:func:`coulomb_newton`): the map's own
-    session where it is one (``opened()``), else one on the model's program (whose radius rows Newton's coupling
-    replaces) started from its last answer, or where the map's session would start; None where it does not apply (the primal, whose slip
-    bounds are no linear map of its unknowns; a program not in bound form; friction at Gauss points, where
-    Newton stalled on the singular systems)."""
+    session where it is one (``opened()``), else one on the model's program (whose radius rows Newton's
+    coupling replaces) started from its last answer, or where the map's session would start. None where it does
+    not apply: the primal, whose slip bounds are no linear map of its unknowns; a program not in bound form;
+    friction at Gauss points, where Newton stalled on the singular systems."""
     if model.formulation != "dual" or model.friction.count > model.fem.contact.m:
         return None  # more friction points than nodes (Gauss points): λ_T is not unique, W singular on it
     if attempt.solver == "newton-cg":

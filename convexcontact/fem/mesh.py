@@ -157,7 +157,8 @@ def check_size(body: Body) -> None:
     dofs = len(cells) * float(np.prod(nodes))
     names = "nx, ny" if len(cells) == 2 else "cells"
     check_memory(dofs, len(cells), f"body.{names.split(',')[0]}", f"{names} = {list(cells)}",
-                 "use fewer cells, or grading to refine only where contact is", 3.0 * nodes[0] * nodes[1])
+                 "use fewer cells, or grading to refine only where contact is",
+                 3.0 * nodes[0] * nodes[1] if len(cells) == 3 else None)
 
 
 def check_mesh_size(mesh: fe.Mesh, element: str, source: str) -> fe.Mesh:

@@ -19,6 +19,7 @@ P ≈ G H⁻¹ Gᵀ (a Delassus operator of a thin slab of the body): CG is then
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, replace
 
@@ -171,8 +172,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     began = time.perf_counter()
     P = spla.aslinearoperator(program.P)
     sets = _bounds(program, form, coupling)
-    matrix = None if isinstance(program.P, spla.LinearOperator) else (  # P̃ where P is a matrix
-        sp.diags(sets.scale) @ sp.csr_matrix(program.P) @ sp.diags(sets.scale))
+    matrix = None if isinstance(program.P, spla.LinearOperator) else functools.cache(  # P̃, made at a dense step
+        lambda: sp.diags(sets.scale) @ sp.csr_matrix(program.P) @ sp.diags(sets.scale))
     products = [0]
 
     def gradient(v):  # ∇f in v: scale ⊙ (P x + q)
@@ -321,7 +322,7 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
 
 def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=None):
     """The Newton step from v (y = v − c∇f): the new v and the CG (GMRES, where radii move) iterations it took;
-    where P is a matrix (``matrix`` = P̃) and the system has at most DIRECT_LIMIT unknowns, a dense LU instead."""
+    where P is a matrix (``matrix()`` = P̃) and the system has at most DIRECT_LIMIT unknowns, a dense LU instead."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
@@ -376,7 +377,7 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
     if direct:
         Z = _expansion(n, free, sphere_vars, bases, None if moving is None else (directions, moving))
         R = Z if moving is None else _expansion(n, free, sphere_vars, bases)
-        H = (R.T @ (matrix @ Z)).toarray()
+        H = (R.T @ (matrix() @ Z)).toarray()
         H[free.size:, free.size:] += np.diag(curvature)
         # a relative 1e-14 on the diagonal: W is singular where a multiplier's DOFs are all held (a 3-D
         # punch's symmetry planes); such a variable then stays where it is
