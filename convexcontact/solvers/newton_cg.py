@@ -344,39 +344,27 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
     k, _, t = bases.shape
     c_sphere = c[sets.balls[sphere, 0]] if np.ndim(c) and sets.balls.shape[1] else np.max(c)
     curvature = np.repeat((norm[sphere] - rho) / (c_sphere * rho), t)
-    # v = new + Z ξ: ξ holds the free variables, then t tangent coordinates per sphere
+    # v = new + Z ξ: ξ holds the free variables, then t tangent coordinates per sphere (see _expansion)
     sphere_vars = sets.balls[sphere]
     moving = None if sets.coupling is None else sets.coupling[sphere]
     if moving is not None:  # the sphere's radius at the new point: ρ(new + Z ξ), linear in the free variables
         directions = unit_rows(ball[sphere])
         new[sphere_vars] = (moving @ new + sets.radius[sphere])[:, None] * directions
 
-    def expand(xi):
-        out = np.zeros(n)
-        out[free] = xi[:free.size]
-        if k:
-            out[sphere_vars] += np.einsum("kpt,kt->kp", bases, xi[free.size:].reshape(k, t))
-            if moving is not None:
-                out[sphere_vars] += (moving @ out)[:, None] * directions
-        return out
+    Z = _expansion(n, free, sphere_vars, bases, None if moving is None else (directions, moving))
+    R = Z if moving is None else _expansion(n, free, sphere_vars, bases)  # rows kept: Rᵀ, not Zᵀ, where radii move
 
-    def restrict(w):
-        tangent = np.einsum("kpt,kp->kt", bases, w[sphere_vars]).ravel() if k else np.zeros(0)
-        return np.concatenate([w[free], tangent])
-
-    def hessian(xi):  # Zᵀ P̃ Z ξ + curvature on the tangent coordinates (restrict is not expand's transpose where radii move)
+    def hessian(xi):  # Rᵀ P̃ Z ξ + curvature on the tangent coordinates
         products[0] += 1
-        Pv = sets.scale * P.matvec(sets.scale * expand(xi))
-        return restrict(Pv) + np.concatenate([np.zeros(free.size), curvature * xi[free.size:]])
+        return R.T @ (sets.scale * P.matvec(sets.scale * (Z @ xi))) + np.concatenate(
+            [np.zeros(free.size), curvature * xi[free.size:]])
 
-    rhs = -restrict(sets.scale * (P.matvec(sets.shift + sets.scale * new) + q))
+    rhs = -(R.T @ (sets.scale * (P.matvec(sets.shift + sets.scale * new) + q)))
     products[0] += 1
     size = free.size + k * t
     count = [0]
     direct = size and matrix is not None and size <= DIRECT_LIMIT
     if direct:
-        Z = _expansion(n, free, sphere_vars, bases, None if moving is None else (directions, moving))
-        R = Z if moving is None else _expansion(n, free, sphere_vars, bases)
         H = (R.T @ (matrix() @ Z)).toarray()
         H[free.size:, free.size:] += np.diag(curvature)
         # a relative 1e-14 on the diagonal: W is singular where a multiplier's DOFs are all held (a 3-D
@@ -389,15 +377,15 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
     if size and not direct:
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
-            (size, size), matvec=lambda xi: restrict(precondition(expand(xi))), dtype=float)
+            (size, size), matvec=lambda xi: R.T @ precondition(Z @ xi), dtype=float)
         callback = lambda *_: count.__setitem__(0, count[0] + 1)
         if moving is None:
-            xi, _ = spla.cg(H, rhs, x0=restrict(v - new), rtol=0.0, atol=target, maxiter=CG_LIMIT, M=M,
+            xi, _ = spla.cg(H, rhs, x0=R.T @ (v - new), rtol=0.0, atol=target, maxiter=CG_LIMIT, M=M,
                             callback=callback)
         else:
-            xi, _ = spla.gmres(H, rhs, x0=restrict(v - new), rtol=0.0, atol=target, restart=GMRES_RESTART,
+            xi, _ = spla.gmres(H, rhs, x0=R.T @ (v - new), rtol=0.0, atol=target, restart=GMRES_RESTART,
                                maxiter=CG_LIMIT // GMRES_RESTART, M=M, callback=callback, callback_type="pr_norm")
-        new = new + expand(xi)
+        new = new + Z @ xi
     return new, count[0]
 
 
