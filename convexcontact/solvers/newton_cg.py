@@ -359,9 +359,13 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
         return R.T @ (sets.scale * P.matvec(sets.scale * (Z @ xi))) + np.concatenate(
             [np.zeros(free.size), curvature * xi[free.size:]])
 
-    rhs = -(R.T @ (sets.scale * (P.matvec(sets.shift + sets.scale * new) + q)))
-    products[0] += 1
     size = free.size + k * t
+    # the system for the step from ξ at v, whose right-hand side is the residual there: one product with P where
+    # the right-hand side and the Krylov method's first residual took two
+    start = R.T @ (v - new)
+    products[0] += 1
+    rhs = -(R.T @ (sets.scale * (P.matvec(sets.shift + sets.scale * (new + Z @ start)) + q)))
+    rhs[free.size:] -= curvature * start[free.size:]
     count = [0]
     direct = size and matrix is not None and size <= DIRECT_LIMIT
     if direct:
@@ -371,7 +375,7 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
         # punch's symmetry planes); such a variable then stays where it is
         H[np.diag_indices(size)] += 1e-14 * np.abs(H).max(initial=0.0)
         try:
-            new = new + Z @ scipy.linalg.solve(H, rhs, check_finite=False)
+            new = new + Z @ (start + scipy.linalg.solve(H, rhs, check_finite=False))
         except np.linalg.LinAlgError:  # H = 0: Krylov below
             direct = False
     if size and not direct:
@@ -380,12 +384,11 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
             (size, size), matvec=lambda xi: R.T @ precondition(Z @ xi), dtype=float)
         callback = lambda *_: count.__setitem__(0, count[0] + 1)
         if moving is None:
-            xi, _ = spla.cg(H, rhs, x0=R.T @ (v - new), rtol=0.0, atol=target, maxiter=CG_LIMIT, M=M,
-                            callback=callback)
+            xi, _ = spla.cg(H, rhs, rtol=0.0, atol=target, maxiter=CG_LIMIT, M=M, callback=callback)
         else:
-            xi, _ = spla.gmres(H, rhs, x0=R.T @ (v - new), rtol=0.0, atol=target, restart=GMRES_RESTART,
+            xi, _ = spla.gmres(H, rhs, rtol=0.0, atol=target, restart=GMRES_RESTART,
                                maxiter=CG_LIMIT // GMRES_RESTART, M=M, callback=callback, callback_type="pr_norm")
-        new = new + Z @ xi
+        new = new + Z @ (start + xi)
     return new, count[0]
 
 
