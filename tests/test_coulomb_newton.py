@@ -12,6 +12,8 @@ import scipy.sparse.linalg as spla
 import convexcontact as cc
 from convexcontact import solvers
 from convexcontact.conic import ConicProgram, nonnegative, soc
+from convexcontact.drivers import picard
+from convexcontact.formulations.dual import normal_multipliers, stick_guess
 from convexcontact.scene.library import punch_3d, whole_face
 from convexcontact.scene.model import Coulomb, SceneError
 from convexcontact.solvers import newton_cg
@@ -164,3 +166,18 @@ def test_a_coulomb_solve_whose_inner_solves_all_fail_is_reported(newton):
     assert result.status == "failed" and result.solver_status == "max_iter"
     assert result.certificate is not None and result.certificate.worst > 1e-6
     assert result.extra["picard"]["attempts"][0]["outcome"] == "failed (inner solve max_iter)"
+
+
+def test_matrix_free_newton_starts_where_every_point_sticks():
+    """On the matrix-free dual Newton's Coulomb solve starts from the frictionless answer, solved only to
+    START_TOL, every point sticking: its first natural residual is that of this guess, recomputed here."""
+    model = cc.prepare(whole_face(2, 61, 2e3, Coulomb(friction=0.3)), "dual-matrix-free")
+    result = model.solve()
+    assert result.status == "solved" and result.extra["history"][0]["coulomb_newton"]
+    frictionless, _ = model.cache[("frictionless", "newton-cg", repr([("tol", picard.START_TOL)]))]
+    assert frictionless.solved and frictionless.info["natural_residual"] <= picard.START_TOL
+    guess = stick_guess(model.program, frictionless, model.fem.contact)
+    _, _, linear = picard.pressure_map(model)
+    coupling = linear @ normal_multipliers(model.program, model.C, model.fem.contact)
+    first = newton_cg.coupled(model.program, coupling, guess.x, max_iter=0).info["residuals"][0]
+    assert result.extra["history"][0]["newton_residuals"][0] == pytest.approx(first, rel=1e-12)
