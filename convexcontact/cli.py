@@ -23,6 +23,7 @@ def table(result) -> str:
         ("contact nodes", s["n_contact_nodes"]),
         ("formulation", f'{s["formulation"]} ({s["formulation_reason"]})'),
         ("solver", f'{s["solver"]} ({s["solver_status"]}, {s["iterations"]} iterations)'),
+        *([("solver choice", s["solver_reason"])] if "solver_reason" in s else []),
         ("status", s["status"]),
     ]
     if result.solved:

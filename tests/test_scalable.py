@@ -7,13 +7,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import convexcontact as cc
-from convexcontact import solvers
+from convexcontact import cli, solvers
 from convexcontact.conic import ConicProgram, nonnegative, soc, zero
 from convexcontact.drivers import model as model_module
 from convexcontact.fem import factorization
 from convexcontact.fem.factorization import factorize
 from convexcontact.formulations import contact_weights
-from convexcontact.scene.library import whole_face
+from convexcontact.scene.library import hertz_punch, punch_3d, tresca_punch, whole_face
 from convexcontact.scene.model import Coulomb, Signorini, Tresca
 
 
@@ -223,3 +223,44 @@ def test_a_failed_matrix_free_solve_that_auto_chose_gives_way_to_the_primal(monk
     assert "newton-cg failed (MaxIterations)" in result.extra["formulation_reason"]
     assert np.abs(result.displacement - primal.displacement).max() < 1e-9 * np.abs(primal.displacement).max()
     assert cc.prepare(scene, "dual-matrix-free").solve().status == "failed"
+
+
+@pytest.mark.parametrize("scene", [
+    tresca_punch(nx=30), tresca_punch(nx=30).with_law(Signorini()),
+    punch_3d(cells=6, law=Tresca(slip_bound=0.002)),
+])
+def test_auto_answers_a_dense_dual_by_newton_cg_as_clarabel_does(scene):
+    """auto tries newton-cg first on a dense dual in its bound form: its answer is Clarabel's (an interior point on
+    the same program) and certified, and the result says which solver answered and why."""
+    model = cc.prepare(scene, "dual")
+    auto, clarabel = model.solve(), model.solve("clarabel")
+    assert auto.solver == "newton-cg" and auto.extra["solver_reason"] == model_module.DENSE_NEWTON
+    assert model_module.DENSE_NEWTON in cli.table(auto) and "solver choice" not in cli.table(clarabel)
+    assert auto.status == clarabel.status == "solved" and auto.certificate.worst < 1e-10
+    assert np.abs(auto.displacement - clarabel.displacement).max() < 1e-8 * np.abs(clarabel.displacement).max()
+    assert np.abs(auto.contact.pressure - clarabel.contact.pressure).max() < 1e-8 * clarabel.max_pressure
+
+
+def test_a_failed_dense_newton_gives_way_to_clarabel(monkeypatch):
+    """Where newton-cg fails on the dense dual, Clarabel answers the same program and the result says why; a
+    force-controlled obstacle (an equality, no bound form) and a user's options go to Clarabel at once."""
+    from convexcontact.conic import ConicSolution
+    from convexcontact.solvers import newton_cg
+
+    model = cc.prepare(tresca_punch(nx=30), "dual")
+    expected = model.solve("clarabel")
+
+    def fails(self):
+        n, m = self.program.n_variables, self.program.n_constraints
+        return ConicSolution(x=np.zeros(n), z=np.zeros(m), s=np.zeros(m), status="failed",
+                             solver_status="max_iter", iterations=100, solve_time=0.0, solver="newton-cg")
+
+    monkeypatch.setattr(newton_cg.Session, "solve", fails)
+    result = model.solve()
+    assert result.status == "solved" and result.solver == "clarabel"
+    assert result.extra["solver_reason"] == "newton-cg max_iter after 100 Newton steps on the dense dual, so Clarabel"
+    assert np.abs(result.displacement - expected.displacement).max() <= 1e-12 * np.abs(expected.displacement).max()
+    monkeypatch.undo()
+    forced = cc.prepare(hertz_punch(30, law=Tresca(slip_bound=0.002)), "dual").solve()
+    assert forced.solver == "clarabel" and "solver_reason" not in forced.extra
+    assert model.solve(tol=1e-9).solver == "clarabel"

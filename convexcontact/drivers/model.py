@@ -110,7 +110,8 @@ class Model:
 
     def solve(self, solver: str = "auto", progress: Callable | None = None, **options) -> ContactResult:
         """Solve with ``solver`` (auto, clarabel, osqp, cvxpy, cvxpy:NAME, newton-cg) and certify the answer;
-        "auto" is newton-cg on a matrix-free program, clarabel on any other.
+        "auto" is newton-cg on a matrix-free program, clarabel on any other, after newton-cg on a dense dual in its
+        bound form (see :func:`dense_newton`; ``result.extra["solver_reason"]`` says which answered).
 
         ``options`` go to the solver adapter (``tol``, ``max_iter``, ``verbose``,
         native settings; ``cvxpy_model`` for an extended cvxpy model). Coulomb laws
@@ -126,12 +127,23 @@ class Model:
             # more touching points than nodes: an active set the polish cannot settle (dependent rows), so
             # the interior point must be accurate on its own (1e-10: certificate 1e-6; 1e-12: 1e-15)
             options = {**options, "tol": GAUSS_TOL}
+        extra = None
+        if solver == "auto" and not options and (newton := dense_newton(self)) is not None:
+            with timed(timings, "solve"):
+                solution = newton.solve()
+            with timed(timings, "postprocess"):
+                result = self.result(solution, timings, self.slip_bound, extra={"solver_reason": DENSE_NEWTON})
+            if result.solved:
+                return result
+            extra = {"solver_reason": f"newton-cg {solution.solver_status} after {solution.iterations} Newton steps "
+                                      f"on the dense dual, so Clarabel"}
         with timed(timings, "solve"):
             session = solvers.session(self.program, solver, **options)
             self.seed(session, solver, options)
             solution = session.solve()
         with timed(timings, "postprocess"):
-            result = self.result(solution, timings, self.slip_bound, extended=options.get("cvxpy_model") is not None)
+            result = self.result(solution, timings, self.slip_bound, extra=extra,
+                                 extended=options.get("cvxpy_model") is not None)
         if not result.solved and solver == "auto" and solvers.matrix_free(self.program) and self.reason != CHOSEN:
             # newton-cg has no convergence guarantee (a Tresca dual on a tall 3-D block, a punch on a foundation
             # failed after 100 steps): what auto chose gives way to the sparse primal, which Clarabel solves
@@ -311,6 +323,27 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
         return "primal", f"the contact nodes carry {columns} of the {fem.n_free} DOFs: too many to gain by condensing"
     return "dual", (f"{unknowns} contact unknowns beside {fem.n_free} DOFs: K is condensed onto Γ_C once "
                     f"(Delassus operator W){reuse}, then the program is small and dense")
+
+
+DENSE_NEWTON = "auto: newton-cg on the dense dual (Clarabel where it fails)"
+"""Why newton-cg answered a dense dual that ``auto`` was left (docs/performance.md, "newton-cg on a dense W"): its
+Newton steps are dense Cholesky solves of the reduced W, 2–10× faster than Clarabel with the polish (3-D punch,
+2.8·10⁵ DOFs, Tresca: 15 s against 39 s), but it has no convergence guarantee (a two-body Tresca dual at 10⁵ DOFs
+stopped after 100 Newton steps, 1.4 s, and Clarabel answered in 2.4 s)."""
+
+
+def dense_newton(model: Model):
+    """A newton-cg session on the model's dense dual, or None where ``auto`` keeps Clarabel: programs not in
+    newton-cg's bound form (a force-controlled obstacle's equality) and contact at Gauss points (more touching
+    points than nodes: W singular on their multipliers)."""
+    law = model.law
+    if model.formulation != "dual" or solvers.matrix_free(model.program) or "gauss" in (
+            getattr(law, "non_penetration", None), getattr(law, "quadrature", None)):
+        return None
+    try:
+        return solvers.session(model.program, "newton-cg")
+    except ValueError:
+        return None
 
 
 def matrix_free_applies(fem: FEModel, law) -> bool:

@@ -45,10 +45,11 @@ STALL = 0.9
 """A Newton segment that leaves the natural residual above STALL × its value is followed by a gradient one."""
 CG_LIMIT = 5000
 """CG iterations per Newton step before it gives up (the step then still uses its last iterate)."""
-DIRECT_LIMIT = 3000
-"""Unknowns of a Newton system solved by a dense LU where P is a matrix: a dense W's systems (a mortar pair on graded
-meshes) took hundreds of unpreconditioned Krylov iterations per step, and an inexact direction stalled the Coulomb
-Newton; beyond, the LU's n³ outweighs the Krylov products."""
+DIRECT_LIMIT = 10_000
+"""Unknowns of a Newton system solved by a dense Cholesky (LU where radii move) where P is a matrix: a dense W's
+systems took hundreds of unpreconditioned Krylov iterations per step (a mortar pair on graded meshes; the 3-D punch at
+2.8·10⁵ DOFs, ~5000 unknowns: 180–400 a step, 52 s against 15 s by LU), and an inexact direction stalled the
+Coulomb Newton. 10,000 is ``auto``'s largest dense W; a Cholesky there is ~3·10¹¹ flops."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
@@ -173,7 +174,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     P = spla.aslinearoperator(program.P)
     sets = _bounds(program, form, coupling)
     matrix = None if isinstance(program.P, spla.LinearOperator) else functools.cache(  # P̃, made at a dense step
-        lambda: sp.diags(sets.scale) @ sp.csr_matrix(program.P) @ sp.diags(sets.scale))
+        lambda: _scaled(program.P, sets.scale))
     products = [0]
 
     def gradient(v):  # ∇f in v: scale ⊙ (P x + q)
@@ -284,6 +285,14 @@ def _preconditioner(approximation, scale: np.ndarray, shift: float):
     return lambda r: (r - G @ factors.solve(G.T @ r)) / shift
 
 
+def _scaled(P, scale: np.ndarray):
+    """P̃ = diag(scale) P diag(scale) for the dense Newton steps: an array where P is mostly nonzero (a dense W held
+    as a sparse matrix: its reduced Hessians were sparse products, 3-D punch at 2.8·10⁵ DOFs), sparse otherwise."""
+    if sp.issparse(P) and P.nnz < 0.25 * P.shape[0] ** 2:
+        return sp.diags(scale) @ sp.csr_matrix(P) @ sp.diags(scale)
+    return scale[:, None] * (P.toarray() if sp.issparse(P) else np.asarray(P, dtype=float)) * scale
+
+
 def _step_lengths(P, sets: _Bounds, c: float):
     """c per variable, 0.1 / P̃_jj (one per ball: its least), where P is a matrix and its diagonal known; the
     scalar ``c`` for an operator. One c for all misjudges the active set where rows differ in scale: the dense
@@ -369,15 +378,20 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
     count = [0]
     direct = size and matrix is not None and size <= DIRECT_LIMIT
     if direct:
-        H = (R.T @ (matrix() @ Z)).toarray()
+        H = R.T @ (Z.T @ matrix()).T  # P̃ symmetric
+        H = H.toarray() if sp.issparse(H) else np.asarray(H)
         H[free.size:, free.size:] += np.diag(curvature)
         # a relative 1e-14 on the diagonal: W is singular where a multiplier's DOFs are all held (a 3-D
         # punch's symmetry planes); such a variable then stays where it is
         H[np.diag_indices(size)] += 1e-14 * np.abs(H).max(initial=0.0)
-        try:
-            new = new + Z @ (start + scipy.linalg.solve(H, rhs, check_finite=False))
-        except np.linalg.LinAlgError:  # H = 0: Krylov below
-            direct = False
+        direct = False
+        for kind in ("pos", "gen") if moving is None else ("gen",):  # Cholesky where H is symmetric, else LU
+            try:
+                new = new + Z @ (start + scipy.linalg.solve(H, rhs, assume_a=kind, check_finite=False))
+                direct = True
+                break
+            except np.linalg.LinAlgError:  # rounding left H indefinite (LU next), or H = 0 (Krylov below)
+                continue
     if size and not direct:
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
