@@ -305,7 +305,9 @@ def newton_session(model: Model, attempt: Attempt, opened):
     except ValueError:  # a force-controlled obstacle's equality
         return None
     newton.update(q=model.program.q, b=model.program.b)
-    model.seed(newton, attempt.solver, attempt.options)  # at first: every point sticking, frictionless pressure
+    # at first: every point sticking under the frictionless pressure, which newton-cg finds too (auto left it the
+    # solver: 3-D punch, 8.5·10⁴ DOFs, 0.2 s against 1.1 s by Clarabel)
+    model.seed(newton, "newton-cg", {}, start={})
     return newton
 
 
