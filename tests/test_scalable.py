@@ -264,3 +264,12 @@ def test_a_failed_dense_newton_gives_way_to_clarabel(monkeypatch):
     forced = cc.prepare(hertz_punch(30, law=Tresca(slip_bound=0.002)), "dual").solve()
     assert forced.solver == "clarabel" and "solver_reason" not in forced.extra
     assert model.solve(tol=1e-9).solver == "clarabel"
+
+
+def test_auto_gives_newton_cg_a_bounded_number_of_steps_on_a_dense_dual(monkeypatch):
+    """newton-cg has DENSE_NEWTON_STEPS Newton steps on a dense dual before Clarabel answers (a wandering Newton
+    costs at most those): held to 1, the punch's Tresca dual goes to Clarabel, whose answer is certified."""
+    monkeypatch.setattr(model_module, "DENSE_NEWTON_STEPS", 1)
+    result = cc.prepare(tresca_punch(nx=30), "dual").solve()
+    assert result.status == "solved" and result.solver == "clarabel" and result.certificate.worst < 1e-10
+    assert result.extra["solver_reason"] == "newton-cg max_iter after 1 Newton steps on the dense dual, so Clarabel"
