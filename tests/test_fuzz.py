@@ -70,13 +70,14 @@ def scenes(draw):
 
 
 def paths(scene: cc.Scene):
-    """(formulation, solver) pairs that accept the scene: compliance is primal only, OSQP takes no 3-D cone."""
+    """(formulation, solver) pairs that accept the scene: compliance is primal only, OSQP takes no 3-D cone; auto on
+    the dual (newton-cg first, the default path)."""
     law = scene.contact.law
     forms = ["primal"] if isinstance(law, cc.NormalCompliance) else ["primal", "dual"]
     names = ["clarabel", "cvxpy"]
     if scene.body.geometry.__class__ is cc.Rectangle or isinstance(law, (cc.Signorini, cc.NormalCompliance)):
         names.append("osqp")
-    return list(itertools.product(forms, names))
+    return list(itertools.product(forms, names)) + [("dual", "auto")] * ("dual" in forms)
 
 
 def solved_paths(scene):
