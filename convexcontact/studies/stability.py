@@ -42,9 +42,11 @@ PATHS = {
     "clarabel/primal": ("clarabel", "primal"),
     "osqp/primal": ("osqp", "primal"),
     "clarabel/dual": ("clarabel", "dual"),
+    "auto/dual": ("auto", "dual"),
     "cvxpy/primal": ("cvxpy", "primal"),
 }
-"""Solver paths: name → (solver, formulation). Every path runs with the library's defaults."""
+"""Solver paths: name → (solver, formulation). Every path runs with the library's defaults; auto/dual is the
+default path (newton-cg first where the dual is in its bound form, else Clarabel)."""
 
 CVXPY_MAX_DOFS = 1500
 """The cvxpy path (a transparent model, not a fast one) runs only on scenes this small."""
