@@ -328,7 +328,7 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
 DENSE_NEWTON = "auto: newton-cg on the dense dual (Clarabel where it fails)"
 """Why newton-cg answered a dense dual that ``auto`` was left (docs/performance.md, "newton-cg on a dense W"): its
 Newton steps are dense Cholesky solves of the reduced W, 2–10× faster than Clarabel with the polish (3-D punch,
-2.8·10⁵ DOFs, Tresca: 15 s against 39 s), but it has no convergence guarantee (a two-body Tresca dual at 10⁵ DOFs
+2.8·10⁵ DOFs, Tresca: 8.1 s against 38.6 s), but it has no convergence guarantee (a two-body Tresca dual at 10⁵ DOFs
 stopped after 100 Newton steps, 1.4 s, and Clarabel answered in 2.4 s)."""
 
 

@@ -48,7 +48,7 @@ CG_LIMIT = 5000
 DIRECT_LIMIT = 10_000
 """Unknowns of a Newton system solved by a dense Cholesky (LU where radii move) where P is a matrix: a dense W's
 systems took hundreds of unpreconditioned Krylov iterations per step (a mortar pair on graded meshes; the 3-D punch at
-2.8·10⁵ DOFs, ~5000 unknowns: 180–400 a step, 52 s against 15 s by LU), and an inexact direction stalled the
+2.8·10⁵ DOFs, ~5000 unknowns: 180–400 a step, 52 s against 8 s by Cholesky), and an inexact direction stalled the
 Coulomb Newton. 10,000 is ``auto``'s largest dense W; a Cholesky there is ~3·10¹¹ flops."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
