@@ -273,3 +273,20 @@ def test_auto_gives_newton_cg_a_bounded_number_of_steps_on_a_dense_dual(monkeypa
     result = cc.prepare(tresca_punch(nx=30), "dual").solve()
     assert result.status == "solved" and result.solver == "clarabel" and result.certificate.worst < 1e-10
     assert result.extra["solver_reason"] == "newton-cg max_iter after 1 Newton steps on the dense dual, so Clarabel"
+
+
+def test_newton_cg_on_a_sparse_p_agrees_with_clarabel():
+    """A P that is mostly zeros (banded SPD) keeps its Newton systems formed sparse, not as an n² array, and
+    newton-cg reaches Clarabel's optimum, with discs (Cholesky steps on the spheres' tangents)."""
+    from dataclasses import replace
+
+    from convexcontact.solvers import newton_cg
+
+    program = random_program(np.random.default_rng(5), 20, 10, 2)
+    n = program.n_variables
+    banded = sp.diags([np.full(n - 1, -1.0), np.full(n, 4.0), np.full(n - 1, -1.0)], [-1, 0, 1], format="csc")
+    program = replace(program, P=banded)
+    assert sp.issparse(newton_cg._scaled(banded, np.ones(n)))
+    reference, answer = solvers.solve(program, "clarabel"), solvers.solve(program, "newton-cg")
+    assert answer.status == "solved" and np.abs(answer.x - reference.x).max() < 1e-8
+    assert kkt_residual(program, answer) < 1e-10
