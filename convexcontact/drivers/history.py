@@ -27,7 +27,7 @@ from ..fem.assembly import FEModel, assemble, viscous_stiffness
 from ..results.result import ContactResult
 from ..scene.history import History
 from ..scene.model import Coulomb, Scene, SceneError
-from .model import Model, condensed, formulate, timed
+from .model import DENSE_NEWTON, Model, condensed, dense_newton, formulate, gave_way, timed
 
 
 @dataclass
@@ -176,11 +176,23 @@ def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progr
 class Stepper:
     """The solver session of the history, kept while K is (one per Δt for viscous bodies): each step
     updates q and b and starts from the last answer. Coulomb steps run the Picard driver, whose
-    sessions are kept the same way (each update carries the step's q and b besides the slip bounds)."""
+    sessions are kept the same way (each update carries the step's q and b besides the slip bounds).
+    Left to ``auto``, a dense dual's session is newton-cg's as in :meth:`Model.solve`, and Clarabel's from the
+    step where newton-cg's answer is not certified."""
 
     def __init__(self, solver: str, options: dict):
         self.solver, self.options = solver, options
         self.key, self.session, self.cache = object(), None, {}
+        self.newton_allowed, self.newton, self.reason = solver == "auto" and not options, False, None
+
+    def open(self, model: Model):
+        newton = dense_newton(model) if self.newton_allowed else None
+        self.newton = newton is not None
+        if self.newton:
+            self.session, self.reason = newton, {"solver_reason": DENSE_NEWTON}
+        else:
+            self.session = solvers.session(model.program, self.solver, **self.options)
+            model.seed(self.session, self.solver, self.options)
 
     def solve(self, model: Model, key, timings: dict) -> ContactResult:
         if key != self.key:
@@ -193,11 +205,14 @@ class Stepper:
             model.bound_update = lambda s: {"q": program.q, "b": program.b, **bounds(s)}
             return coulomb(model, self.solver, **self.options)
         start = time.perf_counter()
-        if self.session is None:
-            self.session = solvers.session(model.program, self.solver, **self.options)
-            model.seed(self.session, self.solver, self.options)
-        else:
-            self.session.update(q=model.program.q, b=model.program.b)
-        solution = self.session.solve()
-        timings["solve"] = time.perf_counter() - start
-        return model.result(solution, timings, model.slip_bound)
+        while True:
+            if self.session is None:
+                self.open(model)
+            else:
+                self.session.update(q=model.program.q, b=model.program.b)
+            solution = self.session.solve()
+            timings["solve"] = time.perf_counter() - start
+            result = model.result(solution, timings, model.slip_bound, extra=self.reason)
+            if result.solved or not self.newton:
+                return result
+            self.session, self.newton_allowed, self.reason = None, False, {"solver_reason": gave_way(solution)}

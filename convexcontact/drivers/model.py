@@ -135,8 +135,7 @@ class Model:
                 result = self.result(solution, timings, self.slip_bound, extra={"solver_reason": DENSE_NEWTON})
             if result.solved:
                 return result
-            extra = {"solver_reason": f"newton-cg {solution.solver_status} after {solution.iterations} Newton steps "
-                                      f"on the dense dual, so Clarabel"}
+            extra = {"solver_reason": gave_way(solution)}
         with timed(timings, "solve"):
             session = solvers.session(self.program, solver, **options)
             self.seed(session, solver, options)
@@ -349,6 +348,11 @@ def dense_newton(model: Model):
         return solvers.session(model.program, "newton-cg", max_iter=DENSE_NEWTON_STEPS)
     except ValueError:
         return None
+
+
+def gave_way(solution: ConicSolution) -> str:
+    """The solver reason of a dense dual that newton-cg did not answer."""
+    return f"newton-cg {solution.solver_status} after {solution.iterations} Newton steps on the dense dual, so Clarabel"
 
 
 def matrix_free_applies(fem: FEModel, law) -> bool:
