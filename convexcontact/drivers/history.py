@@ -17,7 +17,6 @@ updating q and b and starting from the previous answer (Clarabel's polish, OSQP'
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -27,7 +26,7 @@ from ..fem.assembly import FEModel, assemble, viscous_stiffness
 from ..results.result import ContactResult
 from ..scene.history import History
 from ..scene.model import Coulomb, Scene, SceneError
-from .model import DENSE_NEWTON, Model, condensed, dense_newton, formulate, gave_way, timed
+from .model import Model, ProgramSession, condensed, formulate, timed
 
 
 @dataclass
@@ -177,26 +176,15 @@ class Stepper:
     """The solver session of the history, kept while K is (one per Δt for viscous bodies): each step
     updates q and b and starts from the last answer. Coulomb steps run the Picard driver, whose
     sessions are kept the same way (each update carries the step's q and b besides the slip bounds).
-    Left to ``auto``, a dense dual's session is newton-cg's as in :meth:`Model.solve`, and Clarabel's from the
-    step where newton-cg's answer is not certified."""
+    The session is a :class:`ProgramSession`, as :meth:`Model.solve`'s (left to ``auto``: newton-cg on a dense dual)."""
 
     def __init__(self, solver: str, options: dict):
         self.solver, self.options = solver, options
         self.key, self.session, self.cache = object(), None, {}
-        self.newton_allowed, self.newton, self.reason = solver == "auto" and not options, False, None
-
-    def open(self, model: Model):
-        newton = dense_newton(model) if self.newton_allowed else None
-        self.newton = newton is not None
-        if self.newton:
-            self.session, self.reason = newton, {"solver_reason": DENSE_NEWTON}
-        else:
-            self.session = solvers.session(model.program, self.solver, **self.options)
-            model.seed(self.session, self.solver, self.options)
 
     def solve(self, model: Model, key, timings: dict) -> ContactResult:
         if key != self.key:
-            self.key, self.session, self.cache = key, None, {}
+            self.key, self.session, self.cache = key, ProgramSession(self.solver, self.options), {}
         if isinstance(model.law, Coulomb):
             from .picard import coulomb
 
@@ -204,15 +192,4 @@ class Stepper:
             model.cache = self.cache
             model.bound_update = lambda s: {"q": program.q, "b": program.b, **bounds(s)}
             return coulomb(model, self.solver, **self.options)
-        start = time.perf_counter()
-        while True:
-            if self.session is None:
-                self.open(model)
-            else:
-                self.session.update(q=model.program.q, b=model.program.b)
-            solution = self.session.solve()
-            timings["solve"] = time.perf_counter() - start
-            result = model.result(solution, timings, model.slip_bound, extra=self.reason)
-            if result.solved or not self.newton:
-                return result
-            self.session, self.newton_allowed, self.reason = None, False, {"solver_reason": gave_way(solution)}
+        return self.session.solve(model, timings)

@@ -127,22 +127,7 @@ class Model:
             # more touching points than nodes: an active set the polish cannot settle (dependent rows), so
             # the interior point must be accurate on its own (1e-10: certificate 1e-6; 1e-12: 1e-15)
             options = {**options, "tol": GAUSS_TOL}
-        extra = None
-        if solver == "auto" and not options and (newton := dense_newton(self)) is not None:
-            with timed(timings, "solve"):
-                solution = newton.solve()
-            with timed(timings, "postprocess"):
-                result = self.result(solution, timings, self.slip_bound, extra={"solver_reason": DENSE_NEWTON})
-            if result.solved:
-                return result
-            extra = {"solver_reason": gave_way(solution)}
-        with timed(timings, "solve"):
-            session = solvers.session(self.program, solver, **options)
-            self.seed(session, solver, options)
-            solution = session.solve()
-        with timed(timings, "postprocess"):
-            result = self.result(solution, timings, self.slip_bound, extra=extra,
-                                 extended=options.get("cvxpy_model") is not None)
+        result = ProgramSession(solver, options).solve(self, timings, extended=options.get("cvxpy_model") is not None)
         if not result.solved and solver == "auto" and solvers.matrix_free(self.program) and self.reason != CHOSEN:
             # newton-cg has no convergence guarantee (a Tresca dual on a tall 3-D block, a punch on a foundation
             # failed after 100 steps): what auto chose gives way to the sparse primal, which Clarabel solves
@@ -350,9 +335,41 @@ def dense_newton(model: Model):
         return None
 
 
-def gave_way(solution: ConicSolution) -> str:
-    """The solver reason of a dense dual that newton-cg did not answer."""
-    return f"newton-cg {solution.solver_status} after {solution.iterations} Newton steps on the dense dual, so Clarabel"
+class ProgramSession:
+    """The solver session of a model's program, kept across updates of its q and b (a load history's steps): the
+    named solver's, seeded from the frictionless answer; left to ``auto`` on a dense dual, newton-cg's until it
+    does not answer (:func:`dense_newton`), Clarabel's from then on."""
+
+    def __init__(self, solver: str, options: dict):
+        self.solver, self.options = solver, options
+        self.session, self.newton, self.reason = None, False, None
+        self.newton_allowed = solver == "auto" and not options
+
+    def solve(self, model: Model, timings: dict, extended: bool = False) -> ContactResult:
+        """The certified result of the model's program, from the last answer where the session is kept."""
+        while True:
+            with timed(timings, "solve"):
+                if self.session is None:
+                    self._open(model)
+                else:
+                    self.session.update(q=model.program.q, b=model.program.b)
+                solution = self.session.solve()
+            with timed(timings, "postprocess"):
+                result = model.result(solution, timings, model.slip_bound, extra=self.reason, extended=extended)
+            if result.solved or not self.newton:
+                return result
+            self.session, self.newton_allowed = None, False
+            self.reason = {"solver_reason": f"newton-cg {solution.solver_status} after {solution.iterations} Newton "
+                                            f"steps on the dense dual, so Clarabel"}
+
+    def _open(self, model: Model):
+        newton = dense_newton(model) if self.newton_allowed else None
+        self.newton = newton is not None
+        if self.newton:
+            self.session, self.reason = newton, {"solver_reason": DENSE_NEWTON}
+        else:
+            self.session = solvers.session(model.program, self.solver, **self.options)
+            model.seed(self.session, self.solver, self.options)
 
 
 def matrix_free_applies(fem: FEModel, law) -> bool:
