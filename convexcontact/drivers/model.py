@@ -17,6 +17,7 @@ import scipy.sparse as sp
 from .. import solvers
 from ..conic import ConicProgram, ConicSolution, Recovery
 from ..fem.assembly import FEModel, assemble
+from ..fem.coarse import body_far_functions
 from ..fem.factorization import Factorization, condense, factorize
 from ..fem.friction import FrictionPoints, friction_points
 from ..formulations import FORMULATIONS, contact_weights
@@ -440,6 +441,8 @@ def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, 
         condensation = condensation or condensed(fem, timings, formulation == MATRIX_FREE)
     options = {"factorization": condensation if isinstance(condensation, Reused) else Reused(condensation),
                "matrix_free": formulation == MATRIX_FREE} if formulation != "primal" else {}
+    if formulation == MATRIX_FREE:
+        options["coarse"] = body_far_functions(fem)
     formulation = "dual" if formulation == MATRIX_FREE else formulation
     with timed(timings, "formulation"):
 
@@ -465,8 +468,8 @@ class Reused:
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self.factorization.solve(b)
 
-    def delassus(self, B: sp.spmatrix, K: sp.spmatrix | None = None):
-        return self.factorization.delassus(B, K)
+    def delassus(self, B: sp.spmatrix, K: sp.spmatrix | None = None, coarse=None):
+        return self.factorization.delassus(B, K, coarse)
 
     def schur(self, B: sp.spmatrix) -> np.ndarray:
         B, kept = sp.csr_matrix(B), self._B

@@ -130,10 +130,11 @@ class Factorization(ABC):
             W[:, start:start + self._block] = B @ self.solve(Bt[:, start:start + self._block].toarray())
         return 0.5 * (W + W.T)
 
-    def delassus(self, B: sp.spmatrix, K: sp.spmatrix | None = None) -> Delassus:
+    def delassus(self, B: sp.spmatrix, K: sp.spmatrix | None = None, coarse: Callable | None = None) -> Delassus:
         """W = B K⁻¹ Bᵀ as an operator, never formed (see :class:`Delassus`); with ``K``, it carries the
-        approximation of W by the slab of K next to B's columns."""
-        return Delassus(B, self.solve, None if K is None else slab(K, B))
+        approximation of W by the slab of K next to B's columns (and ``coarse`` functions beyond it, see
+        :func:`slab`)."""
+        return Delassus(B, self.solve, None if K is None else slab(K, B, coarse))
 
 
 SLAB = 1 / 3
@@ -141,35 +142,60 @@ SLAB = 1 / 3
 CG on W took 103 iterations to 1e-12 unpreconditioned, 31 with an 8-layer slab (18% of the DOFs, 0.1 s to
 factorize) and 21 with 16 layers (34%, 0.16 s, against 0.5 s for K); on a 3-D block (10⁵ DOFs, 1681 nodes)
 126, 30 with 2 layers (15%, 0.2 s) and 23 with 4 (25%, 0.5 s, against 6 s for K)."""
-LAYERS = 16
-"""Most layers of elements in the slab."""
+LAYERS = 8
+"""Most layers of elements in the slab. 16 before the coarse functions beyond it (:mod:`..fem.coarse`); with them
+the slab's thickness hardly changes the Krylov iterations (2-D strip at 10⁶ DOFs, Tresca, 4001 nodes: 48
+products with W at 16 layers, 48 at 8, 47 at 4) and a thinner one is cheaper to factorize (Signorini, 10,001
+nodes: contact solve 5.8 s at 16 layers, 4.3 s at 8, 3.3 s at 4; Tresca, 4001 nodes: ~7, 6.7, 7.7 s)."""
 
 
 @dataclass(frozen=True)
 class Approximation:
-    """W ≈ G H⁻¹ Gᵀ with H sparse SPD (K on a slab of DOFs next to the contact) and G = B on them;
-    ``factorize(H)`` returns an object with ``solve``."""
+    """W ≈ G H⁻¹ Gᵀ with H sparse SPD (K on a slab of DOFs next to the contact, and on coarse functions
+    beyond it) and G = B on them; ``factorize(H)`` returns an object with ``solve``."""
 
     G: sp.csr_matrix
     H: sp.csr_matrix
     factorize: Callable
 
 
-def slab(K: sp.spmatrix, B: sp.spmatrix) -> Approximation:
+def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Approximation:
     """K on the DOFs within a few layers of B's columns (the rest clamped), and B on them: the same Delassus
     operator for a thin body, which has the contact face's short waves right (they decay within a few
-    layers) and only its long ones wrong; as a preconditioner it leaves CG few iterations."""
+    layers) and only its long ones wrong; as a preconditioner it leaves CG few iterations.
+
+    ``coarse(inside, contact)`` (the slab's mask, B's columns) may give functions of the DOFs, zero on the slab
+    (n × c, see :func:`~convexcontact.fem.coarse.far_functions`): the rest of the body then moves with them
+    instead of being clamped, K on slab + functions (a Galerkin approximation of K) has the long waves too, and
+    CG needs fewer iterations still. Functions that leave that K singular (dependent on the rest) are dropped."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
     graph = (abs(K) > 0).astype(np.int32)  # int8 sums of neighbours overflow
+    contact = np.unique(B.indices)
     inside = np.zeros(K.shape[0], dtype=bool)
-    inside[np.unique(B.indices)] = True
+    inside[contact] = True
     for _ in range(LAYERS):
         grown = (graph @ inside.astype(np.int32)) > 0
         if grown.sum() > SLAB * K.shape[0] or grown.sum() == inside.sum():
             break
         inside = grown
     index = np.flatnonzero(inside)
-    return Approximation(B[:, index].tocsr(), K[index][:, index].tocsr(), factorize)
+    G, H = B[:, index], K[index][:, index]
+    far = None if coarse is None or inside.all() else coarse(inside, contact)
+    if far is not None and far.shape[1]:
+        K_far = (K @ far).tocsr()
+        block = (far.T @ K_far).tocsr()
+        if _definite(block):  # else functions dependent on the rest of the body: keep the clamped slab
+            H = sp.bmat([[H, K_far[index]], [K_far[index].T, block]])
+            G = sp.hstack([G, sp.csr_matrix((B.shape[0], far.shape[1]))])
+    return Approximation(G.tocsr(), H.tocsr(), factorize)
+
+
+def _definite(matrix: sp.spmatrix) -> bool:
+    try:
+        factorize(matrix)
+        return True
+    except SceneError:
+        return False
 
 
 class Delassus(spla.LinearOperator):
@@ -191,16 +217,34 @@ class Delassus(spla.LinearOperator):
 class _Direct(Factorization):
     def __init__(self, K: sp.spmatrix, backend: str, dim: int):
         start = time.perf_counter()
-        self.backend = backend
+        self.backend, self._dim = backend, dim
+        self._factors = None
         if backend == "pardiso":
-            self._solve, self._block = _pardiso_factors(K).solve, _pardiso().BLOCK
+            self._factors = _pardiso_factors(K)
+            self._solve, self._block = self._factors.solve, _pardiso().BLOCK
         else:
-            self._solve = _superlu(K, dim)
+            self._solve, self._pattern = _superlu(K, dim), _structure(K)
         self.timings = {"factorization": time.perf_counter() - start}
         _check_definite(K, self.solve)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self._solve(b)
+
+    def refactorize(self, K: sp.spmatrix) -> None:
+        """Factorize new values on the sparsity pattern of the first K (entries outside it: ValueError), without
+        the singularity check: PARDISO keeps its ordering and redoes only the numeric factorization."""
+        if self._factors is not None:
+            self._factors.refactorize(K)
+        elif (_structure(K) > self._pattern).nnz:
+            raise ValueError("refactorize: the matrix has entries outside the pattern factorized")
+        else:  # SuperLU has no numeric-only factorization: a new one
+            self._solve = _superlu(K, self._dim)
+
+
+def _structure(K: sp.spmatrix) -> sp.csr_matrix:
+    """The entries K stores, explicit zeros included (``abs(K) > 0`` would drop them)."""
+    K = sp.csr_matrix(K)
+    return sp.csr_matrix((np.ones(K.nnz, dtype=bool), K.indices, K.indptr), shape=K.shape)
 
 
 def factorize(K: sp.spmatrix, backend: str = "auto", dim: int = 2) -> Factorization:

@@ -15,6 +15,7 @@ multipliers are minus the obstacle's advance and shift.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -40,11 +41,13 @@ def dual(
     compliance: tuple[float, float] | None = None,
     factorization: Factorization | None = None,
     matrix_free: bool = False,
+    coarse: Callable | None = None,
 ):
     """The dual program, its recovery map and ``bound_update(s) -> {"b": ...}``.
 
     ``matrix_free``: P is W as an operator (:meth:`~convexcontact.fem.factorization.Factorization.delassus`),
-    never formed; for exact friction only."""
+    never formed; for exact friction only; ``coarse``: functions of the body beyond the slab that preconditions it
+    (:func:`~convexcontact.fem.factorization.slab`)."""
     if compliance is not None:
         raise SceneError("formulation", "normal compliance is formulated in the primal only", "use formulation='primal'")
     if matrix_free and epsilon is not None:
@@ -59,7 +62,7 @@ def dual(
     c = np.concatenate([C @ contact.normal_offset - contact.weighted_gap(C)] + ([-friction.offset] if count else []))
     Kf = factorization.solve(f)
     size = m + tangential + extra
-    P = factorization.delassus(B, K) if matrix_free else sp.block_diag(
+    P = factorization.delassus(B, K, coarse) if matrix_free else sp.block_diag(
         [sp.csc_matrix(factorization.schur(B)), sp.csc_matrix((extra, extra))], format="csc")
     q = np.concatenate([-(B @ Kf + c), -epsilon * friction.weights if extra else np.zeros(0)])
 

@@ -1,0 +1,151 @@
+"""The matrix-free dual's preconditioner: coarse functions beyond the slab, numeric refactorization, and the exact
+inverse of the approximation restricted to each Newton system."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import scipy.linalg as la
+import scipy.sparse as sp
+
+import convexcontact as cc
+from convexcontact import solvers
+from convexcontact.fem import factorization
+from convexcontact.fem.coarse import body_far_functions, grid_functions
+from convexcontact.fem.factorization import Approximation, Delassus, factorize
+from convexcontact.formulations import contact_weights
+from convexcontact.scene.library import whole_face
+from convexcontact.scene.model import Signorini, Tresca
+from convexcontact.solvers import newton_cg
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_grid_functions_reproduce_linear_fields(dim):
+    """Bilinear (trilinear) hats sum to one in each component and interpolate any linear field exactly."""
+    rng = np.random.default_rng(dim)
+    points = rng.uniform(-1.0, 2.0, (dim, 500))
+    components = rng.integers(0, dim, 500)
+    functions = grid_functions(points, components, spacing=0.37)
+    assert (functions.getnnz(axis=1) == 2**dim).all()
+    # the grid nodes' positions, recovered from the hats' weights on the points (least squares, exact here)
+    slope, offset = rng.standard_normal(dim), 0.3
+    field = slope @ points + offset
+    node_values, *_ = np.linalg.lstsq(functions.toarray(), field, rcond=None)
+    np.testing.assert_allclose(functions @ node_values, field, atol=1e-10)
+    np.testing.assert_allclose(functions @ np.ones(functions.shape[1]), 1.0, atol=1e-12)
+    for component in range(dim):  # each column holds one component
+        rows = functions[components == component]
+        assert not (abs(functions[components != component]).sum(axis=0).A1 * abs(rows).sum(axis=0).A1).any()
+
+
+def strip(nodes=61, height=24):
+    """A 2-D whole-face strip tall enough that the slab of LAYERS clamps most of it."""
+    fem = cc.prepare(whole_face(2, nodes, 2 * nodes * (height + 1)), "primal").fem
+    B = (contact_weights(fem.contact, "nodal") @ fem.contact.N).tocsr()
+    return fem, B
+
+
+def delassus_eigenvalues(approximation: Approximation, W: np.ndarray) -> np.ndarray:
+    """The generalized eigenvalues of W against the approximation G H⁻¹ Gᵀ."""
+    G = approximation.G.toarray()
+    M = G @ factorize(approximation.H).solve(G.T)
+    return la.eigh(W, 0.5 * (M + M.T), eigvals_only=True)
+
+
+def test_coarse_functions_give_the_slab_the_long_waves():
+    """K on slab + grid functions is a Galerkin approximation (the eigenvalues of W against it are ≥ 1, as for
+    the clamped slab), and it has the long waves the clamped slab has too stiff: the largest eigenvalue falls
+    from several to near one."""
+    fem, B = strip()
+    W = factorize(fem.K).schur(B)
+    clamped = delassus_eigenvalues(factorization.slab(fem.K, B), W)
+    coarse = delassus_eigenvalues(factorization.slab(fem.K, B, body_far_functions(fem)), W)
+    assert clamped.min() > 1 - 1e-9 and coarse.min() > 1 - 1e-9
+    assert clamped.max() > 2.0
+    assert coarse.max() < 1.3
+
+
+def test_dependent_coarse_functions_leave_the_clamped_slab():
+    """Functions that make K on slab + functions singular (here a function given twice) are dropped."""
+    fem, B = strip(31, 12)
+    far = body_far_functions(fem)
+    twice = factorization.slab(fem.K, B, lambda inside, contact: sp.hstack([far(inside, contact)] * 2).tocsr())
+    clamped = factorization.slab(fem.K, B)
+    assert twice.H.shape == clamped.H.shape and abs(twice.H - clamped.H).max() == 0
+
+
+@pytest.mark.parametrize("backend", ["pardiso", "superlu"])
+def test_refactorize_solves_with_the_new_values(backend):
+    """New values on the first matrix's pattern (part of it): the same answers as a fresh factorization; an entry
+    outside the pattern is refused."""
+    if backend == "pardiso" and factorization._pardiso() is None:
+        pytest.skip("PARDISO does not load here")
+    rng = np.random.default_rng(1)
+    fem, _ = strip(21, 6)
+    K = fem.K.tocsr()
+    factors = factorize(K, backend)
+    scaled = sp.diags(rng.uniform(0.5, 2.0, K.shape[0]))
+    changed = (scaled @ K @ scaled).tocsr()
+    changed.setdiag(changed.diagonal() * 1.5)
+    factors.refactorize(changed)
+    b = rng.standard_normal(K.shape[0])
+    np.testing.assert_allclose(changed @ factors.solve(b), b, atol=1e-9 * np.abs(b).max())
+    outside = changed + sp.csr_matrix(([1.0, 1.0], ([0, K.shape[0] - 1], [K.shape[0] - 1, 0])), shape=K.shape)
+    with pytest.raises(ValueError, match="outside the pattern"):
+        factors.refactorize(outside)
+
+
+@pytest.mark.parametrize("dim, nodes, dofs, law", [
+    (2, 41, 2e3, Signorini()),
+    (2, 41, 2e3, Tresca(slip_bound=0.002)),
+    (3, 36, 8e2, Tresca(slip_bound=0.002)),
+])
+def test_exact_approximation_leaves_each_newton_system_a_few_iterations(dim, nodes, dofs, law):
+    """With the approximation W itself (slab = the body), each Newton system's preconditioner is the exact
+    inverse of that system up to the shift δ: a few Krylov iterations a step, where a wrong restriction of the
+    approximation to the step's variables (and curvature) would leave many; the answer is the operator's."""
+    model = cc.prepare(whole_face(dim, nodes, dofs, law), "dual-matrix-free")
+    P = model.program.P
+    exact = Delassus(P.B, P._solve, Approximation(P.B, model.fem.K.tocsr(), factorize))
+    answer = solvers.solve(replace(model.program, P=exact), "newton-cg")
+    reference = solvers.solve(model.program, "newton-cg")
+    assert answer.status == "solved" and reference.status == "solved"
+    assert answer.info["cg_iterations"] <= 4 * answer.iterations
+    assert np.abs(answer.x - reference.x).max() < 1e-9 * np.abs(reference.x).max()
+
+
+def test_preconditioner_pattern_holds_every_newton_system():
+    """The pattern ordered once holds H + Gᵣᵀ D⁻¹ Gᵣ for any free set and sphere: refactorized on random ones."""
+    rng = np.random.default_rng(3)
+    model = cc.prepare(whole_face(3, 25, 6e2, Tresca(slip_bound=0.002)), "dual-matrix-free")
+    program = model.program
+    sets = newton_cg._bounds(program, newton_cg.bound_form_of(program))
+    preconditioner = newton_cg._Preconditioner(program.P.approximation, sets.scale, sets.balls, 1e-3)
+    n = program.n_variables
+    for _ in range(3):
+        held = rng.random(n) < 0.4
+        sphere = rng.random(sets.balls.shape[0]) < 0.5
+        held[sets.balls[sphere].ravel()] = True
+        bases = newton_cg.tangent_bases(rng.standard_normal((sphere.sum(), sets.balls.shape[1])))
+        R = newton_cg._expansion(n, np.flatnonzero(~held), sets.balls[sphere], bases)
+        curvature = np.concatenate([np.zeros((~held).sum()), rng.uniform(0, 1, R.shape[1] - (~held).sum())])
+        apply = preconditioner.system(R, curvature)
+        G = (sp.diags(sets.scale) @ program.P.approximation.G).toarray()
+        M = R.T @ G @ np.linalg.solve(program.P.approximation.H.toarray(), G.T @ R.toarray())
+        xi = rng.standard_normal(R.shape[1])
+        expected = np.linalg.solve(M + np.diag(1e-3 + curvature), xi)
+        np.testing.assert_allclose(apply(xi), expected, rtol=1e-8, atol=1e-10 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize("dim, nodes, dofs", [(2, 41, 2e3), (3, 36, 8e2)])
+def test_newton_cg_preconditioner_on_superlu(monkeypatch, dim, nodes, dofs):
+    """Without PARDISO the slab's factors are SuperLU's, factorized anew each Newton step (no numeric-only
+    refactorization): the same answer as with the default backend."""
+    scene = whole_face(dim, nodes, dofs, Tresca(slip_bound=0.002))
+    reference = cc.prepare(scene, "dual-matrix-free").solve("newton-cg")
+    monkeypatch.setattr(factorization, "_pardiso", lambda: None)
+    answer = cc.prepare(scene, "dual-matrix-free").solve("newton-cg")
+    assert answer.status == "solved" and answer.certificate.worst < 1e-10
+    scale = np.abs(reference.contact.pressure).max()
+    np.testing.assert_allclose(answer.contact.pressure, reference.contact.pressure, atol=1e-9 * scale)
+    np.testing.assert_allclose(answer.contact.friction, reference.contact.friction, atol=1e-9 * scale)
