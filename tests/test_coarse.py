@@ -101,9 +101,10 @@ def test_refactorize_solves_with_the_new_values(backend):
     (3, 36, 8e2, Tresca(slip_bound=0.002)),
 ])
 def test_exact_approximation_leaves_each_newton_system_a_few_iterations(dim, nodes, dofs, law):
-    """With the approximation W itself (slab = the body), each Newton system's preconditioner is the exact
-    inverse of that system up to the shift δ: a few Krylov iterations a step, where a wrong restriction of the
-    approximation to the step's variables (and curvature) would leave many; the answer is the operator's."""
+    """With the approximation W itself (slab = the body), a friction dual's Newton systems get the exact inverse
+    of that system up to the shift δ (a Signorini dual's the restriction of W's, near it on a whole face): a few
+    Krylov iterations a step, where a wrong restriction of the approximation to the step's variables (and
+    curvature) would leave many; the answer is the operator's."""
     model = cc.prepare(whole_face(dim, nodes, dofs, law), "dual-matrix-free")
     P = model.program.P
     exact = Delassus(P.B, P._solve, Approximation(P.B, model.fem.K.tocsr(), factorize))
@@ -149,3 +150,13 @@ def test_newton_cg_preconditioner_on_superlu(monkeypatch, dim, nodes, dofs):
     scale = np.abs(reference.contact.pressure).max()
     np.testing.assert_allclose(answer.contact.pressure, reference.contact.pressure, atol=1e-9 * scale)
     np.testing.assert_allclose(answer.contact.friction, reference.contact.friction, atol=1e-9 * scale)
+
+
+def test_thin_body_keeps_the_clamped_slab():
+    """A body so thin that one layer beyond its face is over a third of it gets no coarse functions."""
+    fem, B = strip(61, 2)
+    called = []
+    thin = factorization.slab(fem.K, B, lambda inside, contact: called.append(1))
+    clamped = factorization.slab(fem.K, B)
+    assert not called and abs(thin.H - clamped.H).max() == 0
+    assert clamped.H.shape[0] < fem.n_free  # a slab still, of the face alone

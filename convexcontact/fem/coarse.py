@@ -17,6 +17,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+CELLS = 2
+"""Least grid spacing, in the body's largest cells."""
 KEEP = 0.25
 """A grid function is kept where it reaches this value at some DOF outside the slab: a hat that only grazes the
 rest (a corner of its support) adds a nearly dependent column."""
@@ -51,7 +53,7 @@ def far_functions(points: np.ndarray, components: np.ndarray, cell_size: float) 
     def coarse(inside: np.ndarray, contact: np.ndarray) -> sp.csr_matrix:
         thickness = cKDTree(points[:, contact].T).query(points[:, inside].T)[0].max(initial=0.0)
         rest = np.flatnonzero(~inside)
-        functions = grid_functions(points[:, rest], components[rest], max(thickness, 2.0 * cell_size))
+        functions = grid_functions(points[:, rest], components[rest], max(thickness, CELLS * cell_size))
         peak = np.zeros(functions.shape[1])
         np.maximum.at(peak, functions.indices, functions.data)
         kept = np.flatnonzero(peak >= KEEP)

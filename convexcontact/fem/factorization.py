@@ -148,6 +148,12 @@ the slab's thickness hardly changes the Krylov iterations (2-D strip at 10⁶ DO
 products with W at 16 layers, 48 at 8, 47 at 4) and a thinner one is cheaper to factorize (Signorini, 10,001
 nodes: contact solve 5.8 s at 16 layers, 4.3 s at 8, 3.3 s at 4; Tresca, 4001 nodes: ~7, 6.7, 7.7 s)."""
 
+COARSE_LAYERS = 2
+"""Fewest layers of a slab that gets coarse functions beyond it. A slab of fewer is the face of a body too thin
+for more (a third of its DOFs): the functions then cost more than they gain (2-D strip 4 cells high, 10⁵ contact
+nodes, Tresca: contact solve 5.6 s with them against 4.0 s without; 3-D block 9 cells high, a 3-layer slab: 40
+products with W against 73)."""
+
 
 @dataclass(frozen=True)
 class Approximation:
@@ -167,20 +173,24 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Appr
     ``coarse(inside, contact)`` (the slab's mask, B's columns) may give functions of the DOFs, zero on the slab
     (n × c, see :func:`~convexcontact.fem.coarse.far_functions`): the rest of the body then moves with them
     instead of being clamped, K on slab + functions (a Galerkin approximation of K) has the long waves too, and
-    CG needs fewer iterations still. Functions that leave that K singular (dependent on the rest) are dropped."""
+    CG needs fewer iterations still; only beyond a slab of COARSE_LAYERS layers or more. Functions that leave that
+    K singular (dependent on the rest) are dropped."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
     graph = (abs(K) > 0).astype(np.int32)  # int8 sums of neighbours overflow
     contact = np.unique(B.indices)
     inside = np.zeros(K.shape[0], dtype=bool)
     inside[contact] = True
-    for _ in range(LAYERS):
+    layers = 0
+    for layers in range(LAYERS):
         grown = (graph @ inside.astype(np.int32)) > 0
         if grown.sum() > SLAB * K.shape[0] or grown.sum() == inside.sum():
             break
         inside = grown
+    else:
+        layers = LAYERS
     index = np.flatnonzero(inside)
     G, H = B[:, index], K[index][:, index]
-    far = None if coarse is None or inside.all() else coarse(inside, contact)
+    far = None if coarse is None or layers < COARSE_LAYERS or inside.all() else coarse(inside, contact)
     if far is not None and far.shape[1]:
         K_far = (K @ far).tocsr()
         block = (far.T @ K_far).tocsr()
