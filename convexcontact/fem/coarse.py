@@ -60,7 +60,7 @@ def far_functions(points: np.ndarray, components: np.ndarray, cell_size: float) 
         number = np.full(functions.shape[1], -1)
         number[kept] = np.arange(kept.size)
         entries = number[functions.indices] >= 0  # rows keep their kept entries, in the DOFs' numbering
-        counts = np.add.reduceat(entries, functions.indptr[:-1]) if rest.size else np.zeros(0, dtype=np.int64)
+        counts = np.add.reduceat(entries, functions.indptr[:-1])  # rest is not empty (see slab)
         indptr = np.zeros(inside.size + 1, dtype=np.int64)
         indptr[rest + 1] = counts
         return sp.csr_matrix((functions.data[entries], number[functions.indices[entries]], np.cumsum(indptr)),

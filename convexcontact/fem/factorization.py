@@ -180,8 +180,7 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Appr
     contact = np.unique(B.indices)
     inside = np.zeros(K.shape[0], dtype=bool)
     inside[contact] = True
-    layers = 0
-    for layers in range(LAYERS):
+    for layers in range(LAYERS):  # the layers grown, read after the loop
         grown = (graph @ inside.astype(np.int32)) > 0
         if grown.sum() > SLAB * K.shape[0] or grown.sum() == inside.sum():
             break

@@ -14,8 +14,9 @@ the first steps, which find the active set, are cheap.
 
 An operator P may carry ``approximation`` with sparse ``G``, ``H`` (SPD) and ``factorize`` such that
 P ≈ G H⁻¹ Gᵀ (a Delassus operator of a thin slab of the body and coarse functions beyond it): each Newton
-system is then preconditioned by the exact inverse of the same system with P's approximation (Woodbury: one
-numeric sparse factorization per Newton step, see :class:`_Preconditioner`).
+system of a program with balls is then preconditioned by the exact inverse of the same system with P's
+approximation (Woodbury: one numeric sparse factorization per Newton step), of a program with bounds alone by
+the restriction of the approximation's inverse (one per session; see :class:`_Preconditioner`).
 """
 
 from __future__ import annotations
@@ -291,12 +292,14 @@ class _Preconditioner:
 
     def __init__(self, approximation, scale: np.ndarray, balls: np.ndarray, shift: float):
         self.G, self.H, self.shift = sp.csr_matrix(sp.diags(scale) @ approximation.G), approximation.H, shift
-        n, p = scale.size, balls.shape[1]
-        pairs = (np.repeat(balls, p, axis=1).ravel(), np.tile(balls, (1, p)).ravel())
-        E = sp.eye(n) + sp.csr_matrix((np.ones(pairs[0].size), pairs), shape=(n, n))  # every R D⁻¹ Rᵀ is on it
-        self.factors = approximation.factorize(_with_pattern(
-            self.H + self.G.T @ self.G / shift, abs(self.H) + abs(self.G).T @ E @ abs(self.G)))
         self.exact = balls.size > 0
+        every_free = self.H + self.G.T @ self.G / shift
+        if self.exact:  # every later R D⁻¹ Rᵀ is on E: order the pattern they all fit
+            n, p = scale.size, balls.shape[1]
+            pairs = (np.repeat(balls, p, axis=1).ravel(), np.tile(balls, (1, p)).ravel())
+            E = sp.eye(n) + sp.csr_matrix((np.ones(pairs[0].size), pairs), shape=(n, n))
+            every_free = _with_pattern(every_free, abs(self.H) + abs(self.G).T @ E @ abs(self.G))
+        self.factors = approximation.factorize(sp.csr_matrix(every_free))
 
     def system(self, R: sp.csr_matrix, curvature: np.ndarray):
         """ξ ↦ the preconditioner of D + Rᵀ P̃ R, D = δ + ``curvature``."""
