@@ -130,15 +130,20 @@ class Pardiso:
         """New values, on the sparsity pattern of the matrix factorized (or part of it): the numeric factorization
         only (phase 22), keeping the ordering — 0.14 s against 0.65 s on a 2-D slab of 1.4·10⁵ DOFs."""
         U = sp.triu(K, format="coo")
-        _, _, n, data, indptr, indices, _ = self._handle
-        keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(indptr)) * n + indices
-        where = np.searchsorted(keys, U.row.astype(np.int64) * n + U.col)
-        if (where >= keys.size).any() or (keys[np.minimum(where, keys.size - 1)] != U.row.astype(np.int64) * n
-                                         + U.col).any():
+        n, data, keys = self.n, self._handle[3], self._keys
+        wanted = U.row.astype(np.int64) * n + U.col
+        where = np.searchsorted(keys, wanted)
+        if (where >= keys.size).any() or (keys[np.minimum(where, keys.size - 1)] != wanted).any():
             raise ValueError("refactorize: the matrix has entries outside the pattern factorized")
         data[:] = 0.0  # in place: PARDISO holds a pointer to it
         np.add.at(data, where, U.data)
         self._run(22, np.zeros(1), np.zeros(1), 1)
+
+    @functools.cached_property
+    def _keys(self) -> np.ndarray:
+        """row · n + column of each stored entry of the upper triangle, increasing (rows sorted, then columns)."""
+        _, _, n, _, indptr, indices, _ = self._handle
+        return np.repeat(np.arange(n, dtype=np.int64), np.diff(indptr)) * n + indices
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """K⁻¹ b (phase 33)."""
