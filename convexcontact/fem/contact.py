@@ -187,7 +187,7 @@ def _nodes(facets: np.ndarray, mesh: fe.Mesh, basis: fe.Basis, boundary: str) ->
     dofs = np.column_stack([view.all(f"u^{i + 1}") for i in range(dim)])
     if dofs.shape[0] == 0:
         raise SceneError("contact.boundary", f"{boundary!r} carries no nodes")
-    facet_basis = fe.FacetBasis(mesh, basis.elem, facets=facets)
+    facet_basis = fe.FacetBasis(mesh, basis.elem, facets=facets, dofs=basis.dofs, disable_doflocs=True)
     # n_i ∝ ∫ ψ_i n ds: the outward normal averaged with the shape function's weight,
     # well defined for any Lagrange element and for curved facets
     weighted_normal = fe.asm(fe.LinearForm(lambda v, w: dot(w.n, v)), facet_basis)[dofs]
@@ -212,12 +212,12 @@ def gauss_interpolation(mesh: fe.Mesh, basis: fe.Basis, facets: np.ndarray, dofs
                         order: int | None = None):
     """G (points × contact nodes), weights ω_q and coordinates of the Gauss points of ``facets`` (the rule
     integrating degree ``order`` exactly; scikit-fem's default for the element when None)."""
-    scalar = fe.FacetBasis(mesh, basis.elem.elem, facets=facets, intorder=order)
-    # scalar DOF j carries vector DOFs dj, …, dj + d − 1 (scikit-fem interleaves components)
+    # scikit-fem locates every DOF of the mesh unless told not to; only the facets' are needed here
+    scalar = fe.FacetBasis(mesh, basis.elem.elem, facets=facets, intorder=order, disable_doflocs=True)
+    # scalar DOF j carries vector DOFs dj, …, dj + d − 1 (scikit-fem interleaves components; tests/test_stiffness.py)
     m, dim = dofs.shape
     node_of_dof = np.full(scalar.N, -1)
     node_of_dof[dofs[:, 0] // dim] = np.arange(m)
-    assert np.allclose(scalar.doflocs[:, dofs[:, 0] // dim], basis.doflocs[:, dofs[:, 0]])
     nfacets, nqp = scalar.dx.shape
     rows = np.arange(nfacets * nqp).reshape(nfacets, nqp)
     entries = [

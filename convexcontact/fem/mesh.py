@@ -66,10 +66,13 @@ def tensor_mesh(*axes: np.ndarray, quads: bool = False) -> fe.Mesh:
     kind = {(2, False): fe.MeshTri1, (2, True): fe.MeshQuad1, (3, False): fe.MeshTet1, (3, True): fe.MeshHex1}
     mesh = kind[dim, bool(quads)].init_tensor(*axes)
     tol = 1e-9 * max(np.ptp(axis) for axis in axes)  # of the body size, not of the smallest element
+    # among the boundary facets only: with_boundaries' tests take the midpoint of every facet (0.8 s at 10⁶ DOFs)
+    boundary = mesh.boundary_facets()
+    midpoints = mesh.p[:, mesh.facets[:, boundary]].mean(axis=1)
     sides = {}
     for i, (axis, names) in enumerate(zip(axes, BOUNDARY_NAMES[dim])):
         for name, value in zip(names, (axis.min(), axis.max())):
-            sides[name] = lambda p, i=i, value=value: np.abs(p[i] - value) < tol
+            sides[name] = boundary[np.abs(midpoints[i] - value) < tol]
     return same_topology(mesh.with_boundaries(sides), mesh)
 
 
