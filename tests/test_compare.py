@@ -8,7 +8,7 @@ import pytest
 import convexcontact as cc
 from convexcontact.baselines import penalty_signorini
 from convexcontact.scene.library import hertz_punch
-from convexcontact.studies.compare import Fields, compare, compare_files, format_report
+from convexcontact.studies.compare import Fields, compare, compare_files, format_report, mass_matrix
 
 ERRORS = ("energy_error", "l2_displacement_error", "pressure_l2_error", "pressure_max_error")
 
@@ -170,3 +170,15 @@ def test_compare_files_weighs_3d_nodes_by_their_areas(tmp_path):
     fem = exact.fem
     areas = fem.contact.weights * fem.scaling.length**2
     assert from_files["contact_zone_difference"] == pytest.approx(areas[exact.closed != shifted.closed].sum())
+
+
+def test_the_l2_error_integrates_the_mass_exactly(indented):
+    """The displacement error's L² norm uses the exact mass (the model's P1 quadrature has one point, which
+    would leave it singular): positive definite, and a unit translation's mass is the body's area."""
+    fem = indented.fem
+    mass = mass_matrix(fem).toarray()
+    assert np.linalg.eigvalsh(mass).min() > 0
+    translation = np.zeros(fem.basis.N)
+    translation[fem.basis.nodal_dofs[0]] = 1.0
+    area = np.ptp(fem.mesh.p[0]) * np.ptp(fem.mesh.p[1])  # the Hertz block is a rectangle
+    assert translation @ mass @ translation == pytest.approx(area, rel=1e-12)

@@ -8,8 +8,10 @@ import skfem as fe
 from skfem.helpers import ddot, div, sym_grad
 
 import convexcontact as cc
-from convexcontact.fem.assembly import assemble, lame_per_element, stiffness
-from convexcontact.fem.mesh import build_mesh, scaled, vector_basis
+from convexcontact.fem.assembly import assemble, lame_per_element, load_vector
+from convexcontact.fem.mesh import build_mesh, scaled, tensor_mesh, vector_basis
+from convexcontact.fem.scaling import Scaling
+from convexcontact.fem.stiffness import stiffness
 
 
 @fe.BilinearForm
@@ -26,7 +28,7 @@ MESHES = [(fe.MeshTri().refined(3), "P1"), (fe.MeshTri().refined(2), "P2"), (fe.
 def test_the_kernel_is_the_weak_form(mesh, element, monkeypatch):
     """Element-wise random Lamé parameters, in blocks smaller than the mesh: K equals the form's to round-off, is
     symmetric, and holds the rigid motions in its kernel."""
-    monkeypatch.setattr("convexcontact.fem.assembly.CHUNK", 7)
+    monkeypatch.setattr("convexcontact.fem.stiffness.BLOCK", 1000)  # blocks of 1–27 cells
     basis = vector_basis(mesh, element)
     rng = np.random.default_rng(1)
     lam, mu = rng.uniform(0.5, 2.0, basis.nelems), rng.uniform(0.5, 2.0, basis.nelems)
@@ -40,6 +42,67 @@ def test_the_kernel_is_the_weak_form(mesh, element, monkeypatch):
         for component, dofs in enumerate(basis.split_indices()[:2]):
             u[dofs] = motion(basis.doflocs[:, dofs])[component]
         assert np.abs(K @ u).max() <= 1e-12 * abs(K).max()
+
+
+@pytest.mark.parametrize("mesh, element", [(fe.MeshTri().refined(2), "P2"), (fe.MeshHex().refined(1), "Q1")],
+                         ids=["MeshTri-P2", "MeshHex-Q1"])
+def test_the_kernel_does_not_rely_on_the_numbering(mesh, element, monkeypatch):
+    """Nodes and cells numbered at random (blocks of cells then touch rows all over K): still the form's K."""
+    monkeypatch.setattr("convexcontact.fem.stiffness.BLOCK", 1000)
+    rng = np.random.default_rng(7)
+    order = rng.permutation(mesh.p.shape[1])
+    shuffled = type(mesh)(mesh.p[:, order], np.argsort(order)[mesh.t][:, rng.permutation(mesh.t.shape[1])])
+    basis = vector_basis(shuffled, element)
+    lam, mu = rng.uniform(0.5, 2.0, basis.nelems), rng.uniform(0.5, 2.0, basis.nelems)
+    points = basis.X.shape[-1]
+    reference = fe.asm(elasticity, basis, lam=np.repeat(lam[:, None], points, 1), mu=np.repeat(mu[:, None], points, 1))
+    assert abs(stiffness(basis, (lam, mu)) - reference).max() <= 1e-14 * abs(reference).max()
+
+
+@pytest.mark.parametrize("mesh, element", MESHES, ids=[f"{type(m).__name__}-{e}" for m, e in MESHES])
+def test_the_basis_evaluates_what_scikit_fem_does(mesh, element):
+    """The lazy basis holds scikit-fem's DOFs, locations, shape functions and measures on the same quadrature, and
+    its vector DOFs interleave components (d·s + a for scalar DOF s, component a), which the kernel and the
+    contact trace rely on."""
+    lazy = vector_basis(mesh, element)
+    eager = fe.CellBasis(mesh, lazy.elem, quadrature=(lazy.X, lazy.W))
+    np.testing.assert_array_equal(lazy.element_dofs, eager.element_dofs)
+    np.testing.assert_allclose(lazy.doflocs, eager.doflocs, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(lazy.dx, eager.dx, rtol=1e-15)
+    for mine, theirs in zip(lazy.basis, eager.basis):
+        np.testing.assert_allclose(mine[0].value, theirs[0].value, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(mine[0].grad, theirs[0].grad, rtol=1e-14, atol=1e-12)
+    dim, scalar = mesh.dim(), fe.Dofs(mesh, lazy.elem.elem).element_dofs
+    interleaved = (dim * scalar[:, None, :] + np.arange(dim)[None, :, None]).reshape(-1, scalar.shape[1])
+    np.testing.assert_array_equal(lazy.element_dofs, interleaved)
+
+
+def test_the_centroid_rule_integrates_p1_loads_exactly():
+    """P1 triangles integrate with one point (scikit-fem's lowest rule has three): a body force's load vector
+    (degree 1) is the exact one."""
+    scene = dataclasses.replace(cc.scene.library.hertz_punch(8), body_force=(0.3, -1.2))
+    mesh = build_mesh(scene.body)
+    one, exact = vector_basis(mesh, "P1"), vector_basis(mesh, "P1", intorder=4)
+    assert one.X.shape[-1] == 1
+    scaling = Scaling(1.0, 1.0, 1.0, 2)
+    exact_load = load_vector(scene, mesh, exact, scaling)
+    np.testing.assert_allclose(load_vector(scene, mesh, one, scaling), exact_load, rtol=0,
+                               atol=1e-14 * np.abs(exact_load).max())
+
+
+@pytest.mark.parametrize("quads", [False, True])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_sides_are_the_boundary_facets_on_each_plane(dim, quads):
+    """The named sides of a tensor mesh are the boundary facets whose midpoints lie on each bounding plane, as
+    scikit-fem's own test of every facet finds them."""
+    axes = [np.array([0.0, 0.4, 1.0]), np.array([-1.0, 0.5, 2.0, 3.0]), np.array([0.0, 0.1, 0.3])][:dim]
+    mesh = tensor_mesh(*axes, quads=quads)
+    names = {2: ("left", "right", "bottom", "top"), 3: ("left", "right", "front", "back", "bottom", "top")}[dim]
+    for index, name in enumerate(names):
+        axis, value = index // 2, axes[index // 2][-(index % 2)]
+        found = mesh.facets_satisfying(lambda x, axis=axis, value=value: np.abs(x[axis] - value) < 1e-12, True)
+        np.testing.assert_array_equal(np.sort(mesh.boundaries[name]), found)
+        assert found.size > 0
 
 
 def test_plane_stress_enters_through_the_lame_parameters():

@@ -17,6 +17,7 @@ from .contact import ContactTrace, contact_trace
 from .mesh import build_mesh, check_boundary, scaled, vector_basis
 from .mortar import PairTrace, pair_trace, pairs_trace
 from .scaling import Scaling
+from .stiffness import stiffness
 
 
 @dataclass
@@ -126,36 +127,6 @@ def viscous_stiffness(fem: FEModel) -> sp.csr_matrix | None:
     return stiffness(fem.basis, (fem.lame[0] * tau, fem.lame[1] * tau))
 
 
-CHUNK = 50_000
-"""Elements per block of :func:`stiffness`: bounds its temporaries (a Q1 hexahedron holds 24 local DOFs
-× 9 gradient entries × 8 points)."""
-
-
-def stiffness(basis: fe.Basis, lame: tuple[np.ndarray, np.ndarray]) -> sp.csr_matrix:
-    """Stiffness matrix of the whole basis with element-wise Lamé parameters:
-    K_e,ij = Σ_q dx (2μ ε(φ_i):ε(φ_j) + λ div φ_i div φ_j), from the gradients scikit-fem's basis holds.
-
-    Summed by hand rather than as a scikit-fem BilinearForm: the form evaluates its integrand
-    once per pair of local DOFs (36 for P1 triangles, 576 for Q1 hexahedra), each pass over every element
-    with its own temporaries; one batched product per block of elements does the same sums
-    (tests/test_stiffness.py checks it against the form)."""
-    lam, mu = lame
-    nloc, nel = basis.element_dofs.shape
-    data = np.empty((nel, nloc, nloc))
-    for block in np.array_split(np.arange(nel), max(1, -(-nel // CHUNK))):
-        grad = np.stack([np.moveaxis(basis.basis[i][0].grad[..., block, :], 2, 0) for i in range(nloc)], axis=1)
-        strain = 0.5 * (grad + grad.swapaxes(2, 3))  # (element, i, a, b, point)
-        divergence = np.trace(grad, axis1=2, axis2=3)  # (element, i, point)
-        dx = basis.dx[block]
-        weighted = strain * (2.0 * mu[block, None] * dx)[:, None, None, None, :]
-        data[block] = (weighted.reshape(len(block), nloc, -1) @ strain.reshape(len(block), nloc, -1).swapaxes(1, 2)
-                       + (divergence * (lam[block, None] * dx)[:, None, :]) @ divergence.swapaxes(1, 2))
-    dofs = basis.element_dofs.T
-    rows = np.broadcast_to(dofs[:, :, None], data.shape).ravel()
-    columns = np.broadcast_to(dofs[:, None, :], data.shape).ravel()
-    return sp.csr_matrix((data.ravel(), (rows, columns)), shape=(basis.N, basis.N))
-
-
 def check_length(vector, dim: int, field_name: str) -> np.ndarray:
     """A load vector of the body's dimension (an all-zero vector of any length is zero)."""
     vector = np.asarray(vector, dtype=float)
@@ -170,7 +141,7 @@ def load_vector(scene: Scene, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling) 
     dim = mesh.dim()
     for traction in scene.tractions:
         facets = check_boundary(mesh, traction.boundary, f"traction[{traction.boundary}].boundary")
-        facet_basis = fe.FacetBasis(mesh, basis.elem, facets=facets)
+        facet_basis = fe.FacetBasis(mesh, basis.elem, facets=facets, dofs=basis.dofs, disable_doflocs=True)
         if traction.pressure is not None:
             p = traction.pressure / scaling.pressure
             f += fe.asm(fe.LinearForm(lambda v, w, p=p: -p * dot(w.n, v)), facet_basis)

@@ -51,8 +51,9 @@ def timed(function, *args) -> float:
 def mortar_assembly(facets: int = 10_000, rows: int = 8, dim: int = 2, element: str = "P1") -> dict:
     """Seconds to build the pair's trace (mortar, and node-to-segment in 2-D) and the stiffness K of the same mesh;
     in 3-D about ``facets`` slave triangles (``rows`` and ``element`` unused)."""
-    from convexcontact.fem.assembly import assemble, stiffness
+    from convexcontact.fem.assembly import assemble
     from convexcontact.fem.mortar import pair_trace
+    from convexcontact.fem.stiffness import stiffness
 
     scene = strips(facets, rows, element=element) if dim == 2 else slabs(round((facets / 2) ** 0.5))
     fem = assemble(scene)

@@ -25,7 +25,7 @@ import numpy as np
 import skfem as fe
 
 from ..results.result import CLOSED_PRESSURE, ContactResult
-from .compare import _mass, relative, traction_errors
+from .compare import mass_matrix, relative, traction_errors
 
 DISPLACEMENT_NAMES = ("displacement", "displacements", "u", "disp", "DISPLACEMENT", "Displacement", "U")
 PRESSURE_NAMES = ("contact_pressure", "CONTACT_PRESSURE", "pressure", "contact pressure", "p_contact")
@@ -110,7 +110,7 @@ def compare_peer(reference: ContactResult, path, displacement: str | None = None
         for component, dofs in enumerate(fem.basis.split_indices()):  # every DOF, mid-side ones included
             peer[dofs] = interpolation(mesh, ours[:, dofs], path, box) @ values[:, component]
         u, error = reference.displacement / scaling.displacement, (peer - reference.displacement) / scaling.displacement
-        for name, matrix in (("energy_error", fem.K_full), ("l2_displacement_error", fe.asm(_mass, fem.basis))):
+        for name, matrix in (("energy_error", fem.K_full), ("l2_displacement_error", mass_matrix(fem))):
             report[name] = relative(np.sqrt(max(error @ (matrix @ error), 0.0)), np.sqrt(max(u @ (matrix @ u), 0.0)))
     if names["pressure"] is not None:
         contact = reference.contact
