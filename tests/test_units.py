@@ -102,3 +102,50 @@ def test_a_load_of_round_off_size_does_not_set_the_scale(formulation):
     assert result.status == "solved" and result.certificate.passes(1e-12)
     # the body translates rigidly by 4e-290; its free nodes come from a factorization, to round-off
     assert np.abs(result.displacement).max() <= 4e-290 * (1.0 + 1e-12) and not result.closed.any()
+
+
+def _same(ours, fresh, name="trace"):
+    """Equal to round-off, field by field (arrays, sparse matrices, nested traces and tuples)."""
+    if dataclasses.is_dataclass(ours):
+        for item in dataclasses.fields(ours):
+            _same(getattr(ours, item.name), getattr(fresh, item.name), f"{name}.{item.name}")
+    elif isinstance(ours, (tuple, list)):
+        assert len(ours) == len(fresh), name
+        for i, (a, b) in enumerate(zip(ours, fresh)):
+            _same(a, b, f"{name}[{i}]")
+    elif hasattr(ours, "toarray"):
+        assert abs(ours - fresh).max() <= 1e-14 * max(abs(fresh).max(), 1.0), name
+    elif isinstance(ours, (np.ndarray, float)):
+        np.testing.assert_allclose(ours, fresh, rtol=1e-13, atol=1e-14 * np.abs(fresh).max(initial=1.0), err_msg=name)
+    else:
+        assert ours == fresh or (ours is None and fresh is None), name
+
+
+def _rescaled_scenes():
+    from convexcontact.scene.bodies_library import patch_pair
+    from convexcontact.scene.library import hertz_sphere
+
+    pulled = cc.Obstacle("parabolic", radius=1.0, force=HERTZ_FORCE, tangential_force=0.1 * HERTZ_FORCE)
+    return {
+        "force and tangential force": dataclasses.replace(
+            hertz_punch(nx=16), contact=cc.Contact("top", pulled, cc.Tresca(slip_bound=0.01))),
+        "gauss points": hertz_punch(nx=16, law=cc.Signorini(non_penetration="gauss")),
+        "contact nodes prescribed": dataclasses.replace(  # the top left corner moves: nonzero offsets
+            hertz_punch(nx=16, law=cc.Tresca(slip_bound=0.01)),
+            dirichlet=(cc.Dirichlet("left", ux=1e-3, uy=-2e-3),)),
+        "two bodies": patch_pair(),
+        "3-D": hertz_sphere(cells=5),
+    }
+
+
+@pytest.mark.parametrize("name", list(_rescaled_scenes()))
+def test_the_trace_in_scaled_units_is_the_trace_built_in_them(name):
+    """The assembly takes the contact trace in user displacement units (the overlap sets the scale) and rescales
+    it: every field equals the trace built in the scaled units from the start."""
+    from convexcontact.fem.assembly import assemble, build_trace
+
+    scene = _rescaled_scenes()[name]
+    fem = assemble(scene)
+    assert not np.isclose(fem.scaling.displacement, 1.0)
+    fresh = build_trace(scene.contact, fem.mesh, fem.basis, fem.scaling, fem.free, fem.prescribed)
+    _same(fem.contact, fresh)

@@ -239,8 +239,8 @@ def assemble(scene: Scene) -> FEModel:
     mesh = scaled(user_mesh, 1.0 / length)
     basis = vector_basis(mesh, scene.body.element)
 
-    # the overlap at the contact nodes sets the displacement scale, so the trace is first
-    # taken with displacements in user units (it is cheap: boundary integrals only)
+    # the overlap at the contact nodes sets the displacement scale, so the trace is taken with displacements
+    # in user units, then rescaled
     free, prescribed = dirichlet(scene, mesh, basis, 1.0)
     dim = mesh.dim()
     unscaled = build_trace(scene.contact, mesh, basis, Scaling(length, E_max, 1.0, dim), free, prescribed)
@@ -255,7 +255,7 @@ def assemble(scene: Scene) -> FEModel:
     K_full = stiffness(basis, lame)
     f_full = load_vector(scene, mesh, basis, scaling)
     prescribed = prescribed / scaling.displacement
-    contact = build_trace(scene.contact, mesh, basis, scaling, free, prescribed)
+    contact = unscaled.in_displacement_units(scaling.displacement)
     pair_warnings = contact.warnings if isinstance(contact, PairTrace) else ()
     return FEModel(scene, scaling, mesh, basis, lame, K_full, f_full, free, prescribed, contact,
                    locking_warnings(scene, mesh.dim()) + pair_warnings)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -70,6 +70,15 @@ class ContactTrace:
     obstacle_tangential_force: float = 0.0
     bitangents: np.ndarray | None = None  # (m, 3) in 3-D
     points: ContactPoints | None = None  # Gauss-point non-penetration only
+
+    def in_displacement_units(self, scale: float) -> ContactTrace:
+        """This trace with displacements measured in units ``scale`` times as large: gaps, offsets and the
+        obstacle's forces (a force scale is a displacement scale times a stiffness) divided by ``scale``, the
+        only fields the displacement scale enters."""
+        points = None if self.points is None else replace(self.points, gap=self.points.gap / scale)
+        return replace(self, gap=self.gap / scale, normal_offset=self.normal_offset / scale,
+                       tangent_offset=self.tangent_offset / scale, obstacle_force=self.obstacle_force / scale,
+                       obstacle_tangential_force=self.obstacle_tangential_force / scale, points=points)
 
     @property
     def m(self) -> int:
@@ -197,7 +206,10 @@ def _nodes(facets: np.ndarray, mesh: fe.Mesh, basis: fe.Basis, boundary: str) ->
     # T becoming 1e-53: a rank-deficient instead of an empty column of the dual's W)
     normals[np.abs(normals) < ROUNDOFF] = 0.0
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    mass = fe.asm(fe.BilinearForm(lambda u, v, w: u[0] * v[0]), facet_basis).tocsr()[dofs[:, 0]][:, dofs[:, 0]]
+    # of the scalar element (the vector one's first components, a quarter (2-D) of the pairs to integrate)
+    scalar = fe.FacetBasis(mesh, basis.elem.elem, facets=facets, disable_doflocs=True)
+    nodes = dofs[:, 0] // dim  # scikit-fem's vector DOF d·s + a of scalar DOF s
+    mass = fe.asm(fe.BilinearForm(lambda u, v, w: u * v), scalar).tocsr()[nodes][:, nodes]
     weights = np.asarray(mass.sum(axis=1)).ravel()  # partition of unity: Σ_j ∫ψ_iψ_j = ∫ψ_i
     return _Nodes(dofs, basis.doflocs[:, dofs[:, 0]].T, normals, mass, weights)
 
