@@ -7,7 +7,6 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import scipy.sparse as sp
 import skfem as fe
-from skfem.helpers import dot
 
 from ..scene.model import COVERED, Contact, SceneError
 from .mesh import check_boundary
@@ -196,19 +195,20 @@ def _nodes(facets: np.ndarray, mesh: fe.Mesh, basis: fe.Basis, boundary: str) ->
     dofs = np.column_stack([view.all(f"u^{i + 1}") for i in range(dim)])
     if dofs.shape[0] == 0:
         raise SceneError("contact.boundary", f"{boundary!r} carries no nodes")
-    facet_basis = fe.FacetBasis(mesh, basis.elem, facets=facets, dofs=basis.dofs, disable_doflocs=True)
+    # integrals over Γ_C of the scalar element: scikit-fem's vector DOF d·s + a carries component a of
+    # scalar DOF s, and the scalar basis holds a quarter (2-D) of the vector one's pairs of shape functions
+    scalar = fe.FacetBasis(mesh, basis.elem.elem, facets=facets, disable_doflocs=True)
+    nodes = dofs[:, 0] // dim
     # n_i ∝ ∫ ψ_i n ds: the outward normal averaged with the shape function's weight,
     # well defined for any Lagrange element and for curved facets
-    weighted_normal = fe.asm(fe.LinearForm(lambda v, w: dot(w.n, v)), facet_basis)[dofs]
+    weighted_normal = np.column_stack([fe.asm(fe.LinearForm(lambda v, w, a=a: w.n[a] * v), scalar)[nodes]
+                                       for a in range(dim)])
     normals = weighted_normal / np.linalg.norm(weighted_normal, axis=1, keepdims=True)
     # the quadrature leaves round-off (~1e-17) in components that are zero on a plane face; through the
     # tangents it would couple a roller's eliminated direction to its friction multiplier (an empty row of
     # T becoming 1e-53: a rank-deficient instead of an empty column of the dual's W)
     normals[np.abs(normals) < ROUNDOFF] = 0.0
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    # of the scalar element (the vector one's first components, a quarter (2-D) of the pairs to integrate)
-    scalar = fe.FacetBasis(mesh, basis.elem.elem, facets=facets, disable_doflocs=True)
-    nodes = dofs[:, 0] // dim  # scikit-fem's vector DOF d·s + a of scalar DOF s
     mass = fe.asm(fe.BilinearForm(lambda u, v, w: u * v), scalar).tocsr()[nodes][:, nodes]
     weights = np.asarray(mass.sum(axis=1)).ravel()  # partition of unity: Σ_j ∫ψ_iψ_j = ∫ψ_i
     return _Nodes(dofs, basis.doflocs[:, dofs[:, 0]].T, normals, mass, weights)
