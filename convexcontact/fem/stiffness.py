@@ -6,9 +6,13 @@ import numpy as np
 import scipy.sparse as sp
 import skfem as fe
 
-BLOCK = 1 << 18
-"""Local stiffness entries per block of cells in :func:`stiffness` (2 MB of float64). Small blocks keep the
-temporaries in the allocator's reused memory: blocks of 64 MB took 2.5 s against 2.2 s at 10⁶ DOFs in 2-D."""
+CELLS = 8192
+"""Cells per block of :func:`stiffness`, enough to spread scikit-fem's cost per basis over many cells: at 3·10⁵
+DOFs of Q1 in 3-D blocks of 455 cells took 3.1 s, of 7281 cells 1.1–2.1 s; at 10⁶ DOFs of P1 in 2-D blocks of
+7281 cells 0.9–1.3 s, of 116,508 cells 1.4 s (the first call in a process is the slower: fresh memory)..."""
+BLOCK = 1 << 22
+"""... and at most this many local stiffness entries per block (32 MB of float64): Q2 hexahedra have 6561 per
+cell. Smaller temporaries are reused from the allocator's memory rather than mapped anew."""
 
 
 def stiffness(basis: fe.CellBasis, lame: tuple[np.ndarray, np.ndarray]) -> sp.csr_matrix:
@@ -23,7 +27,7 @@ def stiffness(basis: fe.CellBasis, lame: tuple[np.ndarray, np.ndarray]) -> sp.cs
     the blocks of the scalar DOF graph, which become CSR once. The vector basis's own shape functions are
     never evaluated. Measured (the stiffness alone, peak memory over its input): 1.4 s and 0.4 GB against
     4.2 s and 1.5 GB for element matrices from the evaluated vector basis summed as COO at 10⁶ DOFs of P1 in
-    2-D; 2.2 s and 0.5 GB against 13 s and 4.3 GB at 3·10⁵ DOFs of Q1 in 3-D. tests/test_stiffness.py checks
+    2-D; 1.4 s and 0.6 GB against 13 s and 4.3 GB at 3·10⁵ DOFs of Q1 in 3-D. tests/test_stiffness.py checks
     it against the form.
     """
     lam, mu = lame
@@ -33,7 +37,7 @@ def stiffness(basis: fe.CellBasis, lame: tuple[np.ndarray, np.ndarray]) -> sp.cs
     pattern, keys = _graph(dofs.element_dofs, dofs.N)
     blocks = np.zeros((pattern.nnz, dim, dim))
     n = dofs.element_dofs.shape[0]
-    size = max(1, BLOCK // (dim * dim * n * n))
+    size = max(1, min(CELLS, BLOCK // (dim * dim * n * n)))
     for start in range(0, basis.mesh.t.shape[1], size):
         cells = np.arange(start, min(start + size, basis.mesh.t.shape[1]))
         scalar = fe.CellBasis(basis.mesh, element, quadrature=(basis.X, basis.W), elements=cells, dofs=dofs,
