@@ -72,6 +72,11 @@ def test_the_basis_evaluates_what_scikit_fem_does(mesh, element):
     for mine, theirs in zip(lazy.basis, eager.basis):
         np.testing.assert_allclose(mine[0].value, theirs[0].value, rtol=0, atol=1e-14)
         np.testing.assert_allclose(mine[0].grad, theirs[0].grad, rtol=1e-14, atol=1e-12)
+    cells = np.arange(0, mesh.t.shape[1], 3)
+    part, eager_part = lazy.with_elements(cells), eager.with_elements(cells)  # scikit-fem builds this class again
+    assert isinstance(part, type(lazy))
+    np.testing.assert_allclose(part.basis[-1][0].grad, eager_part.basis[-1][0].grad, rtol=1e-14, atol=1e-12)
+    np.testing.assert_allclose(part.dx, eager_part.dx, rtol=1e-15)
     dim, scalar = mesh.dim(), fe.Dofs(mesh, lazy.elem.elem).element_dofs
     interleaved = (dim * scalar[:, None, :] + np.arange(dim)[None, :, None]).reshape(-1, scalar.shape[1])
     np.testing.assert_array_equal(lazy.element_dofs, interleaved)
