@@ -290,3 +290,21 @@ def test_newton_cg_on_a_sparse_p_agrees_with_clarabel():
     reference, answer = solvers.solve(program, "clarabel"), solvers.solve(program, "newton-cg")
     assert answer.status == "solved" and np.abs(answer.x - reference.x).max() < 1e-8
     assert kkt_residual(program, answer) < 1e-10
+
+
+def test_newton_cg_solves_the_dense_two_body_tresca_dual_by_the_projection_arc(monkeypatch):
+    """The bench's two-body Tresca dual at 10⁵ DOFs (1434 unknowns, a mortar pair on graded meshes): the least f on
+    the segment to Newton's point left the residual wandering for 100 steps, and auto paid them before Clarabel. With
+    the projection arc newton-cg converges well within auto's DENSE_NEWTON_STEPS, to Clarabel's answer, certified;
+    without it (ARC = 0) it does not."""
+    from convexcontact.solvers import newton_cg
+    from convexcontact.studies.bench import two_body_scene
+
+    model = cc.prepare(two_body_scene("tresca", 1e5), "dual")
+    auto, clarabel = model.solve(), model.solve("clarabel")
+    assert auto.solver == "newton-cg" and auto.iterations < model_module.DENSE_NEWTON_STEPS
+    assert auto.status == clarabel.status == "solved" and auto.certificate.worst < 1e-10
+    assert np.abs(auto.displacement - clarabel.displacement).max() < 1e-8 * np.abs(clarabel.displacement).max()
+    assert np.abs(auto.contact.pressure - clarabel.contact.pressure).max() < 1e-8 * clarabel.max_pressure
+    monkeypatch.setattr(newton_cg, "ARC", 0)
+    assert model.solve("newton-cg", max_iter=model_module.DENSE_NEWTON_STEPS).status != "solved"
