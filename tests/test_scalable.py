@@ -1,6 +1,8 @@
 """Large contact zones: the matrix-free dual (W = B K⁻¹ Bᵀ through K's factors) and newton-cg, against
 Clarabel on the dense program, judged by the certificate."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -177,6 +179,26 @@ def test_auto_goes_matrix_free_for_large_closed_zones(monkeypatch):
     assert solvers.matrix_free(cc.prepare(cc.library.tresca_punch(nx=80)).program)
     forced = cc.prepare(cc.library.hertz_punch(nx=120))
     assert forced.formulation == "primal" and "force-controlled" in forced.reason
+
+
+def test_auto_goes_matrix_free_for_large_3d_bodies(monkeypatch):
+    """The rule, not the timing: a 3-D body over DENSE_DOFS_3D DOFs is not condensed (in 3-D the Schur complement
+    costs more than a factorization) but solved matrix-free, with the reason said, to the dense dual's answer; a 2-D
+    body of as many DOFs keeps the dense W, and so does a force-controlled 3-D obstacle (no bound form)."""
+    scene = punch_3d(cells=6, law=Tresca(slip_bound=0.002))
+    dense = cc.prepare(scene)
+    assert dense.formulation == "dual" and not solvers.matrix_free(dense.program)
+    monkeypatch.setattr(model_module, "DENSE_DOFS_3D", dense.fem.n_free - 1)
+    model = cc.prepare(scene)
+    assert solvers.matrix_free(model.program) and "costs more to condense than to factorize" in model.reason
+    result, expected = model.solve(), dense.solve("clarabel")
+    assert result.solver == "newton-cg" and result.status == "solved" and result.certificate.worst < 1e-10
+    assert np.abs(result.contact.pressure - expected.contact.pressure).max() < 1e-8 * expected.max_pressure
+    monkeypatch.setattr(model_module, "DENSE_DOFS_3D", 10)
+    assert not solvers.matrix_free(cc.prepare(tresca_punch(nx=30)).program)
+    pushed = cc.Obstacle("parabolic", radius=1.0, center=(0.0, 0.0, 0.0), force=0.01)
+    forced = cc.prepare(dataclasses.replace(scene, contact=dataclasses.replace(scene.contact, obstacle=pushed)))
+    assert not solvers.matrix_free(forced.program)
 
 
 def test_whole_face_bench_row_says_what_auto_chose(tmp_path, monkeypatch):

@@ -269,6 +269,14 @@ closed; ratios to one linear solve, dense / matrix-free; docs/performance.md): 2
 3267: 51 / 7.3. On the punch (few nodes closed) the dense W stays ahead: 2-D Tresca 634 unknowns
 1.9 / 4.0, 1098: 2.2 / 7.0."""
 
+DENSE_DOFS_3D = 50_000
+"""Most free DOFs of a 3-D body for a dense W: there its condensation (PARDISO's Schur complement onto the contact
+DOFs) costs 1.6–1.8× a factorization and forming W |C|³ more, while the matrix-free dual costs one factorization and
+its products. Measured on the 3-D punch (ratios to one linear solve, dense / matrix-free; Signorini, Tresca,
+Coulomb): 9.0·10³ DOFs 1.64 / 2.25, 2.47 / 4.51, 2.30 / 4.17; 3.0·10⁴ DOFs 1.53 / 2.22, 2.80 / 3.17, 2.59 / 3.48;
+8.5·10⁴ DOFs 1.86 / 1.59, 2.83 / 2.27, 2.63 / 2.70; 2.8·10⁵ DOFs 1.71 / 1.27, 2.47 / 1.48 (and peak memory 1.1–1.4×
+the linear solve's against 1.5–1.9×)."""
+
 COLUMN_LIMIT = 15000
 """Most columns K is condensed onto for a dense W (the contact DOFs; a pair's slave and master DOFs): the
 Schur complement is dense, 8·c² bytes (1.8 GB at the limit) before PARDISO's own copies. The two-body
@@ -297,7 +305,9 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
     closed = round(unknowns * np.count_nonzero(fem.contact.gap <= TOUCHING) / fem.contact.m)
     too_large = (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}" if unknowns > DENSE_LIMIT else
                  f"{closed} contact unknowns at closed nodes exceed {CLOSED_LIMIT}" if closed > CLOSED_LIMIT else
-                 f"the {columns} DOFs to condense onto exceed {COLUMN_LIMIT}" if columns > COLUMN_LIMIT else None)
+                 f"the {columns} DOFs to condense onto exceed {COLUMN_LIMIT}" if columns > COLUMN_LIMIT else
+                 f"a 3-D body of {fem.n_free} DOFs (over {DENSE_DOFS_3D}) costs more to condense than to factorize"
+                 if fem.dim == 3 and fem.n_free > DENSE_DOFS_3D else None)
     if too_large and matrix_free_applies(fem, law):
         return MATRIX_FREE, (f"{too_large}: W = B K⁻¹ Bᵀ is applied through one factorization of K{reuse}, never "
                              "formed (a dense W would cost more), and newton-cg solves the dual")
