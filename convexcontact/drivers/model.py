@@ -274,7 +274,7 @@ DENSE_DOFS_3D = 50_000
 DOFs) costs 1.6–1.8× a factorization and forming W |C|³ more, while the matrix-free dual costs one factorization and
 its products. Measured on the 3-D punch (ratios to one linear solve, dense / matrix-free; Signorini, Tresca,
 Coulomb): 9.0·10³ DOFs 1.64 / 2.25, 2.47 / 4.51, 2.30 / 4.17; 3.0·10⁴ DOFs 1.53 / 2.22, 2.80 / 3.17, 2.59 / 3.48;
-8.5·10⁴ DOFs 1.86 / 1.59, 2.83 / 2.27, 2.63 / 2.70; 2.8·10⁵ DOFs 1.71 / 1.27, 2.47 / 1.48 (and peak memory 1.1–1.4×
+8.5·10⁴ DOFs 1.86 / 1.59, 2.83 / 2.27, 2.63 / 2.70; 2.8·10⁵ DOFs 1.71 / 1.27, 2.47 / 1.48, 2.51 / 1.52 (peak memory 1.1–1.4×
 the linear solve's against 1.5–1.9×)."""
 
 COLUMN_LIMIT = 15000
