@@ -210,19 +210,21 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         """Π(``towards``) if its natural residual is below ``residual``; else, where P is a matrix, the first point
         Π(v + α(towards − v)), α = 1, ½, … (ARC of them), that lowers f by Armijo's rule; else the least f on
         [v, Π(towards)] (feasible: both ends are); ∇f there, and whether the point is on the arc."""
-        d = _project(towards, sets) - v
+        end = _project(towards, sets)  # the points themselves are returned: v + (w − v) would leave bounds by round-off
+        d = end - v
         products[0] += 1
         Pd = sets.scale * P.matvec(sets.scale * d)
-        if _natural(v + d, g + Pd, c, sets, program.q)[0] < residual:
-            return v + d, g + Pd, True
+        if _natural(end, g + Pd, c, sets, program.q)[0] < residual:
+            return end, g + Pd, True
         for alpha in 0.5 ** np.arange(ARC if matrix is not None else 0):
-            e = _project(v + alpha * (towards - v), sets) - v
+            w = end if alpha == 1 else _project(v + alpha * (towards - v), sets)
+            e = w - v
             if alpha < 1:
                 products[0] += 1
             Pe = Pd if alpha == 1 else sets.scale * P.matvec(sets.scale * e)
             slope = g @ e
             if slope < 0 and slope + 0.5 * (e @ Pe) <= ARMIJO * slope:
-                return v + e, g + Pe, True
+                return w, g + Pe, True
         slope, curve = g @ d, d @ Pd
         alpha = min(1.0, max(0.0, -slope / curve)) if curve > 0 else float(slope < 0)
         return v + alpha * d, g + alpha * Pd, False
