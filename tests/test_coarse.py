@@ -160,3 +160,19 @@ def test_thin_body_keeps_the_clamped_slab():
     clamped = factorization.slab(fem.K, B)
     assert not called and abs(thin.H - clamped.H).max() == 0
     assert clamped.H.shape[0] < fem.n_free  # a slab still, of the face alone
+
+
+def test_the_frictionless_start_and_a_sweep_reuse_the_friction_slab(monkeypatch):
+    """Coulomb's frictionless start solves the leading rows of the friction program's B = [C N; R T]: its operator
+    and slab approximation are those of the friction program with G's first rows, so one slab is built per solve,
+    and none for a sweep's next coefficient; the answers are certified and equal to those with a slab of their own."""
+    built = []
+    slab = factorization.slab
+    monkeypatch.setattr(factorization, "slab", lambda K, B, coarse=None: built.append(B.shape) or slab(K, B, coarse))
+    model = cc.prepare(whole_face(2, 201, 2e4, law=cc.Coulomb(friction=0.3)), "dual-matrix-free")
+    result = model.solve()
+    assert result.status == "solved" and result.certificate.worst < 1e-10 and len(built) == 1
+    swept = model.with_law(cc.Coulomb(friction=0.4)).solve()
+    assert swept.status == "solved" and swept.certificate.worst < 1e-10 and len(built) == 1
+    fresh = cc.prepare(whole_face(2, 201, 2e4, law=cc.Coulomb(friction=0.4)), "dual-matrix-free").solve()
+    assert np.abs(swept.contact.pressure - fresh.contact.pressure).max() < 1e-8 * fresh.max_pressure

@@ -18,7 +18,7 @@ from .. import solvers
 from ..conic import ConicProgram, ConicSolution, Recovery
 from ..fem.assembly import FEModel, assemble
 from ..fem.coarse import body_far_functions
-from ..fem.factorization import Factorization, condense, factorize
+from ..fem.factorization import Delassus, Factorization, condense, factorize
 from ..fem.friction import FrictionPoints, friction_points
 from ..formulations import FORMULATIONS, contact_weights
 from ..formulations.dual import stick_guess
@@ -466,32 +466,43 @@ def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, 
 
 
 class Reused:
-    """K's factorization or condensation, keeping the last W = B K⁻¹ Bᵀ: a sweep over the law's
-    coefficients rebuilds the dual program with the same B, and W is then not recomputed; nor is it for
-    the frictionless program that seeds a friction solve, whose B = C N is the friction program's first rows
-    (its W is the leading block)."""
+    """K's factorization or condensation, keeping the last W = B K⁻¹ Bᵀ (dense, or as an operator with its slab
+    approximation): a sweep over the law's coefficients rebuilds the dual program with the same B, and W is then not
+    recomputed; nor is it for the frictionless program that seeds a friction solve, whose B = C N is the friction
+    program's first rows (its W is the leading block, its slab approximation the same with G's first rows)."""
 
     def __init__(self, factorization: Factorization):
         self.factorization = factorization
-        self._B, self._W = None, None
+        self._B, self._W, self._delassus = None, None, None
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self.factorization.solve(b)
 
-    def delassus(self, B: sp.spmatrix, K: sp.spmatrix | None = None, coarse=None):
-        return self.factorization.delassus(B, K, coarse)
+    def delassus(self, B: sp.spmatrix, K: sp.spmatrix | None = None, coarse=None) -> Delassus:
+        kept = self._delassus
+        if kept is not None and _leading(kept.B, B) and (K is None or kept.approximation is not None):
+            m, approximation = B.shape[0], kept.approximation
+            return Delassus(kept.B[:m], self.factorization.solve,
+                            approximation and replace(approximation, G=approximation.G[:m]))
+        self._delassus = self.factorization.delassus(B, K, coarse)
+        return self._delassus
 
     def schur(self, B: sp.spmatrix) -> np.ndarray:
-        B, kept = sp.csr_matrix(B), self._B
-        m = B.shape[0]
-        if kept is not None and B.shape[1] == kept.shape[1] and m <= kept.shape[0] and (kept[:m] != B).nnz == 0:
-            if m == kept.shape[0]:
+        B = sp.csr_matrix(B)
+        if self._B is not None and _leading(self._B, B):
+            if B.shape[0] == self._B.shape[0]:
                 return self._W
-            block = self._W[:m, :m]
+            block = self._W[:B.shape[0], :B.shape[0]]
             block.flags.writeable = False  # a view of the kept W
             return block
         self._B, self._W = B, self.factorization.schur(B)
         return self._W
+
+
+def _leading(kept: sp.csr_matrix, B: sp.spmatrix) -> bool:
+    """Whether ``B`` is the first rows of ``kept``."""
+    B, m = sp.csr_matrix(B), B.shape[0]
+    return B.shape[1] == kept.shape[1] and m <= kept.shape[0] and (kept[:m] != B).nnz == 0
 
 
 def condensed(fem: FEModel, timings: dict, matrix_free: bool = False):
