@@ -37,9 +37,9 @@ def stiffness(basis: fe.CellBasis, lame: tuple[np.ndarray, np.ndarray]) -> sp.cs
     pattern, keys = _graph(dofs.element_dofs, dofs.N)
     blocks = np.zeros((pattern.nnz, dim, dim))
     n = dofs.element_dofs.shape[0]
-    size = max(1, min(CELLS, BLOCK // (dim * dim * n * n)))
-    for start in range(0, basis.mesh.t.shape[1], size):
-        cells = np.arange(start, min(start + size, basis.mesh.t.shape[1]))
+    size, count = max(1, min(CELLS, BLOCK // (dim * dim * n * n))), basis.mesh.t.shape[1]
+    for start in range(0, count, size):
+        cells = np.arange(start, min(start + size, count))
         scalar = fe.CellBasis(basis.mesh, element, quadrature=(basis.X, basis.W), elements=cells, dofs=dofs,
                               disable_doflocs=True)
         grad = np.stack([scalar.basis[k][0].grad for k in range(n)], axis=2)  # (a, element, k, point)

@@ -216,15 +216,19 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         Pd = sets.scale * P.matvec(sets.scale * d)
         if _natural(end, g + Pd, c, sets, program.q)[0] < residual:
             return end, g + Pd, True
-        for alpha in 0.5 ** np.arange(ARC if matrix is not None else 0):
-            w = end if alpha == 1 else _project(v + alpha * (towards - v), sets)
-            e = w - v
-            if alpha < 1:
-                products[0] += 1
-            Pe = Pd if alpha == 1 else sets.scale * P.matvec(sets.scale * e)
+        def armijo(e, Pe):
             slope = g @ e
-            if slope < 0 and slope + 0.5 * (e @ Pe) <= ARMIJO * slope:
-                return w, g + Pe, True
+            return slope < 0 and slope + 0.5 * (e @ Pe) <= ARMIJO * slope
+
+        if matrix is not None:
+            if armijo(d, Pd):
+                return end, g + Pd, True
+            for alpha in 0.5 ** np.arange(1, ARC):
+                w = _project(v + alpha * (towards - v), sets)
+                products[0] += 1
+                Pe = sets.scale * P.matvec(sets.scale * (w - v))
+                if armijo(w - v, Pe):
+                    return w, g + Pe, True
         slope, curve = g @ d, d @ Pd
         alpha = min(1.0, max(0.0, -slope / curve)) if curve > 0 else float(slope < 0)
         return v + alpha * d, g + alpha * Pd, False
