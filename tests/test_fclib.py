@@ -197,24 +197,95 @@ def test_refused_problems_say_why(tmp_path):
         fclib.LocalProblem(sp.identity(4, format="csr"), np.zeros(4), np.ones(1), 3)
 
 
-def test_matrices_in_all_three_storages(tmp_path):
+def siconos_matrix(group, A, storage="triplet"):
+    """An FClib matrix group as Siconos writes one: its CSparse matrix's fields one to one (fclib_interface.c:
+    ``W->p = spmat->p``, ``W->i = spmat->i``), so a triplet holds the row indices in i and the columns in p;
+    integers as int32 arrays of one entry (fclib.c, write_matrix)."""
+    coo, csc, csr = sp.coo_matrix(A), sp.csc_matrix(A), sp.csr_matrix(A)
+    nz, p, i, x = {"triplet": (coo.nnz, coo.col, coo.row, coo.data), "csc": (-1, csc.indptr, csc.indices, csc.data),
+                   "csr": (-2, csr.indptr, csr.indices, csr.data)}[storage]
+    for key, value in {"nzmax": len(x), "m": A.shape[0], "n": A.shape[1], "nz": nz}.items():
+        group.create_dataset(key, data=np.array([value], dtype=np.int32))
+    group.create_dataset("p", data=np.asarray(p, dtype=np.int32))
+    group.create_dataset("i", data=np.asarray(i, dtype=np.int32))
+    group.create_dataset("x", data=np.asarray(x, dtype=np.float64))
+
+
+@pytest.mark.parametrize("storage", ["triplet", "csc", "csr"])
+def test_matrices_are_read_as_siconos_writes_them(tmp_path, storage):
+    """A non-square and a non-symmetric matrix in each storage: read as the matrix written, not its transpose."""
+    H = sp.csr_matrix(np.array([[1.0, 0.0], [0.0, 2.0], [3.0, 0.0]]))  # 3 × 2: a transposed triplet is 2 × 3
     A = sp.random(5, 4, density=0.5, random_state=2, format="csr")
-    coo = A.tocoo()
-    stored = {
-        "triplet": (coo.nnz, coo.row, coo.col, coo.data),
-        "csc": (-1, A.tocsc().indptr, A.tocsc().indices, A.tocsc().data),
-        "csr": (-2, A.indptr, A.indices, A.data),
-    }
+    skew = sp.csr_matrix(np.array([[1.0, 0.2, 0.0], [-0.2, 1.0, 0.0], [0.0, 0.0, 1.0]]))
     with h5py.File(tmp_path / "m.hdf5", "w") as file:
-        for name, (nz, p, i, x) in stored.items():
-            group = file.create_group(name)
-            for key, value in {"nzmax": A.nnz, "m": 5, "n": 4, "nz": nz}.items():
-                group.create_dataset(key, data=np.array([value], dtype=np.int32))
-            group.create_dataset("p", data=np.asarray(p, dtype=np.int32))
-            group.create_dataset("i", data=np.asarray(i, dtype=np.int32))
-            group.create_dataset("x", data=x)
-        for name in stored:
-            assert abs(fclib.read_matrix(file[name]) - A).max() == 0
+        for name, matrix in (("H", H), ("A", A), ("skew", skew)):
+            siconos_matrix(file.create_group(name), matrix, storage)
+        for name, matrix in (("H", H), ("A", A), ("skew", skew)):
+            assert (fclib.read_matrix(file[name]) != matrix).nnz == 0
+
+
+def test_a_non_symmetric_triplet_w_keeps_its_exact_answer(tmp_path):
+    """W = [[1, .2, 0], [−.2, 1, 0], [0, 0, 1]], q = (−1, 0, 0), μ = .3: r = (1, .2, 0)/1.04 gives u = W r + q = 0 with
+    r inside the cone (|r_T| = .2/1.04 < μ r_N): sticking, a solution. Read transposed, the same r would slide:
+    u = (−.04, .4, 0)/1.04, and fclib's merit says so."""
+    W = np.array([[1.0, 0.2, 0.0], [-0.2, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    with h5py.File(tmp_path / "skew.hdf5", "w") as file:
+        group = file.create_group("fclib_local")
+        group.create_dataset("spacedim", data=np.array([3], dtype=np.int32))
+        siconos_matrix(group.create_group("W"), sp.csr_matrix(W))
+        group.create_dataset("vectors/q", data=np.array([-1.0, 0.0, 0.0]))
+        group.create_dataset("vectors/mu", data=np.array([0.3]))
+    problem, _, _ = fclib.read(tmp_path / "skew.hdf5")
+    np.testing.assert_array_equal(problem.W.toarray(), W)
+    r = np.array([1.0, 0.2, 0.0]) / 1.04
+    assert merit(problem, r) < 1e-15
+    transposed = dataclasses.replace(problem, W=sp.csr_matrix(W.T))
+    assert merit(transposed, r) > 0.1
+
+
+def test_a_global_problem_with_a_non_square_triplet_h(tmp_path):
+    """M = 2 I (4 DOFs), H 4 × 2 (one 2-D contact) in triplets: read as written, condensed to W = Hᵀ M⁻¹ H."""
+    H = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.5], [0.0, 0.0]])
+    with h5py.File(tmp_path / "g.hdf5", "w") as file:
+        group = file.create_group("fclib_global")
+        group.create_dataset("spacedim", data=np.array([2], dtype=np.int32))
+        siconos_matrix(group.create_group("M"), 2 * sp.identity(4))
+        siconos_matrix(group.create_group("H"), sp.csr_matrix(H))
+        for name, value in {"f": np.zeros(4), "w": np.array([-1.0, 0.0]), "mu": np.array([0.5])}.items():
+            group.create_dataset(f"vectors/{name}", data=value)
+    problem, _, _ = fclib.read(tmp_path / "g.hdf5")
+    np.testing.assert_array_equal(problem.H.toarray(), H)
+    local, _ = condense(problem)
+    np.testing.assert_allclose(local.W.toarray(), H.T @ H / 2, atol=1e-15)
+
+
+def upper_triangle_file(path, full):
+    """A global problem whose M is stored as its upper triangle only, as LMGC90's dumps are (i ≤ p)."""
+    with h5py.File(path, "w") as file:
+        group = file.create_group("fclib_global")
+        group.create_dataset("spacedim", data=np.array([3], dtype=np.int32))
+        siconos_matrix(group.create_group("M"), sp.triu(sp.csr_matrix(full)))
+        siconos_matrix(group.create_group("H"), sp.csr_matrix(np.eye(3)))
+        for name, value in {"f": full @ np.ones(3), "w": np.zeros(3), "mu": np.array([0.3])}.items():
+            group.create_dataset(f"vectors/{name}", data=value)
+
+
+@pytest.mark.parametrize("backend", ["superlu", "pardiso"])
+def test_a_matrix_stored_as_one_triangle_is_read_as_the_symmetric_one(tmp_path, backend):
+    """M = [[4, 1, 0], [1, 3, 1], [0, 1, 2]] stored as its upper triangle, f = M (1, 1, 1) = (5, 5, 3): read as the
+    full M (warned), so M⁻¹ f = (1, 1, 1) with either backend. The literal triangle would give (23/24, 7/6, 3/2) with SuperLU, (1, 1, 1) with
+    PARDISO (which reads one triangle): answers that depended on the backend."""
+    from convexcontact.fem.factorization import _pardiso, factorize
+
+    if backend == "pardiso" and _pardiso() is None:
+        pytest.skip("PARDISO (pypardiso) is not available")
+    full = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 2.0]])
+    upper_triangle_file(tmp_path / "triangle.hdf5", full)
+    problem, _, _ = fclib.read(tmp_path / "triangle.hdf5")
+    np.testing.assert_array_equal(problem.M.toarray(), full)
+    assert len(problem.warnings) == 1 and problem.warnings[0].startswith("fclib_global/M: stored as its upper triangle")
+    np.testing.assert_allclose(factorize(problem.M, backend).solve(problem.f), np.ones(3), rtol=1e-14)
+    np.testing.assert_allclose(np.linalg.solve(np.triu(full), problem.f), [23 / 24, 7 / 6, 1.5], rtol=1e-14)
 
 
 def test_command_line(tmp_path, capsys):
