@@ -194,9 +194,10 @@ def _pointers(group, count: int, length: int) -> np.ndarray:
     if p.size != count + 1:
         raise ValueError(f"{where}: {p.size} pointers; compressed storage of {count} columns (nz = −1) or rows "
                          f"(nz = −2) needs {count + 1}")
-    if p[0] != 0 or np.any(np.diff(p) < 0) or p[-1] > length:
-        raise ValueError(f"{where}: not nondecreasing from 0 to at most {length} (the entries of i and x): got "
-                         f"{p[0]} … {p[-1]}; the file is damaged")
+    if p[0] != 0 or np.any(np.diff(p) < 0):
+        raise ValueError(f"{where}: not nondecreasing from 0 (got {p[:6].tolist()}…); the file is damaged")
+    if p[-1] > length:
+        raise ValueError(f"{where}: ends at {p[-1]}, but i and x hold {length} entries; the file is damaged")
     return p
 
 
