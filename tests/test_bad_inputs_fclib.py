@@ -226,7 +226,7 @@ CORRUPTIONS = st.one_of(
 
 
 @pytest.mark.parametrize("kind", ["local", "global"])
-@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_a_randomly_damaged_file_is_read_or_refused_naming_a_dataset(tmp_path, kind, data):
     path = valid_file(tmp_path, kind)

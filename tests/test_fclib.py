@@ -19,7 +19,10 @@ from convexcontact.interop import fclib, fclib_scene
 from convexcontact.interop.fclib_cli import main
 from convexcontact.interop.fclib_solve import condense, merit, natural_residuals, solve_global, solve_local
 
-SHIPPED = Path(__file__).parent / "data" / "fclib" / "local_problem_test.hdf5"
+DATA = Path(__file__).parent / "data" / "fclib"
+SHIPPED = DATA / "local_problem_test.hdf5"
+LMGC_GLOBAL = DATA / "LMGC_GlobalFrictionContactProblem00046.hdf5"  # Siconos' test data (NOTICE.md)
+LMGC_LOCAL = DATA / "LMGC_100_PR_PerioBox-i00361-60-03000.hdf5"
 
 
 def punch_2d():
@@ -173,6 +176,39 @@ def test_fclibs_own_test_problem():
     answer = solve_local(problem)
     assert answer.status == "solved" and answer.merit < 1e-10
     assert max(natural_residuals(problem, answer.r).values()) < 1e-8
+
+
+def test_siconos_global_lmgc_file_is_read_as_written():
+    """LMGC_GlobalFrictionContactProblem00046 (Siconos' test data, written by LMGC90 through Siconos): H is 162 × 27
+    in triplets, its p below n = 27 and its i up to 107 — only "i rows, p columns" fits; M is stored as its upper
+    triangle. Read so, the problem is solved to fclib merit 1e-14 with equilibrium 1e-13; judged on the literal
+    triangle instead, the same answer's equilibrium residual is of order one."""
+    with h5py.File(LMGC_GLOBAL) as file:
+        H = file["fclib_global/H"]
+        assert int(H["nz"][0]) == 405 and H["p"][()].max() < int(H["n"][0]) == 27 <= H["i"][()].max()
+        M = file["fclib_global/M"]
+        rows, columns = M["i"][()], M["p"][()]
+        assert np.all(rows <= columns) and np.sum(rows < columns) > 2800  # the upper triangle only
+        triangle = sp.csr_matrix((M["x"][()], (rows, columns)), shape=(162, 162))
+    problem, stored, guesses = fclib.read(LMGC_GLOBAL)
+    assert problem.H.shape == (162, 27) and problem.mu.size == 9 and np.all(problem.mu == 0.3) and stored is None and guesses == []
+    assert abs(problem.M - problem.M.T).max() == 0 and problem.warnings[0].startswith("fclib_global/M: stored as its")
+    answer = solve_global(problem)
+    assert answer.status == "solved" and answer.merit < 1e-12 and answer.residuals["equilibrium"] < 1e-10
+    literal = triangle @ answer.v - problem.H @ answer.r - problem.f
+    assert np.abs(literal).max() > 0.1 * np.abs(triangle @ answer.v).max()
+
+
+def test_siconos_local_lmgc_file_is_read_as_written():
+    """LMGC_100_PR_PerioBox (Siconos' test data): 60 contacts of rigid particles, W 180 × 180 in compressed rows,
+    symmetric and positive semi-definite of rank 72 (6 per particle), μ ∈ {0.3, 0.5}."""
+    problem, stored, guesses = fclib.read(LMGC_LOCAL)
+    assert problem.W.shape == (180, 180) and problem.mu.size == 60 and set(problem.mu) == {0.3, 0.5}
+    assert stored is None and guesses == [] and problem.warnings == []
+    W = problem.W.toarray()
+    assert np.abs(W - W.T).max() < 1e-15 * np.abs(W).max()
+    eigenvalues = np.linalg.eigvalsh(W)
+    assert eigenvalues[0] > -1e-12 * eigenvalues[-1] and np.sum(eigenvalues > 1e-10 * eigenvalues[-1]) == 72
 
 
 def test_refused_problems_say_why(tmp_path):
