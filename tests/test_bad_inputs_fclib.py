@@ -135,6 +135,15 @@ def test_a_bad_global_file_is_refused_naming_the_dataset(global_file, name, valu
     refused(replace(global_file, name, value), start)
 
 
+@pytest.mark.parametrize("field, start", [("q", "fclib_local/vectors/q: not finite"),
+                                           ("W", "fclib_local/W/x: not finite")])
+def test_a_problem_built_in_python_with_nan_is_refused(field, start):
+    problem = local_problem()
+    values = {"W": problem.W.multiply(np.nan).tocsr(), "q": np.full(6, np.inf)}
+    with pytest.raises(ValueError, match=f"^{start}"):
+        fclib.LocalProblem(**{**vars(problem), field: values[field]})
+
+
 def triplet(file, name, m, n, rows, columns, values, nz=None):
     """A triplet matrix group as fclib writes one (rows in i, columns in p)."""
     group = file.require_group(name)

@@ -59,6 +59,8 @@ class LocalProblem:
     warnings: list[str] = field(default_factory=list)
 
     def __post_init__(self):
+        check_finite("fclib_local", {"W/x": self.W, "vectors/q": self.q, "V/x": self.V, "R/x": self.R,
+                                     "vectors/s": self.s})
         check_contacts(self.W.shape[0], self.spacedim, self.mu, "fclib_local/W")
         if self.W.shape != (self.q.size, self.q.size):
             raise ValueError(f"fclib_local/W: {self.W.shape[0]} × {self.W.shape[1]} but vectors/q has {self.q.size} "
@@ -86,6 +88,8 @@ class GlobalProblem:
     warnings: list[str] = field(default_factory=list)
 
     def __post_init__(self):
+        check_finite("fclib_global", {"M/x": self.M, "H/x": self.H, "vectors/f": self.f, "vectors/w": self.w,
+                                      "G/x": self.G, "vectors/b": self.b})
         check_contacts(self.H.shape[1], self.spacedim, self.mu, "fclib_global/H")
         if self.M.shape != (self.f.size, self.f.size) or self.H.shape[0] != self.f.size or self.w.size != self.H.shape[1]:
             raise ValueError(f"fclib_global/M, H: M {self.M.shape}, H {self.H.shape}, f ({self.f.size}) and w "
@@ -100,6 +104,14 @@ class Solution:
     u: np.ndarray
     v: np.ndarray | None = None
     l: np.ndarray | None = None  # multipliers of FClib's equalities (its name)
+
+
+def check_finite(top: str, arrays: dict) -> None:
+    """Refuse NaN or ±inf in a problem's vectors and matrices (None: absent)."""
+    for name, value in arrays.items():
+        values = value.data if sp.issparse(value) else value
+        if values is not None and not np.all(np.isfinite(values)):
+            raise ValueError(f"{top}/{name}: not finite (NaN or ±inf); an FClib problem holds finite numbers")
 
 
 def check_contacts(size: int, spacedim: int, mu: np.ndarray, where: str) -> None:
