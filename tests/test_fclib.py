@@ -336,3 +336,10 @@ def test_command_line(tmp_path, capsys):
     assert "fclib merit" in capsys.readouterr().out
     assert main(["export", str(scene), "--out", str(out)]) == 2  # exists: --overwrite to replace
     assert "--overwrite" in capsys.readouterr().err
+
+
+def test_an_answer_above_the_certificate_exits_3_as_every_command(exported, capsys):
+    """One Picard step on the 2-D punch (it needs ~25): an answer, reported inaccurate, exit 3 (cli.EXIT)."""
+    path = exported["2d", "local"][0]
+    assert main(["solve", str(path), "--max-iterations", "1"]) == 3
+    assert "inaccurate" in capsys.readouterr().out
