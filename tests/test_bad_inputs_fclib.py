@@ -219,10 +219,12 @@ def valid_file(folder, kind):
 MATRIX_PARTS = ("m", "n", "nz", "nzmax", "p", "i", "x")
 DATASETS = {
     "local": [*(f"fclib_local/W/{key}" for key in MATRIX_PARTS), "fclib_local/spacedim", "fclib_local/vectors/q",
-              "fclib_local/vectors/mu", "fclib_local/info/title", "solution/r", "solution/u",
+              "fclib_local/vectors/mu", "fclib_local/vectors/s", "fclib_local/V/x", "fclib_local/R/nz",
+              "fclib_local/info/title", "solution/r", "solution/u", "solution/l",
               "guesses/number_of_guesses", "guesses/1/r"],
     "global": [*(f"fclib_global/{name}/{key}" for name in "MH" for key in MATRIX_PARTS), "fclib_global/spacedim",
-               *(f"fclib_global/vectors/{key}" for key in ("f", "w", "mu", "b")), "solution/v", "solution/r"],
+               *(f"fclib_global/vectors/{key}" for key in ("f", "w", "mu", "b")), "fclib_global/G/x", "solution/v",
+               "solution/r"],
 }
 NUMBERS = st.one_of(st.integers(-2**31, 2**31 - 1), st.floats(allow_nan=True, allow_infinity=True),
                     st.sampled_from([0, 1, -1, 2, 3, 6, 7, 8, -2]))
