@@ -122,8 +122,7 @@ GLOBAL_CASES = [
     ("fclib_global/H", None, "fclib_global/H: missing"),
     ("fclib_global/M", None, "fclib_global/M: missing"),
     ("fclib_global/vectors/f", np.array([0.0, np.inf, 0]), "fclib_global/vectors/f: entry 1 is inf"),
-    ("fclib_global/M/x", np.zeros(7), "fclib_global/M: diagonal entry 0 is 0; M is symmetric positive definite"),
-    ("fclib_global/M/x", np.array([2.0, -1, 5, 2, -1, -1, 2]), "fclib_global/M: not symmetric"),
+    ("fclib_global/M/x", np.zeros(7), "fclib_global/M: diagonal entry 0 is 0; M is positive definite"),
     ("fclib_global/vectors/w", np.zeros(4), "fclib_global/H/m, n: 3 × 2, but the problem's vectors make it 3 × 4"),
     ("fclib_global/vectors/b", np.zeros(1), "fclib_global/G: missing; the equalities Gᵀ v + b = 0 need both"),
     ("solution/v", np.zeros(4), "solution/v: 4 entries, the problem needs 3"),
@@ -142,6 +141,15 @@ def test_a_problem_built_in_python_with_nan_is_refused(field, start):
     values = {"W": problem.W.multiply(np.nan).tocsr(), "q": np.full(6, np.inf)}
     with pytest.raises(ValueError, match=f"^{start}"):
         fclib.LocalProblem(**{**vars(problem), field: values[field]})
+
+
+def test_a_non_symmetric_m_is_kept_as_stored_and_warned_of(global_file):
+    """fclib.h says M is symmetric; a file whose M is not is the file's problem: read as stored, and said so."""
+    replace(global_file, "fclib_global/M/x", np.array([2.0, -1, 5, 2, -1, -1, 2]))  # M[0, 1] = 5, M[1, 0] = −1
+    problem, _, _ = fclib.read(global_file)
+    assert problem.M[0, 1] == 5 and problem.M[1, 0] == -1
+    assert problem.warnings == [("fclib_global/M: not symmetric (max |M − Mᵀ| = 6, max |M| = 5) although fclib.h "
+                                 "says it is; kept as stored")]
 
 
 def triplet(file, name, m, n, rows, columns, values, nz=None):

@@ -32,7 +32,7 @@ LOCAL = "an FClib local problem needs W, q and mu (fclib.h)"
 GLOBAL = "an FClib global problem needs M, H, f, w and mu (fclib.h)"
 MATRIX = "an FClib matrix is a group of m, n, nz, p, i and x (fclib.h)"
 SYMMETRY = 1e-10
-"""M is symmetric (fclib.h) when ‖M − Mᵀ‖ ≤ this × max |M_ij|: assembly round-off, not a different matrix."""
+"""An M with max |M − Mᵀ| above this × max |M| is reported not symmetric (below: assembly round-off)."""
 
 
 def _h5py():
@@ -275,19 +275,22 @@ def one_triangle(A: sp.csr_matrix, where: str) -> tuple[sp.csr_matrix, str | Non
                   "for, the triangle plus its transpose (fclib.h: M is symmetric positive definite)")
 
 
-def _symmetric_definite(M: sp.csr_matrix, where: str) -> tuple[sp.csr_matrix, list[str]]:
-    """Refuse an M that cannot be FClib's symmetric positive definite one; expand one triangle (warned)."""
+def _definite(M: sp.csr_matrix, where: str) -> tuple[sp.csr_matrix, list[str]]:
+    """M as FClib's symmetric positive definite matrix: one stored triangle expanded (warned), a diagonal entry
+    ≤ 0 refused (xᵀ M x > 0 needs them all > 0: an all-zero M is refused here), a non-symmetric M kept as stored
+    (the file's problem) and warned of."""
     M, warning = one_triangle(M, where)
+    warnings = [warning] if warning else []
     diagonal = M.diagonal()
     if diagonal.size and diagonal.min() <= 0:
         k = int(np.argmin(diagonal))
-        raise ValueError(f"{where}: diagonal entry {k} is {diagonal[k]:.3g}; M is symmetric positive definite "
-                         "(fclib.h), so every diagonal entry is > 0")
+        raise ValueError(f"{where}: diagonal entry {k} is {diagonal[k]:.3g}; M is positive definite (fclib.h), so "
+                         "every diagonal entry is > 0")
     asymmetry = abs(M - M.T).max() if M.nnz else 0.0
     if asymmetry > SYMMETRY * abs(M).max():
-        raise ValueError(f"{where}: not symmetric (max |M − Mᵀ| = {asymmetry:.3g}, max |M| = {abs(M).max():.3g}); "
-                         "FClib's M is symmetric positive definite (fclib.h)")
-    return M, [warning] if warning else []
+        warnings.append(f"{where}: not symmetric (max |M − Mᵀ| = {asymmetry:.3g}, max |M| = {abs(M).max():.3g}) "
+                        "although fclib.h says it is; kept as stored")
+    return M, warnings
 
 
 def _semidefinite_diagonal(W: sp.csr_matrix, where: str) -> None:
@@ -339,7 +342,7 @@ def _global(g) -> GlobalProblem:
     f, w, mu = (_vector(vectors, name, GLOBAL) for name in ("f", "w", "mu"))
     b = _vector(vectors, "b")
     spacedim = _spacedim(g, GLOBAL)
-    M, warnings = _symmetric_definite(_matrix(g, "M", (f.size, f.size), GLOBAL), _where(g, "M"))
+    M, warnings = _definite(_matrix(g, "M", (f.size, f.size), GLOBAL), _where(g, "M"))
     H = _matrix(g, "H", (f.size, w.size), GLOBAL)
     G = _matrix(g, "G", (f.size, 0 if b is None else b.size))
     if (G is None) != (b is None):
