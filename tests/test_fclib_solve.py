@@ -193,3 +193,12 @@ def test_solved_needs_every_measure():
     assert status_of(1e-12, 1e-12, 1e-12) == "solved"
     assert status_of(1e-12, 1e-12, 0.18) == "inaccurate"
     assert status_of(1e-12, np.nan) == "inaccurate" and status_of(np.nan) == "inaccurate"
+
+
+@pytest.mark.parametrize("name, value", [("merit_tol", -1.0), ("merit_tol", float("nan")), ("merit_tol", "1e-8"),
+                                         ("max_iterations", 0), ("max_iterations", 2.5), ("relaxation", 0.0),
+                                         ("relaxation", float("nan")), ("guess", np.zeros(2)),
+                                         ("guess", np.full(3, np.inf))])
+def test_settings_that_cannot_run_are_refused_by_name(name, value):
+    with pytest.raises(ValueError, match=f"^{name}: .*(e\\.g\\.|\\(0, 1\\]|finite contact forces)"):
+        solve_local(local(SKEWED, [-1.0, 0.0, 0.0], 0.3), **{name: value})

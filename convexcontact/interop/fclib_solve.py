@@ -161,8 +161,7 @@ def solve_local(problem: LocalProblem, solver: str = "clarabel", merit_tol: floa
     change of s alone is no test: where W is singular (rigid bodies) r_N is not unique and s may wander among
     solutions. ``options`` go to the solver (:func:`solvers.session`; Clarabel's polish off unless asked).
     """
-    if not 0 < relaxation <= 1:
-        raise ValueError(f"relaxation: ω must lie in (0, 1], got {relaxation}")
+    check_settings(merit_tol, max_iterations, relaxation, guess, problem.q.size)
     start = time.perf_counter()
     scaled = scaled_problem(problem)
     mu, d = problem.mu, problem.spacedim
@@ -184,6 +183,18 @@ def solve_local(problem: LocalProblem, solver: str = "clarabel", merit_tol: floa
     return Answer(r, velocity(problem, r, l) if not failed else np.full(r.size, np.nan), merit_value, residuals,
                   status, outcome, sum("iteration" in step for step in history), history,
                   {"total": time.perf_counter() - start}, l=l, extra=extra, siconos_error=error)
+
+
+def check_settings(merit_tol, max_iterations, relaxation, guess, size: int) -> None:
+    """Refuse, before any work, settings that cannot run (each message names the argument and what it takes)."""
+    if isinstance(merit_tol, bool) or not isinstance(merit_tol, (int, float)) or not 0 < merit_tol < np.inf:
+        raise ValueError(f"merit_tol: must be a positive finite number (e.g. 1e-12), got {merit_tol!r}")
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) or max_iterations < 1:
+        raise ValueError(f"max_iterations: must be a whole number ≥ 1 (e.g. 100), got {max_iterations!r}")
+    if isinstance(relaxation, bool) or not isinstance(relaxation, (int, float)) or not 0 < relaxation <= 1:
+        raise ValueError(f"relaxation: ω must lie in (0, 1] (1: no relaxation), got {relaxation!r}")
+    if guess is not None and (np.shape(guess) != (size,) or not np.all(np.isfinite(guess))):
+        raise ValueError(f"guess: must be {size} finite contact forces r (FClib's order), got shape {np.shape(guess)}")
 
 
 def picard(problem: LocalProblem, scaled: Scaled, x, s, settings, session):
