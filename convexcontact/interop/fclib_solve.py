@@ -172,7 +172,7 @@ def solve_local(problem: LocalProblem, solver: str = "clarabel", merit_tol: floa
     session = solvers.session(scaled.program, solver, **{"polishing": False, **options})
     best, history, outcome = picard(problem, scaled, x, s, (merit_tol, max_iterations, relaxation), session)
     (value, r, l), finish = best, None
-    if outcome != "converged" and np.isfinite(value):
+    if outcome != "converged":  # from the best iterate, or from the start if the solver failed at once
         (value, r, l), finish = newton(problem, scaled, r, l, merit_tol, history, best)
         outcome = "converged" if finish == "converged" else outcome
     merit_value, error = measures(problem, r, l)
