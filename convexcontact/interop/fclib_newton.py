@@ -35,9 +35,11 @@ NEWTON_SHORTEST = 2.0**-4
 fclib's Boxes Stack, W of rank 72/144, the LU of a nearly singular J gave steps cut to 1e-6 for 200 iterations)."""
 SLOW = 6
 """Newton steps over which the measure must at least halve, else the attempt stops (a start too far)."""
-DENSE = 0.5
-"""W with more than this fraction of nonzeros is factorized dense (LAPACK), below it sparse (SuperLU): on the
-LMGC PerioBox file (W 180², 30% nonzeros) LAPACK's threaded LU took 0.19 s a step on our loaded 2 cores."""
+DENSE = (0.5, 500)
+"""W with more than this fraction of nonzeros and more unknowns is factorized dense (LAPACK), else sparse (SuperLU,
+one thread). On our loaded 2 cores LAPACK's threaded LU took 0.18 s for a dense 150² matrix against SuperLU's
+0.02 s (858²: 0.33 s against 0.62 s; 3204²: 3.5 s against 12.7 s), and 0.19 s a step on the LMGC PerioBox
+file (W 180², 30 % nonzeros)."""
 
 
 @dataclass

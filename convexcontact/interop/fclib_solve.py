@@ -107,7 +107,8 @@ def scaled_problem(problem: LocalProblem) -> Scaled:
     s = None if problem.s is None else problem.s / beta
     b = np.concatenate([-s if equalities else np.zeros(0), np.zeros(count + n)])
     program = ConicProgram(sp.csc_matrix(0.5 * (W + W.T)), q / beta, sp.vstack(rows).tocsc(), b, cones)
-    dense = W.nnz > fclib_newton.DENSE * n * n
+    fraction, size = fclib_newton.DENSE
+    dense = W.nnz > fraction * n * n and n > size
     equation = fclib_newton.Equation(W.toarray() if dense else W, q / beta, problem.mu, d, np.ones(count), V,
                                      None if V is None else sp.csr_matrix((equalities, equalities)), s)
     return Scaled(program, equalities + count + np.arange(count) * d, scale, beta, sp.csr_matrix(0.5 * (W - W.T)),
