@@ -202,3 +202,12 @@ def test_solved_needs_every_measure():
 def test_settings_that_cannot_run_are_refused_by_name(name, value):
     with pytest.raises(ValueError, match=f"^{name}: .*(e\\.g\\.|\\(0, 1\\]|finite contact forces)"):
         solve_local(local(SKEWED, [-1.0, 0.0, 0.0], 0.3), **{name: value})
+
+
+def test_answers_of_the_wrong_size_are_refused_by_name():
+    problem = local(SKEWED, [-1.0, 0.0, 0.0], 0.3)
+    for measure in (merit, siconos_error):
+        with pytest.raises(ValueError, match=r"^r: must hold 3 numbers"):
+            measure(problem, np.zeros(4))
+    with pytest.raises(ValueError, match=r"^v: must hold 4 numbers"):
+        siconos_error_global(skewed_global(), np.zeros(3), np.zeros(3))

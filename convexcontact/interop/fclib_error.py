@@ -41,14 +41,24 @@ def project_on_cone(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
     return out
 
 
+def check_size(value, size: int, name: str) -> np.ndarray:
+    """``value`` as a float vector of ``size`` entries, or a ValueError naming it (a wrong size would otherwise
+    surface as numpy's broadcasting message)."""
+    if np.shape(value) != (size,):
+        raise ValueError(f"{name}: must hold {size} numbers (FClib's order, [N, T…] per contact for forces), "
+                         f"got shape {np.shape(value)}")
+    return np.asarray(value, dtype=float)
+
+
 def velocity(problem: LocalProblem, r: np.ndarray, l: np.ndarray | None = None) -> np.ndarray:
     """u = W r + q (+ V λ for a mixed problem)."""
+    r = check_size(r, problem.q.size, "r")
     u = problem.W @ r + problem.q
     if problem.V is None:
         return u
     if l is None:
         raise ValueError("fclib_local/V: a problem with equalities needs their multipliers l (λ) as well as r")
-    return u + problem.V @ l
+    return u + problem.V @ check_size(l, problem.V.shape[1], "l")
 
 
 def equality_residual(problem: LocalProblem, r: np.ndarray, l: np.ndarray | None) -> np.ndarray:
@@ -108,6 +118,7 @@ def siconos_error_global(problem: GlobalProblem, r: np.ndarray, v: np.ndarray) -
     ‖M v − H r − f‖ / max(‖f‖, ‖M v‖, ‖H r‖) + ‖r − Π_C(r − û)‖ / max(‖u‖, ‖r‖), u = Hᵀ v + w, each divisor
     used only above √DBL_EPSILON, as Siconos does. M and H as read from the file.
     """
+    r, v = check_size(r, problem.H.shape[1], "r"), check_size(v, problem.M.shape[0], "v")
     forces, reactions = problem.M @ v, problem.H @ r
     balance = np.linalg.norm(forces - reactions - problem.f)
     balance /= relative(np.linalg.norm(problem.f), np.linalg.norm(forces), np.linalg.norm(reactions),
