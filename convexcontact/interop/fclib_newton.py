@@ -1,7 +1,7 @@
 """A semismooth Newton method on Alart–Curnier's equation of an FClib local problem, W as given.
 
 Coulomb's law at contact k, with u = W r + V λ + q and ρ > 0, is F_k(r, u) = 0 (Alart–Curnier 1991,
-the form Siconos' ``fc3d_nonsmooth_Newton_AlartCurnier`` uses):
+Siconos' ``computeAlartCurnierSTD``, radius μ max(0, r_N − ρ u_N)):
 
     F_N = r_N − max(0, r_N − ρ u_N),      F_T = r_T − Π_B(μ max(0, r_N − ρ u_N)) (r_T − ρ u_T),
 
@@ -127,29 +127,33 @@ def block_diagonal(blocks: np.ndarray) -> sp.csr_matrix:
     return sp.bsr_matrix((blocks, np.arange(count), np.arange(count + 1))).tocsr()
 
 
-def newton_step(J, F: np.ndarray) -> np.ndarray | None:
-    """δ with J δ = −F (LU), or None when J is singular."""
+def linear_solve(A, b: np.ndarray) -> np.ndarray | None:
+    """A⁻¹ b by LU (LAPACK for a dense A, SuperLU for a sparse one), or None when A is singular."""
     try:
-        if isinstance(J, np.ndarray):
+        if isinstance(A, np.ndarray):
             with np.errstate(all="ignore"), warnings.catch_warnings():
-                warnings.simplefilter("ignore", la.LinAlgWarning)  # a singular J is answered below, not warned of
-                step = la.lu_solve(la.lu_factor(J, check_finite=False), -F, check_finite=False)
+                warnings.simplefilter("ignore", la.LinAlgWarning)  # a singular A is answered by None, not warned of
+                x = la.lu_solve(la.lu_factor(A, check_finite=False), b, check_finite=False)
         else:
-            step = spla.splu(sp.csc_matrix(J)).solve(-F)
+            x = spla.splu(sp.csc_matrix(A)).solve(b)
     except (RuntimeError, la.LinAlgError, ValueError):  # SuperLU: "Factor is exactly singular"
         return None
-    return step if np.all(np.isfinite(step)) else None
+    return x if np.all(np.isfinite(x)) else None
 
 
-def least_squares_step(J, F: np.ndarray) -> np.ndarray:
+def newton_step(J, F: np.ndarray) -> np.ndarray | None:
+    """δ with J δ = −F, or None when J is singular."""
+    return linear_solve(J, -F)
+
+
+def least_squares_step(J, F: np.ndarray) -> np.ndarray | None:
     """δ minimizing ‖J δ + F‖² + ν‖δ‖² (Levenberg–Marquardt, ν tiny): a step where J is singular (W singular:
     rigid bodies; the forces are then not unique and the step picks the least change). LU, not Cholesky:
     OpenBLAS' threaded Cholesky took 1.1 s on an 858² matrix on our loaded 2 cores, its LU 0.1 s."""
     normal = J.T @ J
     damping = 1e-12 * max(normal.diagonal().sum(), TINY)
-    if isinstance(J, np.ndarray):
-        return la.solve(normal + damping * np.eye(normal.shape[0]), -J.T @ F)
-    return spla.splu(sp.csc_matrix(normal + damping * sp.identity(normal.shape[0]))).solve(-J.T @ F)
+    identity = np.eye(normal.shape[0]) if isinstance(J, np.ndarray) else sp.identity(normal.shape[0])
+    return linear_solve(normal + damping * identity, -J.T @ F)
 
 
 def line_search(equation: Equation, x: np.ndarray, step: np.ndarray, F: np.ndarray, J, shortest: float):
@@ -183,7 +187,8 @@ def solve(equation: Equation, r: np.ndarray, l: np.ndarray, done, max_iterations
         step = newton_step(J, F)
         found = None if step is None else line_search(equation, x, step, F, J, NEWTON_SHORTEST)
         if found is None:
-            found = line_search(equation, x, least_squares_step(J, F), F, J, SHORTEST)
+            step = least_squares_step(J, F)
+            found = None if step is None else line_search(equation, x, step, F, J, SHORTEST)
         if found is None:
             return best, history, "stalled"
         x, G, alpha = found
