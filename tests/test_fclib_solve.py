@@ -68,6 +68,14 @@ def test_a_skew_coupling_in_2d_that_slides():
     np.testing.assert_allclose(answer.u, [0.0, 1.0 / 17], atol=1e-12)
 
 
+@pytest.mark.parametrize("solver", ["osqp", "cvxpy", "newton-cg"])
+def test_every_solver_path_gives_the_2d_slide(solver):
+    """The Picard steps go to any solver path (cvxpy's takes no polish setting: it once refused the run)."""
+    answer = solve_local(local([[1.0, 0.5], [-0.5, 1.0]], [-1.0, 1.0], 0.3), solver)
+    assert answer.status == "solved"
+    np.testing.assert_allclose(answer.r, np.array([20.0, -6.0]) / 17, atol=1e-12)
+
+
 def test_a_tangential_skew_turns_the_friction_force():
     """W = [[1, 0, 0], [0, 1, 1.2], [0, −1.2, 1]], q = (−1, 1, 0), μ = 0.5: r_N = 1 (u_N = r_N − 1), and sliding
     along a unit e with r_T = −.5 e, u_T = t e needs (t + .5) e + .6 J e = q_T: t + .5 = .8, e = (.8, .6) (the

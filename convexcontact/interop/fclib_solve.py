@@ -59,6 +59,8 @@ PATIENCE = 8
 lets it (Clarabel at tol 1e-12 on the condensed 2-D punch: merits wander between 1e-10 and 1e-8)."""
 NEWTON_ITERATIONS = 50
 """Newton steps at most per attempt; a start it can finish takes few (3–6 measured), a bad one stalls sooner."""
+POLISHED = ("clarabel", "osqp")
+"""Solver paths with a polish of their own, switched off for the Picard steps (Newton finishes the answer)."""
 BLOCK = 64
 """Columns of H per solve with M when condensing a global problem."""
 
@@ -170,7 +172,9 @@ def solve_local(problem: LocalProblem, solver: str = "clarabel", merit_tol: floa
     s = mu * np.maximum(per_contact(scaled.scale * x, d)[:, 0], 0.0)
     if guess is None and problem.V is not None and problem.V.tocsr()[np.arange(mu.size * d) % d != 0].count_nonzero():
         s = STICK * scaled.scale[::d]  # a tangential equality (a force pulling the obstacle) has no frictionless answer
-    session = solvers.session(scaled.program, solver, **{"polishing": False, **options})
+    # the polish off where the adapter has one to switch off (cvxpy's path takes no such setting)
+    quiet = {"polishing": False} if solvers.resolve(solver, scaled.program).split(":")[0] in POLISHED else {}
+    session = solvers.session(scaled.program, solver, **{**quiet, **options})
     best, history, outcome = picard(problem, scaled, x, s, (merit_tol, max_iterations, relaxation), session)
     (value, r, l), finish = best, None
     if outcome != "converged":  # from the best iterate, or from the start if the solver failed at once
