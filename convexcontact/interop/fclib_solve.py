@@ -13,7 +13,7 @@ Two methods, one feeding the other, both on the scaled problem (:func:`scaled_pr
 2. A semismooth Newton method on Alart–Curnier's equation with the file's W (:mod:`.fclib_newton`), tried
    from the Picard iterates 1, 2, 4, 8, … and from the best one at the end: the map brings the answer near
    (globally, but linearly at best), Newton finishes it (locally, quadratically). On Capsules (286
-   contacts, W 1.3e-3 non-symmetric and singular) three Picard steps and three Newton steps reach 1e-13.
+   contacts, W 1.3e-3 non-symmetric and singular) one Picard step and 11 Newton steps reach 5e-14 in 0.4 s.
 
 Every answer is judged on the matrices as read by fclib's merit and Siconos' error (:mod:`.fclib_error`);
 ``solved`` only when both are ≤ :data:`CERTIFIED`.
