@@ -61,6 +61,7 @@ def solve_file(args) -> int:
             ("problem", f"{'local' if local else 'global'}, spacedim {problem.spacedim}, {problem.mu.size} contacts"),
             ("status", f"{answer.status} (Picard {answer.outcome}, {answer.iterations} steps)"),
             ("fclib merit", f"{answer.merit:.3e}"),
+            ("siconos error", f"{answer.siconos_error:.3e} ({'' if local else 'g'}fc{problem.spacedim}d_compute_error)"),
             ("natural-map residual", f"{max(answer.residuals.values()):.3e} (worst of {len(answer.residuals)})"),
             ("time", f"{answer.timings['total']:.3f} s")]
     if stored is not None and stored.r is not None:
