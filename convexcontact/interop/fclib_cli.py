@@ -104,6 +104,7 @@ def solve_file(args) -> int:
             *(("read as", warning) for warning in problem.warnings),
             ("status", f"{answer.status} (Picard {answer.outcome}, {answer.iterations} steps)"),
             ("fclib merit", f"{answer.merit:.3e}"),
+            ("siconos error", f"{answer.siconos_error:.3e} ({'' if local else 'g'}fc{problem.spacedim}d_compute_error)"),
             ("natural-map residual", f"{max(answer.residuals.values()):.3e} (worst of {len(answer.residuals)})"),
             ("time", f"{answer.timings['total']:.3f} s")]
     if stored is not None and stored.r is not None:
