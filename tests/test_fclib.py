@@ -339,7 +339,8 @@ def test_command_line(tmp_path, capsys):
 
 
 def test_an_answer_above_the_certificate_exits_3_as_every_command(exported, capsys):
-    """One Picard step on the 2-D punch (it needs ~25): an answer, reported inaccurate, exit 3 (cli.EXIT)."""
+    """Stopped at merit 0.5 (the frictionless first iterate, merit ~3e-4): an answer above the certificate's 1e-8,
+    reported inaccurate, exit 3 (cli.EXIT)."""
     path = exported["2d", "local"][0]
-    assert main(["solve", str(path), "--max-iterations", "1"]) == 3
+    assert main(["solve", str(path), "--merit-tol", "0.5"]) == 3
     assert "inaccurate" in capsys.readouterr().out
