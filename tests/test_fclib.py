@@ -2,6 +2,7 @@
 problem, fclib's merit function, and solving imported problems (docs/fclib.md)."""
 
 import dataclasses
+import os
 from pathlib import Path
 
 import numpy as np
@@ -95,6 +96,16 @@ def test_the_file_holds_what_was_written(exported):
             ()].decode()
     assert abs(read_back.W - problem.W).max() == 0 and np.array_equal(read_back.q, problem.q)
     assert np.array_equal(read_back.mu, problem.mu) and np.array_equal(stored.r, solution.r)
+
+
+def test_a_written_file_is_whole_and_readable_by_others(tmp_path):
+    """Written beside its name and moved in (nothing left behind), with the permissions of any new file (umask),
+    not a temporary file's 0600."""
+    umask = os.umask(0o022)
+    os.umask(umask)
+    path = fclib.write(tmp_path / "p.hdf5", one_contact())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.hdf5"]
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask
 
 
 def test_the_mapping_of_unknowns_and_signs():

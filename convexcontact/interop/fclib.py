@@ -20,7 +20,6 @@ no solver.
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -438,14 +437,12 @@ def write(path, problem: LocalProblem | GlobalProblem, solution: Solution | None
     """Write ``problem`` (and its solution and guesses) to the FClib file ``path``, whole or not at all (written
     beside it, then moved in)."""
     path = Path(path)
-    handle, staging = tempfile.mkstemp(prefix=f".{path.name}-unfinished-", dir=path.parent)
-    os.close(handle)
+    staging = path.with_name(f".{path.name}.unfinished")
     try:
         _write(staging, problem, solution, guesses)
         os.replace(staging, path)
     finally:
-        if os.path.exists(staging):
-            os.remove(staging)
+        staging.unlink(missing_ok=True)
     return path
 
 
