@@ -216,7 +216,11 @@ def commands(argv=None) -> int:
 
         studies = {"work-precision": work_precision, "sweep": sweeps, "stability": stability, "uniqueness": uniqueness,
                    "grid": grid, "sfepy": sfepy_peer}
-        studies[args.kind].main(args.arguments)
+        try:
+            studies[args.kind].main(args.arguments)
+        except (SceneError, ValueError) as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
         return 0
     if args.command == "compare":
         from .studies.compare import compare_files, format_report

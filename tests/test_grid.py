@@ -70,5 +70,5 @@ def test_the_command_line_runs_a_grid(tmp_path, capsys):
     assert cli.main(["study", "grid", str(scene), "--param", "contact.slip_bound=0.001,0.002",
                      "--scheduler", "serial", "--out", str(tmp_path / "out")]) == 0
     assert "2/2 cases solved" in capsys.readouterr().out
-    with pytest.raises(SystemExit):
-        cli.main(["study", "grid", str(scene), "--param", "contact.nosuch=1", "--scheduler", "serial"])
+    assert cli.main(["study", "grid", str(scene), "--param", "contact.nosuch=1", "--scheduler", "serial"]) == 2
+    assert capsys.readouterr().err.startswith("error: --param contact.nosuch: not a parameter")
