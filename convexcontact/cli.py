@@ -132,14 +132,16 @@ def report(result, out: Path | None, json_file: Path | None) -> int:
 def compare_scene(args) -> dict:
     """The exact answer of the scene file against a peer's output file (``convexcontact compare SCENE PEER``):
     the outputs, the scene and the peer's file are checked before the solve."""
+    from .fem.mesh import build_mesh
     from .scene.toml import load_scene
-    from .studies.peer import peer_errors, plot_pressures, read_peer
+    from .studies.peer import check_dimension, peer_errors, plot_pressures, read_peer
 
     check_outputs(args.out, None, args.overwrite, ("pressures.png",))
     scene = load_scene(args.reference)
     if scene.history is not None:
         raise ValueError(f"{args.reference}: compare takes a static scene; drop its [history]")
     peer = read_peer(args.other, args.displacement, args.pressure)
+    check_dimension(peer, build_mesh(scene.body).dim())
     if args.out is not None and peer.pressure is None:
         raise ValueError(f"--out: {args.other} has no contact pressure, so there is no pressures.png to write; drop "
                          "--out, or name the peer's pressure with --pressure NAME")

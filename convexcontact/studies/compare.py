@@ -232,9 +232,9 @@ def read_summary(path) -> tuple[dict, dict]:
         raise ValueError(f"{path}: not a summary.json (no JSON: {error.msg} at line {error.lineno}, column "
                          f"{error.colno}); {SUMMARY_FIX}") from None
     if not isinstance(data, dict) or "contact_nodes" not in data:
-        status = data.get("status") if isinstance(data, dict) else f"none: a JSON {type(data).__name__}"
-        raise ValueError(f"{path}: no contact_nodes (status {status!r}): only a solved result can be compared; "
-                         f"{SUMMARY_FIX}")
+        problem = (f"no contact_nodes (status {data.get('status')!r}): only a solved result can be compared"
+                   if isinstance(data, dict) else f"not a summary.json (a JSON {type(data).__name__}, not an object)")
+        raise ValueError(f"{path}: {problem}; {SUMMARY_FIX}")
     return data, check_nodes(data, path)
 
 
@@ -244,7 +244,7 @@ def check_nodes(data: dict, path: Path) -> dict:
     nodes = data["contact_nodes"]
     missing = [name for name in ("x", "y", "lambda_N", "status") if not isinstance(nodes, dict) or name not in nodes]
     if missing:
-        raise ValueError(f"{path}: contact_nodes: no {', '.join(missing)} (got {str(nodes)[:60]}); {SUMMARY_FIX}")
+        raise ValueError(f"{path}: contact_nodes: no {', '.join(missing)}; {SUMMARY_FIX}")
     checked, count = {}, np.size(nodes["x"]) if isinstance(nodes["x"], list) else -1
     for name in (*NODE_NUMBERS, "status"):
         if name not in nodes:

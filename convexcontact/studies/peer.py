@@ -76,6 +76,9 @@ def read_mesh(path: Path):
 
     if not path.is_file():
         raise ValueError(f"{path}: {'a folder' if path.is_dir() else 'no such file'}; give the peer's output file")
+    if path.suffix.lower() == ".json":
+        raise ValueError(f"{path}: a JSON file, not a mesh; to compare two summary.json files give both (the first "
+                         f"not a .toml), and to compare a scene with a peer give the peer's mesh: {mesh_formats()}")
     said = io.StringIO()
     try:
         with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
@@ -206,25 +209,44 @@ def interpolation(peer: Peer, points: np.ndarray, box: np.ndarray):
             blocks.append(basis.probes(points[:, start:start + CHUNK]))
         except ValueError:  # some point of the batch is in no cell: probe its points one by one to find which
             for k in range(start, min(start + CHUNK, points.shape[1])):
-                try:
-                    blocks.append(basis.probes(points[:, [k]]))
-                except ValueError:
-                    lost.append(k)
+                probe = probe_point(basis, points[:, k], 1e-9 * (high - low).max())
+                blocks.append(probe) if probe is not None else lost.append(k)
     if lost:
         distance = cKDTree(mesh.p.T).query(points[:, lost].T)[0]
         far = lost[int(np.argmax(distance))]
         raise ValueError(f"{peer.path}: {len(lost)} of {points.shape[1]} of our points "
-                         f"({100 * len(lost) / points.shape[1]:.2g} %) lie outside the peer's mesh, up to "
-                         f"{distance.max():.3g} from its nearest vertex (at {np.round(points[:, far], 6).tolist()}; "
+                         f"({100 * len(lost) / points.shape[1]:.2g} %) lie outside the peer's mesh, the farthest "
+                         f"{distance.max():.3g} from the peer's nearest vertex (at {np.round(points[:, far], 6).tolist()}; "
                          f"ours spans {box.tolist()}); the peer's mesh must cover the scene's body: the same body, "
                          "units and placement?")
     return sp.vstack(blocks).tocsr()[:, basis.nodal_dofs[0]]  # columns in the order of the peer's vertices
+
+
+def probe_point(basis: fe.Basis, point: np.ndarray, step: float):
+    """The probe of one point, or of the point moved ``step`` towards the centre of the nearest cell when it lies
+    on the peer's boundary up to round-off (a hole's edge, where the box's nudge does not reach); None outside."""
+    centres = basis.mesh.p[:, basis.mesh.t].mean(axis=1)
+    nearest = centres[:, np.argmin(np.linalg.norm(centres - point[:, None], axis=0))]
+    towards = (nearest - point) / max(np.linalg.norm(nearest - point), 1e-300)
+    for candidate in (point, point + step * towards):
+        try:
+            return basis.probes(candidate[:, None])
+        except ValueError:
+            continue
+    return None
 
 
 def compare_peer(reference: ContactResult, path, displacement: str | None = None,
                  pressure: str | None = None) -> dict:
     """Errors of the peer's output at ``path`` against ``reference`` (see the module docstring)."""
     return peer_errors(reference, read_peer(path, displacement, pressure))
+
+
+def check_dimension(peer: Peer, dim: int) -> None:
+    """Refuse a peer's mesh of another dimension than the scene's."""
+    if peer.mesh.dim() != dim:
+        raise ValueError(f"{peer.path}: a {peer.mesh.dim()}-D mesh against a {dim}-D scene; compare with a scene of "
+                         "the peer's dimension")
 
 
 def peer_errors(reference: ContactResult, peer: Peer) -> dict:
@@ -234,9 +256,7 @@ def peer_errors(reference: ContactResult, peer: Peer) -> dict:
         raise ValueError(f"reference: no answer to compare (status {reference.status!r})")
     path, mesh = peer.path, peer.mesh
     fem, scaling = reference.fem, reference.fem.scaling
-    if mesh.dim() != fem.dim:
-        raise ValueError(f"{path}: a {mesh.dim()}-D mesh against a {fem.dim}-D scene; compare with a scene of the "
-                         "peer's dimension")
+    check_dimension(peer, fem.dim)
     ours = fem.basis.doflocs * scaling.length  # (d, N): a location per DOF
     box = np.array([ours.min(axis=1), ours.max(axis=1)])
     peer_box = np.array([mesh.p.min(axis=1), mesh.p.max(axis=1)])
