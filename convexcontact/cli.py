@@ -129,9 +129,9 @@ def report(result, out: Path | None, json_file: Path | None) -> int:
     return EXIT.get(result.status, 1)
 
 
-def compare_scene(args) -> dict:
+def compare_scene(args) -> dict | None:
     """The exact answer of the scene file against a peer's output file (``convexcontact compare SCENE PEER``):
-    the outputs, the scene and the peer's file are checked before the solve."""
+    the outputs, the scene and the peer's file are checked before the solve; None when the solve has no answer."""
     from .fem.mesh import build_mesh
     from .scene.toml import load_scene
     from .studies.peer import check_dimension, peer_errors, plot_pressures, read_peer
@@ -146,8 +146,9 @@ def compare_scene(args) -> dict:
         raise ValueError(f"--out: {args.other} has no contact pressure, so there is no pressures.png to write; drop "
                          "--out, or name the peer's pressure with --pressure NAME")
     result = solve(scene)
-    if not result.solved:
-        raise ValueError(f"{args.reference}: the exact solve returned {result.status}: {result.message}")
+    if not result.solved:  # no answer to compare with: exit 1, not a bad input
+        print(f"error: {args.reference}: the exact solve returned {result.status}: {result.message}", file=sys.stderr)
+        return None
     report = peer_errors(result, peer)
     if args.out is not None:
         print("wrote", plot_pressures(report, args.out / "pressures.png"))
@@ -247,11 +248,13 @@ def commands(argv=None) -> int:
         from .studies.compare import format_report
 
         try:
-            print(format_report(compare_scene(args) if args.reference.suffix.lower() == ".toml"
-                                else compare_summaries(args)))
+            report = compare_scene(args) if args.reference.suffix.lower() == ".toml" else compare_summaries(args)
         except (OSError, ValueError) as error:
             print(f"error: {error}", file=sys.stderr)
             return 2
+        if report is None:
+            return 1
+        print(format_report(report))
         return 0
     return run_command(args)
 

@@ -70,3 +70,25 @@ def test_the_command_line_compares_a_scene_with_a_peer_file(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "energy_error" in printed and "fields: displacement 'displacement'" in printed
     assert (tmp_path / "pressures.png").exists()
+
+
+def test_a_peer_with_a_hole_whose_edge_passes_through_our_nodes_reads_them_exactly(tmp_path):
+    """A 6 × 6 peer without the cells of [1/3, 2/3]²: our 3 × 3 mesh's nodes at the hole's corners lie on the peer's
+    boundary up to round-off; they are probed just inside, and the report is that of the whole peer mesh."""
+    def sheared(n):  # a unit square pressed and sheared over a Tresca ground: a field that varies in x and y
+        return cc.solve(cc.Scene(name="square", body=cc.Body(cc.Rectangle(nx=n, ny=n)), materials=cc.Material(1.0, 0.3),
+                                 dirichlet=(cc.Dirichlet("top", ux=0.002, uy=-0.01),),
+                                 contact=cc.Contact("bottom", cc.Obstacle("flat"), cc.Tresca(slip_bound=0.001))))
+
+    ours, peer_result = sheared(3), sheared(6)
+    whole = written(peer_result, tmp_path / "whole.vtu")
+    mesh = meshio.read(whole)
+    centres = mesh.points[mesh.cells[0].data].mean(axis=1)
+    inside = (abs(centres[:, 0] - 0.5) < 1 / 6) & (abs(centres[:, 1] - 0.5) < 1 / 6)
+    assert inside.sum() == 8
+    meshio.write(tmp_path / "hole.vtu", meshio.Mesh(mesh.points, [("triangle", mesh.cells[0].data[~inside])],
+                                                    point_data=mesh.point_data))
+    expected, holed = compare_peer(ours, whole), compare_peer(ours, tmp_path / "hole.vtu")
+    for name in ("energy_error", "l2_displacement_error", "pressure_l2_error"):
+        assert holed[name] == pytest.approx(expected[name], rel=1e-9, abs=1e-12), name
+    assert expected["energy_error"] > 1e-3  # the two meshes' answers differ: the comparison is not trivially zero

@@ -414,8 +414,11 @@ def main(argv=None) -> list[dict]:
                         help="a parameter and its values, e.g. contact.friction=0.1,0.2 (repeat for a grid)")
     parser.add_argument("--scheduler", default=None, help="tcp://host:port of a Dask scheduler, or 'serial'")
     parser.add_argument("--workers", type=int, default=None, help="workers of the local cluster (default: cores)")
-    parser.add_argument("--solver", default="clarabel")
-    parser.add_argument("--out", type=Path, default=Path("out/grid"))
+    parser.add_argument("--solver", default="clarabel",
+                        help="clarabel (default) | osqp | cvxpy[:NAME] | newton-cg | auto")
+    parser.add_argument("--formulation", default="auto", help="auto (default) | primal | dual | dual-matrix-free")
+    parser.add_argument("--out", type=Path, default=Path("out/grid"),
+                        help="folder of grid.csv (default out/grid); a rerun there skips the cases it holds")
     args = parser.parse_args(argv)
     paths = [path for path, _ in args.param]
     repeated = next((path for path in paths if paths.count(path) > 1), None)
@@ -424,7 +427,7 @@ def main(argv=None) -> list[dict]:
                          f"all its values, e.g. --param {repeated}=V1,V2")
     scene = load_scene(args.scene)
     try:
-        return run_grid(scene, dict(args.param), args.out, args.solver, scheduler=args.scheduler,
-                        workers=args.workers)
+        return run_grid(scene, dict(args.param), args.out, args.solver, args.formulation, args.scheduler,
+                        args.workers)
     except ValueError as error:
         raise ValueError(as_option(str(error))) from None

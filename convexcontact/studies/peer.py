@@ -209,7 +209,7 @@ def interpolation(peer: Peer, points: np.ndarray, box: np.ndarray):
             blocks.append(basis.probes(points[:, start:start + CHUNK]))
         except ValueError:  # some point of the batch is in no cell: probe its points one by one to find which
             for k in range(start, min(start + CHUNK, points.shape[1])):
-                probe = probe_point(basis, points[:, k], 1e-9 * (high - low).max())
+                probe = probe_point(basis, points[:, k], 1e-12 * (high - low).max())
                 blocks.append(probe) if probe is not None else lost.append(k)
     if lost:
         distance = cKDTree(mesh.p.T).query(points[:, lost].T)[0]
