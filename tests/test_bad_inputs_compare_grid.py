@@ -312,6 +312,7 @@ def test_grid_parameters_are_refused_before_any_case(files, tmp_path, grid, star
     ({"scheduler": 8786}, "scheduler: expected str", "tcp://HOST:8786"),
     ({"progress": "print"}, "progress: expected a function", "progress=print"),
     ({"scene": "patch.toml"}, "scene: expected Scene", "cc.scene.load_scene(path)"),
+    ({"out": None}, "out: expected str or Path", "give a folder's path"),
 ])
 def test_run_options_are_refused_before_any_case(files, tmp_path, options, start, fix):
     grid_refused(files, tmp_path, start, fix, **options)
@@ -428,3 +429,13 @@ def test_study_grid_out_and_scene_arguments(files, tmp_path, capsys):
             f"error: --out: {files['scene']} is a file", "give a folder")
     refused(["study", "grid", tmp_path / "missing.toml", "--param", "contact.slip_bound=0.1"], capsys,
             "error: toml: cannot read", "missing.toml")
+
+
+def test_imported_arrays_name_the_argument(files):
+    from convexcontact.studies.compare import Fields
+
+    with pytest.raises(ValueError, match=r"^pressure: expected an array of numbers"):
+        Fields.from_arrays(files["result"], pressure=["high"] * 4)
+    with pytest.raises(ValueError, match=r"^displacement: contains NaN or infinity \(\d+ of \d+ values\) — give the finite"):
+        Fields.from_arrays(files["result"], pressure=np.ones(4), displacement=np.full(files["result"].fem.basis.N,
+                                                                                        np.nan))

@@ -65,11 +65,10 @@ class Fields:
         Closed where the pressure exceeds ``CLOSED_PRESSURE`` × its maximum, as for our own
         results; the stick zone is then unknown and not compared.
         """
-        self.pressure = np.asarray(self.pressure, dtype=float)
-        if self.displacement is not None:
-            self.displacement = np.asarray(self.displacement, dtype=float)
-        if self.friction is not None:
-            self.friction = np.asarray(self.friction, dtype=float)
+        for name in ("pressure", "displacement", "friction"):
+            values = getattr(self, name)
+            if values is not None:
+                setattr(self, name, numbers(values, name))
         if self.status is None:
             largest = self.pressure.max(initial=0.0)
             self.status = np.where((largest > 0) & (self.pressure > CLOSED_PRESSURE * largest), "closed", "open")
@@ -109,6 +108,14 @@ class Fields:
         return self.friction is not None and not np.any(self.status == "closed")
 
 
+def numbers(values, name: str) -> np.ndarray:
+    """``values`` as an array of floats, or a ValueError naming the argument."""
+    try:
+        return np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name}: expected an array of numbers ({error})") from None
+
+
 def check(reference: ContactResult, fields: Fields, prefix: str) -> None:
     """Lengths and values of ``fields`` against the reference's DOFs and contact nodes."""
     ndofs, m = reference.fem.basis.N, reference.fem.contact.m
@@ -123,7 +130,8 @@ def check(reference: ContactResult, fields: Fields, prefix: str) -> None:
         if values.shape != (size,):
             raise ValueError(f"{prefix}{name}: {values.size} values, the reference has {size} — {fix}")
         if name != "status" and not np.isfinite(values).all():
-            raise ValueError(f"{prefix}{name}: contains NaN or infinity")
+            raise ValueError(f"{prefix}{name}: contains NaN or infinity ({np.sum(~np.isfinite(values))} of {size} "
+                             "values) — give the finite values of a solve that converged")
     unknown = set(fields.status.tolist()) - set(STATUSES)
     if unknown:
         raise ValueError(f"{prefix}status: unknown values {sorted(unknown)}; use {STATUSES}")

@@ -243,22 +243,30 @@ def check_run(solver: str, formulation: str, scheduler: str | None, workers: int
         if scheduler is not None:
             raise ValueError(f"workers: sizes the local cluster, but the scheduler is {scheduler!r}; leave the number of "
                              "workers out (a scheduler's cluster has its own)")
+    if scheduler != "serial":
+        require_distributed()
     if scheduler is not None and scheduler != "serial":
         check_scheduler(scheduler)
     check_folder_target(out, "out")
 
 
-def check_scheduler(address) -> None:
-    """Refuse an address that is not a running Dask scheduler's: malformed, nothing listening, something else
-    listening (an HTTP server's answer read as Dask's frames asked numpy for exabytes), or a worker."""
-    of_type(address, str, "scheduler", SCHEDULER_FIX)
+def require_distributed() -> None:
+    """Refuse a cluster run where Dask's distributed is not installed."""
     try:
-        from distributed.comm import parse_address, parse_host_port
+        import distributed  # noqa: F401
     except ModuleNotFoundError as error:
         if error.name != "distributed":
             raise
         raise ValueError("scheduler: Dask's distributed is not installed; pip install 'convexcontact[sweeps]', or "
                          "use 'serial'") from None
+
+
+def check_scheduler(address) -> None:
+    """Refuse an address that is not a running Dask scheduler's: malformed, nothing listening, something else
+    listening (an HTTP server's answer read as Dask's frames asked numpy for exabytes), or a worker."""
+    from distributed.comm import parse_address, parse_host_port
+
+    of_type(address, str, "scheduler", SCHEDULER_FIX)
     try:
         scheme, location = parse_address(address, strict=True)
         host, port = parse_host_port(location) if scheme in ("tcp", "tls", "ws", "wss") else (None, None)
@@ -310,7 +318,7 @@ def run_grid(scene: Scene, grid: dict[str, list], out="out/grid", solver: str = 
     check_options({"progress": progress})
     all_cases = cases(scene, grid)
     check_sizes([case for _, case in all_cases])
-    out = Path(out)
+    out = Path(of_type(out, (str, Path), "out", "give a folder's path, e.g. 'out/grid'"))
     check_run(solver, formulation, scheduler, workers, out)
     table = out / "grid.csv"
     header, done = resume(table, list(grid))
