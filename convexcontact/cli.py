@@ -150,8 +150,8 @@ def compare_scene(args) -> dict | None:
         print(f"error: {args.reference}: the exact solve returned {result.status}: {result.message}", file=sys.stderr)
         return None
     report = peer_errors(result, peer)
-    if args.out is not None:
-        print("wrote", plot_pressures(report, args.out / "pressures.png"))
+    if args.out is not None:  # written whole or not at all, as a run's outputs
+        print("wrote", *staged(args.out, lambda folder: [plot_pressures(report, folder / "pressures.png")]))
     report.pop("pressure_curves", None)
     return report
 
