@@ -3,6 +3,7 @@
 from pathlib import Path
 
 import meshio
+import numpy as np
 import pytest
 
 import convexcontact as cc
@@ -92,3 +93,17 @@ def test_a_peer_with_a_hole_whose_edge_passes_through_our_nodes_reads_them_exact
     for name in ("energy_error", "l2_displacement_error", "pressure_l2_error"):
         assert holed[name] == pytest.approx(expected[name], rel=1e-9, abs=1e-12), name
     assert expected["energy_error"] > 1e-3  # the two meshes' answers differ: the comparison is not trivially zero
+
+
+def test_vertices_no_cell_uses_are_read_and_left_out(exact, tmp_path):
+    """A file with a point no cell uses (gmsh's geometry points, far away, with other values there): its box and
+    interpolation are those of the cells' vertices, so the report is that of the file without it."""
+    path = written(exact, tmp_path / "same.vtu")
+    mesh = meshio.read(path)
+    data = {name: np.concatenate([np.full((1, *values.shape[1:]), 7.0), values])
+            for name, values in mesh.point_data.items()}
+    meshio.write(tmp_path / "extra.vtu", meshio.Mesh(np.vstack([[[5.0, 5.0, 0.0]], mesh.points]),
+                                                     [("triangle", mesh.cells[0].data + 1)], point_data=data))
+    with_extra, without = compare_peer(exact, tmp_path / "extra.vtu"), compare_peer(exact, path)
+    for name in ("energy_error", "pressure_l2_error"):
+        assert with_extra[name] == without[name], name

@@ -58,6 +58,13 @@ class Peer:
     displacement: np.ndarray | None  # (vertices, dim)
     pressure: np.ndarray | None  # (vertices,)
 
+    @property
+    def box(self) -> np.ndarray:
+        """The lowest and highest coordinates of the vertices the cells use (a mesh file may hold others: gmsh's
+        geometry points, arc centres)."""
+        used = self.mesh.p[:, np.unique(self.mesh.t)]
+        return np.array([used.min(axis=1), used.max(axis=1)])
+
 
 COMMON_FORMATS = (".vtu", ".vtk", ".xdmf", ".exo", ".msh", ".med", ".inp")
 
@@ -197,7 +204,7 @@ def interpolation(peer: Peer, points: np.ndarray, box: np.ndarray):
     outside the peer's mesh are refused, saying how many and how far."""
     mesh = peer.mesh
     basis = fe.Basis(mesh, ELEMENTS[type(mesh)]())
-    low, high = mesh.p.min(axis=1, keepdims=True), mesh.p.max(axis=1, keepdims=True)
+    low, high = peer.box[0][:, None], peer.box[1][:, None]
     outside = np.maximum(low - points, 0.0) + np.maximum(points - high, 0.0)
     if outside.max(initial=0.0) <= 1e-9 * (high - low).max():
         # boundary nodes of two meshes of one body differ by round-off: move them just inside the peer's box
@@ -254,12 +261,12 @@ def peer_errors(reference: ContactResult, peer: Peer) -> dict:
     of_type(reference, ContactResult, "reference", "give the result of cc.solve(scene)")
     if not reference.solved:
         raise ValueError(f"reference: no answer to compare (status {reference.status!r})")
-    path, mesh = peer.path, peer.mesh
+    path = peer.path
     fem, scaling = reference.fem, reference.fem.scaling
     check_dimension(peer, fem.dim)
     ours = fem.basis.doflocs * scaling.length  # (d, N): a location per DOF
     box = np.array([ours.min(axis=1), ours.max(axis=1)])
-    peer_box = np.array([mesh.p.min(axis=1), mesh.p.max(axis=1)])
+    peer_box = peer.box
     if np.abs(peer_box - box).max() > 1e-3 * np.ptp(box, axis=0).max():
         raise ValueError(f"{path}: the peer's mesh spans {peer_box.tolist()}, ours {box.tolist()}: the same body in "
                          "the same units and placement? (the scene must be in the peer file's units)")
