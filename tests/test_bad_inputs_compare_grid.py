@@ -234,6 +234,7 @@ def test_files_that_are_not_summaries_or_of_another_mesh(files, tmp_path, capsys
                 "give the scene's .toml first")
     refused(["compare", tmp_path / "missing.json", files["summary"]], capsys, "missing.json: cannot read it",
             "check the path")
+    refused(["compare", tmp_path / "missing.toml", files["peer"]], capsys, "error: toml: cannot read", "missing.toml")
     refused(["compare", files["summary"], files["peer"]], capsys, "peer.vtu: not a summary.json", "summary.json")
     finer = cc.solve(dataclasses.replace(load_scene(files["scene"]), body=cc.Body(cc.Rectangle(nx=4, ny=3))))
     finer.save(tmp_path / "finer", formats=("json",))
@@ -370,6 +371,15 @@ def test_schedulers_that_do_not_answer_or_are_not_dask_are_refused(files, tmp_pa
                      "not its dashboard's port 8787", scheduler=address)
         refused(["study", "grid", files["scene"], "--param", "contact.slip_bound=0.001", "--scheduler", address],
                 capsys, f"error: --scheduler: {address} answers, but not as a Dask scheduler", "'serial'")
+
+
+def test_a_dask_worker_is_not_a_scheduler_and_its_scheduler_is_named(files, tmp_path):
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster:
+        worker = next(iter(cluster.scheduler.workers))
+        grid_refused(files, tmp_path, f"scheduler: {worker} is a Dask Worker, not a scheduler (its scheduler is "
+                     f"{cluster.scheduler_address})", "'serial'", scheduler=worker)
 
 
 def test_the_resume_table_must_be_ours_and_is_never_changed(files, tmp_path):
