@@ -100,11 +100,12 @@ OUTPUTS = ("summary.json", "solution.vtu", "solution.pvd", "solution_*.vtu", "so
 """What a run writes into --out: the names it would replace."""
 
 
-def check_outputs(out: Path | None, json_file: Path | None, overwrite: bool) -> None:
-    """Refuse, before any work, outputs that would fail or replace a file without --overwrite."""
+def check_outputs(out: Path | None, json_file: Path | None, overwrite: bool, outputs=OUTPUTS) -> None:
+    """Refuse, before any work, outputs that would fail or replace a file without --overwrite (``outputs``: the
+    names the command writes into --out)."""
     if out is not None:
         check_folder_target(out, "--out")
-        ours = sorted({path.name for pattern in OUTPUTS for path in out.glob(pattern)}) if out.is_dir() else []
+        ours = sorted({path.name for pattern in outputs for path in out.glob(pattern)}) if out.is_dir() else []
         if ours and not overwrite:
             raise ValueError(f"--out: {out} already holds {', '.join(ours[:5])}{' …' if len(ours) > 5 else ''}; "
                              "give another folder, or --overwrite to replace them (nothing else there is touched)")
@@ -128,22 +129,42 @@ def report(result, out: Path | None, json_file: Path | None) -> int:
     return EXIT.get(result.status, 1)
 
 
-def compare_scene(args) -> dict:
-    """The exact answer of the scene file against a peer's output file (``convexcontact compare SCENE PEER``)."""
+def compare_scene(args) -> dict | None:
+    """The exact answer of the scene file against a peer's output file (``convexcontact compare SCENE PEER``):
+    the outputs, the scene and the peer's file are checked before the solve; None when the solve has no answer."""
+    from .fem.mesh import build_mesh
     from .scene.toml import load_scene
-    from .studies.peer import compare_peer, plot_pressures
+    from .studies.peer import check_dimension, peer_errors, plot_pressures, read_peer
 
+    check_outputs(args.out, None, args.overwrite, ("pressures.png",))
     scene = load_scene(args.reference)
     if scene.history is not None:
         raise ValueError(f"{args.reference}: compare takes a static scene; drop its [history]")
+    peer = read_peer(args.other, args.displacement, args.pressure)
+    check_dimension(peer, build_mesh(scene.body).dim())
+    if args.out is not None and peer.pressure is None:
+        raise ValueError(f"--out: {args.other} has no contact pressure, so there is no pressures.png to write; drop "
+                         "--out, or name the peer's pressure with --pressure NAME")
     result = solve(scene)
-    if not result.solved:
-        raise ValueError(f"{args.reference}: the exact solve returned {result.status}: {result.message}")
-    report = compare_peer(result, args.other, args.displacement, args.pressure)
-    if args.out is not None and "pressure_curves" in report:
-        print("wrote", plot_pressures(report, args.out / "pressures.png"))
+    if not result.solved:  # no answer to compare with: exit 1, not a bad input
+        print(f"error: {args.reference}: the exact solve returned {result.status}: {result.message}", file=sys.stderr)
+        return None
+    report = peer_errors(result, peer)
+    if args.out is not None:  # written whole or not at all, as a run's outputs
+        print("wrote", *staged(args.out, lambda folder: [plot_pressures(report, folder / "pressures.png")]))
     report.pop("pressure_curves", None)
     return report
+
+
+def compare_summaries(args) -> dict:
+    """Two summary.json files (``convexcontact compare A.json B.json``); the options of a peer file are refused."""
+    from .studies.compare import compare_files
+
+    for option, value in (("--displacement", args.displacement), ("--pressure", args.pressure), ("--out", args.out)):
+        if value is not None:
+            raise ValueError(f"{option}: serves a scene compared with a peer's file (REFERENCE a .toml); two "
+                             "summary.json files have no point data and no pressure overlay — drop it")
+    return compare_files(args.reference, args.other)
 
 
 def main(argv=None) -> int:
@@ -196,6 +217,7 @@ def commands(argv=None) -> int:
     compare.add_argument("--displacement", default=None, help="the peer's displacement point data (default: found by name)")
     compare.add_argument("--pressure", default=None, help="the peer's contact pressure point data (default: by name)")
     compare.add_argument("--out", type=Path, default=None, help="folder for the pressure overlay PNG (peer files)")
+    compare.add_argument("--overwrite", action="store_true", help="replace a pressures.png already in --out")
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["study"] and (len(argv) == 1 or argv[1] in ("-h", "--help")):
         study.print_help()
@@ -216,17 +238,23 @@ def commands(argv=None) -> int:
 
         studies = {"work-precision": work_precision, "sweep": sweeps, "stability": stability, "uniqueness": uniqueness,
                    "grid": grid, "sfepy": sfepy_peer}
-        studies[args.kind].main(args.arguments)
+        try:
+            studies[args.kind].main(args.arguments)
+        except (SceneError, ValueError) as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
         return 0
     if args.command == "compare":
-        from .studies.compare import compare_files, format_report
+        from .studies.compare import format_report
 
         try:
-            print(format_report(compare_files(args.reference, args.other) if args.reference.suffix != ".toml"
-                                else compare_scene(args)))
+            report = compare_scene(args) if args.reference.suffix.lower() == ".toml" else compare_summaries(args)
         except (OSError, ValueError) as error:
             print(f"error: {error}", file=sys.stderr)
             return 2
+        if report is None:
+            return 1
+        print(format_report(report))
         return 0
     return run_command(args)
 
