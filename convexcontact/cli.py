@@ -52,6 +52,11 @@ def table(result) -> str:
         rows += [
             ("certificate (worst)", f'{s["certificate"]["worst"]:.2e}'),
         ]
+        if s["error_budget"] is not None:
+            budget = s["error_budget"]
+            errors = (f'algebraic {budget["algebraic"]:.1e}, discretization ≈ {budget["discretization"]:.1e} '
+                      "(estimated, docs/estimate.md)")
+            rows.append(("error / ‖u‖_E", errors))
     if s["message"]:
         rows.append(("message", s["message"]))
     rows += [("warning", warning) for warning in s["warnings"]]

@@ -32,6 +32,8 @@ def write_vtk(result, path: Path):
     if result.contact.friction is not None:
         point_data["friction_traction"] = vertex_contact(result, result.contact.friction)
     cell_data = {name: [values] for name, values in element_stress(result).items()}
+    if result.error_estimate is not None:  # η_T per cell, user energy units (docs/estimate.md)
+        cell_data["error_indicator"] = [np.sqrt(result.error_estimate.indicators * fem.scaling.energy)]
     if isinstance(fem.scene.body, Bodies):
         cell_data["body"] = [fem.scene.body.body_ids(fem.mesh)]
     if result.contact.master_forces is not None:  # on the slave nodes and, transferred, on the master's

@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..fem.assembly import FEModel
+from ..fem.estimate import ContactState, ErrorEstimate, algebraic_error, estimate
 from ..fem.friction import FrictionPoints
 from ..fem.mortar import PairTrace
 from ..formulations.fields import ContactFields
+from ..scene.model import compliance_of
 from .certificate import Certificate, normal_displacement, normal_gap, pair_multipliers
 
 CLOSED_PRESSURE = 1e-6
@@ -78,6 +81,7 @@ class ContactResult:
     message: str = ""
     extra: dict = field(default_factory=dict)
     not_unique: dict[str, str] = field(default_factory=dict)  # quantity → why the answer does not fix it
+    estimate_error: bool = True  # False: no error budget (summary, VTU), saving the estimator's cost
 
     @property
     def solved(self) -> bool:
@@ -132,8 +136,49 @@ class ContactResult:
         scaled = self.displacement / self.fem.scaling.displacement
         return float(0.5 * scaled @ (self.fem.K_full @ scaled) * self.fem.scaling.energy)
 
+    @cached_property
+    def error_estimate(self) -> ErrorEstimate | None:
+        """The residual estimate of the discretization error (:mod:`convexcontact.fem.estimate`), scaled units;
+        None without an answer, when switched off (``estimate_error``) or for two bodies (not estimated)."""
+        if not (self.solved and self.estimate_error) or isinstance(self.fem.contact, PairTrace):
+            return None
+        return estimate(self.fem, self.displacement / self.fem.scaling.displacement, contact_state(self))
+
+    @cached_property
+    def error_budget(self) -> dict | None:
+        """The algebraic and the estimated discretization error side by side, relative to ‖u_h‖_E (docs/estimate.md);
+        None where :attr:`error_estimate` is."""
+        estimated = self.error_estimate
+        if estimated is None:
+            return None
+        norm = np.sqrt(estimated.energy)
+        algebraic = algebraic_error(self.fem, self.displacement / self.fem.scaling.displacement, contact_state(self))
+        calibration = EFFECTIVITY[self.scene.body.element]
+        discretization = estimated.eta / calibration / norm if norm > 0 else estimated.relative
+        return {
+            "algebraic": algebraic / norm if norm > 0 else algebraic,
+            "discretization": float(discretization),
+            "eta": estimated.eta * np.sqrt(self.fem.scaling.energy),
+            "energy_norm": float(norm * np.sqrt(self.fem.scaling.energy)),
+            "calibration": calibration,
+            "terms": {name: value / estimated.eta**2 if estimated.eta > 0 else 0.0
+                      for name, value in estimated.terms.items()},
+        }
+
+    @property
+    def warnings(self) -> list[str]:
+        """The model's warnings, and one naming a remedy when the estimated discretization error is large."""
+        budget = self.error_budget
+        if budget is None or budget["discretization"] <= LARGE_ERROR:
+            return list(self.fem.warnings)
+        element = self.scene.body.element
+        remedy = ("refine the mesh, or use P2/Q2 elements if ν is near 0.5 (P1/Q1 lock)" if element in ("P1", "Q1")
+                  else "refine the mesh (for ν near 0.5 the residual estimate overstates the error: docs/estimate.md)")
+        large = f"estimated discretization error {budget['discretization']:.0%} of the energy norm (over {LARGE_ERROR:.0%})"
+        return [*self.fem.warnings, f"{large}: {remedy}"]
+
     def summary(self) -> dict:
-        """JSON-ready summary (see docs/certificate.md for the certificate)."""
+        """JSON-ready summary (see docs/certificate.md for the certificate, docs/estimate.md for the error budget)."""
         out = {
             "scene": self.scene.name,
             "ndof": self.ndof,
@@ -147,7 +192,7 @@ class ContactResult:
             "iterations": self.iterations,
             "timings": self.timings,
             "message": self.message,
-            "warnings": list(self.fem.warnings),
+            "warnings": self.warnings,
             "not_unique": dict(self.not_unique),
         }
         if not self.solved:
@@ -161,6 +206,7 @@ class ContactResult:
             elastic_energy=self.elastic_energy,
             certificate=self.certificate.as_dict(),
             n_closed=int(self.closed.sum()),
+            error_budget=self.error_budget,
             contact_nodes={
                 **{axis: c.coords[:, i].tolist() for i, axis in enumerate("xyz"[: c.coords.shape[1]])},
                 "s": c.coordinate.tolist(),
@@ -197,6 +243,28 @@ class ContactResult:
         from .output import save
 
         return save(self, directory, formats)
+
+
+EFFECTIVITY = {"P1": 4.6, "Q1": 4.6, "P2": 7.2, "Q2": 7.2}
+"""η / true energy error measured on Hertz 2-D under uniform refinement (docs/estimate.md): the estimated
+discretization error is η divided by it — a calibration on one family, checked on others, not a bound."""
+
+LARGE_ERROR = 0.5
+"""Estimated relative discretization error (energy norm) above which a result warns and names the remedy: an answer
+not resolved at all. Measured (docs/estimate.md): Hertz P1 ν = 0.3 on the stability study's nx = 32 mesh 0.19, the
+library's nx = 80 0.08; the locking row (P1, ν = 0.4999, 71 % off Hertz) 77, P1 at ν = 0.49 (15 % off) 2.7."""
+
+
+def contact_state(result: ContactResult) -> ContactState:
+    """The discrete contact state of a solved result at the contact nodes, scaled (for the estimator)."""
+    scaling, c = result.fem.scaling, result.contact
+    slip = None
+    if c.slip is not None:
+        along = c.slip[:, None] if c.slip.ndim == 1 else c.slip
+        frame = [c.tangents] if c.bitangents is None else [c.tangents, c.bitangents]
+        slip = sum(along[:, [j]] * t for j, t in enumerate(frame)) / scaling.displacement
+    return ContactState(c.forces / scaling.force, c.normal_displacement / scaling.displacement,
+                        c.gap / scaling.displacement, slip, compliance_of(result.scene.contact.law) is None)
 
 
 def contact_nodes(

@@ -1,0 +1,244 @@
+"""A residual a-posteriori estimate of the energy-norm discretization error, contact-aware (Hild–Nicaise).
+
+For the one-body scenes (a body against a rigid obstacle), any element (the residual terms are
+element-agnostic), in scaled units. Per cell T, with σ = σ(u_h), h the cell (facet) size, μ_T the shear
+modulus, t_h the contact traction the discrete problem holds and g_N the applied traction::
+
+    η_T² = (1/2μ_T) [ h_T² ‖f + div σ‖²_T                                   interior
+                      + ½ Σ_{E ⊂ ∂T interior} h_E ‖[σ n]‖²_E                 jump
+                      + Σ_{E ⊂ ∂T ∩ Γ_N} h_E ‖σ n − g_N‖²_E                  neumann
+                      + Σ_{E ⊂ ∂T ∩ Γ_C} h_E ‖σ n − t_h‖²_E ]                contact (normal and tangential)
+           + Σ_{E ⊂ ∂T ∩ Γ_C} ∫_E (p_h)_+ (g − u_N,h)_+                     complementarity
+           + Σ_{E ⊂ ∂T ∩ Γ_C} 2μ_T h_E⁻¹ ‖(u_N,h − g)_+‖²_E                  penetration
+           + Σ_{E ⊂ ∂T ∩ Γ_C} ∫_E (|t_T,h| |v_T,h| + t_T,h · v_T,h)           friction (slip against the traction)
+
+Components of σ n held by a Dirichlet condition are left out (they are reactions). The contact
+traction is the field of the trace space whose moments are the discrete nodal contact forces F
+(t_h = Σ τ_i ψ_i with M τ = F, M the boundary mass of Γ_C): the same for lumped, weak (Hild's P1) and
+Gauss-point multipliers, and with it the residual vanishes on the discrete test functions. p_h = −t_h·n
+is the pressure, g and u_N,h the trace-space interpolants of the nodal gap and normal displacement,
+v_T,h the slip. The obstacle's own interpolation error (g − g_h, O(h²) for a smooth obstacle) is not
+included. The 1/2μ weights put the residual terms in energy units (‖u − u_h‖² ≤ C/(2μ) ‖residual‖²
+by Korn's inequality).
+
+Reliability holds up to a constant the theory does not give (Hild & Nicaise, M2AN 41, 2007): η is an
+estimate, not a guaranteed bound. Its measured effectivity is in docs/estimate.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import skfem as fe
+from scipy.sparse.linalg import splu
+
+from ..scene.model import Dirichlet
+from .assembly import FEModel
+from .mesh import check_boundary
+
+TERMS = ("interior", "jump", "neumann", "contact", "complementarity", "penetration", "friction")
+"""The kinds of terms of η², in the order of the module's formula."""
+
+
+@dataclass(frozen=True)
+class ErrorEstimate:
+    """The residual estimate of one solution, scaled energy units (squares: η² = Σ_T η_T²).
+
+    ``indicators`` η_T² per cell; ``terms`` each kind's share of η² (:data:`TERMS`);
+    ``energy`` ‖u_h‖²_E = uᵀKu of the solution.
+    """
+
+    indicators: np.ndarray
+    terms: dict[str, float]
+    energy: float
+
+    @property
+    def eta(self) -> float:
+        return float(np.sqrt(self.indicators.sum()))
+
+    @property
+    def relative(self) -> float:
+        """η / ‖u_h‖_E (inf for a zero solution with a nonzero residual, 0 for both zero)."""
+        if self.energy > 0:
+            return self.eta / np.sqrt(self.energy)
+        return 0.0 if self.eta == 0 else np.inf
+
+
+@dataclass(frozen=True)
+class ContactState:
+    """The discrete contact state at the m nodes of Γ_C (scaled units): nodal contact ``forces`` on the body
+    (m, d), ``normal_displacement`` u_N, ``gap`` g (at the obstacle's final position) and the ``slip`` v_T
+    relative to the obstacle as vectors (m, d; None without friction)."""
+
+    forces: np.ndarray
+    normal_displacement: np.ndarray
+    gap: np.ndarray
+    slip: np.ndarray | None = None
+    constrained: bool = True  # non-penetration (False: normal compliance, no complementarity)
+
+
+def components(fem: FEModel, u: np.ndarray) -> np.ndarray:
+    """(d, scalar DOFs): scikit-fem's vector DOF d·s + a is component a of scalar DOF s."""
+    return u.reshape(-1, fem.dim).T
+
+
+def gradient(basis: fe.AbstractBasis, u_components: np.ndarray) -> np.ndarray:
+    """∇u at the basis' quadrature points, (d, d, elements, points): [a, k] = ∂_k u_a."""
+    return np.stack([basis.interpolate(u_a).grad for u_a in u_components])
+
+
+def stress(grad_u: np.ndarray, lam: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """σ = 2μ ε + λ tr ε I from ∇u (d, d, elements, points), Lamé parameters per element."""
+    strain = 0.5 * (grad_u + grad_u.transpose(1, 0, 2, 3))
+    sigma = 2.0 * mu[:, None] * strain
+    trace = np.einsum("aaep->ep", strain)
+    for a in range(grad_u.shape[0]):
+        sigma[a, a] += lam[:, None] * trace
+    return sigma
+
+
+def stress_divergence(fem: FEModel, elem: fe.Element, cells: fe.CellBasis, u_components: np.ndarray) -> np.ndarray:
+    """div σ(u_h) at the quadrature points of ``cells`` (d, elements, points).
+
+    scikit-fem's Lagrange elements give no second derivatives. On affine cells (and on the tensor meshes'
+    rectangles) σ(u_h) lies in the element's broken space, so its values at the element's reference nodes
+    interpolate it exactly and the shape functions' gradients give its divergence."""
+    if elem.maxdeg == 1:  # P1: σ is constant per cell
+        return np.zeros((fem.dim, *cells.dx.shape))
+    nodes = fe.CellBasis(fem.mesh, elem, quadrature=(elem.doflocs.T, np.ones(elem.doflocs.shape[0])))
+    sigma = stress(gradient(nodes, u_components), *fem.lame)  # (d, d, elements, local nodes)
+    shape_gradients = np.stack([cells.basis[j][0].grad for j in range(cells.Nbfun)])  # (nodes, d, elements, points)
+    return np.einsum("akej,jkep->aep", sigma, shape_gradients)
+
+
+def interior(fem: FEModel, elem: fe.Element, u_components: np.ndarray) -> np.ndarray:
+    """h_T² ‖f + div σ‖²_T per cell (f the body force)."""
+    cells = fe.CellBasis(fem.mesh, elem)
+    residual = stress_divergence(fem, elem, cells, u_components)
+    body_force = np.asarray(fem.scene.body_force, dtype=float)
+    if body_force.any():
+        residual = residual + (body_force * fem.scaling.length / fem.scaling.pressure)[:, None, None]
+    h = cells.mesh_parameters().value
+    return (h**2 * (residual**2).sum(axis=0) * cells.dx).sum(axis=1)
+
+
+def jumps(fem: FEModel, elem: fe.Element, u_components: np.ndarray) -> np.ndarray:
+    """½ Σ h_E ‖[σ n]‖²_E per cell over its interior facets, each side weighted by its own 1/2μ."""
+    sides = [fe.InteriorFacetBasis(fem.mesh, elem, side=side) for side in (0, 1)]
+    lam, mu = fem.lame
+    traction = [np.einsum("abep,bep->aep", stress(gradient(b, u_components), lam[b.tind], mu[b.tind]), b.normals.value)
+                for b in sides]
+    h = sides[0].mesh_parameters().value
+    per_facet = (h * ((traction[0] - traction[1]) ** 2).sum(axis=0) * sides[0].dx).sum(axis=1)
+    out = np.zeros(fem.mesh.nelements)
+    for b in sides:
+        np.add.at(out, b.tind, 0.5 * per_facet / (2.0 * mu[b.tind]))
+    return out
+
+
+def held_components(fem: FEModel, facets: np.ndarray) -> np.ndarray:
+    """(d, facets) mask of the displacement components a Dirichlet condition prescribes on each facet."""
+    held = np.zeros((fem.dim, facets.size), dtype=bool)
+    position = {facet: i for i, facet in enumerate(facets)}
+    for condition in fem.scene.dirichlet:
+        on = [position[f] for f in check_boundary(fem.mesh, condition.boundary, "dirichlet.boundary") if f in position]
+        for a, name in enumerate(Dirichlet.COMPONENTS[:fem.dim]):
+            if getattr(condition, name) is not None:
+                held[a, on] = True
+    return held
+
+
+def applied_traction(fem: FEModel, boundary: fe.FacetBasis) -> np.ndarray:
+    """g_N (d, facets, points) of the scene's tractions on the boundary facets of ``boundary`` (scaled)."""
+    out = np.zeros((fem.dim, *boundary.dx.shape))
+    position = {facet: i for i, facet in enumerate(boundary.find)}
+    for load in fem.scene.tractions:
+        rows = [position[f] for f in check_boundary(fem.mesh, load.boundary, "traction.boundary")]
+        if load.pressure is not None:
+            out[:, rows] += -load.pressure / fem.scaling.pressure * boundary.normals.value[:, rows]
+        else:
+            vector = np.zeros(fem.dim)
+            vector[:len(load.vector)] = load.vector
+            out[:, rows] += (vector / fem.scaling.pressure)[:, None, None]
+    return out
+
+
+def trace_field(fem: FEModel, nodal: np.ndarray) -> np.ndarray:
+    """A field given at the contact nodes ((m,) or (m, d)) as scalar-DOF vectors ((N,) or (d, N)), zero elsewhere."""
+    nodes = fem.contact.dofs[:, 0] // fem.dim
+    count = fem.basis.N // fem.dim
+    out = np.zeros((count,) if nodal.ndim == 1 else (nodal.shape[1], count))
+    out[..., nodes] = nodal.T
+    return out
+
+
+def boundary_terms(fem: FEModel, elem: fe.Element, u_components: np.ndarray, state: ContactState) -> dict:
+    """The Neumann, contact, complementarity, penetration and friction terms per cell."""
+    contact, (lam, mu) = fem.contact, fem.lame
+    boundary = fe.FacetBasis(fem.mesh, elem, facets=fem.mesh.boundary_facets())
+    cell = boundary.tind
+    on_contact = np.isin(boundary.find, contact.facets)
+    # t_h = Σ τ_i ψ_i with M τ = F: its moments against the trace space are the discrete nodal forces
+    tau = splu(sp.csc_matrix(contact.mass)).solve(np.ascontiguousarray(state.forces))
+    target = np.where(on_contact[None, :, None],
+                      np.stack([boundary.interpolate(t).value for t in trace_field(fem, tau)]),
+                      applied_traction(fem, boundary))
+    n = boundary.normals.value
+    residual = np.einsum("abep,bep->aep", stress(gradient(boundary, u_components), lam[cell], mu[cell]), n) - target
+    residual = np.where(held_components(fem, boundary.find)[:, :, None], 0.0, residual)
+    h = boundary.mesh_parameters().value
+    weighted = (h * (residual**2).sum(axis=0) * boundary.dx).sum(axis=1) / (2.0 * mu[cell])
+    out = {name: np.zeros(fem.mesh.nelements) for name in TERMS[2:]}
+    np.add.at(out["neumann"], cell[~on_contact], weighted[~on_contact])
+    np.add.at(out["contact"], cell[on_contact], weighted[on_contact])
+
+    facets = fe.FacetBasis(fem.mesh, elem, facets=contact.facets)
+    cell, n, dx, h = facets.tind, facets.normals.value, facets.dx, facets.mesh_parameters().value
+    traction = np.stack([facets.interpolate(t).value for t in trace_field(fem, tau)])
+    pressure = -(traction * n).sum(axis=0)
+    if state.constrained:
+        opening = facets.interpolate(trace_field(fem, state.gap - state.normal_displacement)).value
+        np.add.at(out["complementarity"], cell,
+                  (np.maximum(pressure, 0.0) * np.maximum(opening, 0.0) * dx).sum(axis=1))
+        np.add.at(out["penetration"], cell, 2.0 * mu[cell] * (np.maximum(-opening, 0.0) ** 2 / h * dx).sum(axis=1))
+    if state.slip is not None:
+        tangential = traction + pressure * n
+        slip = np.stack([facets.interpolate(v).value for v in trace_field(fem, state.slip)])
+        slip = slip - (slip * n).sum(axis=0) * n
+        misdirected = np.linalg.norm(tangential, axis=0) * np.linalg.norm(slip, axis=0) + (tangential * slip).sum(axis=0)
+        np.add.at(out["friction"], cell, (misdirected * dx).sum(axis=1))
+    return out
+
+
+def estimate(fem: FEModel, u: np.ndarray, state: ContactState) -> ErrorEstimate:
+    """The residual estimate of the full (scaled) displacement ``u`` under the contact ``state``."""
+    elem = fem.basis.elem.elem  # the scalar element of the vector basis
+    u_components = components(fem, u)
+    parts = {"interior": interior(fem, elem, u_components) / (2.0 * fem.lame[1]),
+             "jump": jumps(fem, elem, u_components),
+             **boundary_terms(fem, elem, u_components, state)}
+    indicators = sum(parts[name] for name in TERMS)
+    return ErrorEstimate(indicators, {name: float(parts[name].sum()) for name in TERMS}, float(u @ (fem.K_full @ u)))
+
+
+def algebraic_error(fem: FEModel, u: np.ndarray, state: ContactState) -> float:
+    """An estimate of ‖u_h − u_h*‖_E, u_h* the exact discrete solution, from the discrete residuals (scaled).
+
+    With K(u − u*) = r − (contact forces' error), ‖u − u*‖²_E ≤ ‖r‖²_{K⁻¹} + Σ_i |F_N,i| |u_N,i − g_i| +
+    Σ_i (|F_T,i| |v_T,i| + F_T,i·v_T,i) (the nodal complementarity and friction-direction gaps, energies), up to
+    the multipliers' own error; ‖r‖²_{K⁻¹} is estimated by rᵀ diag(K)⁻¹ r (no solve): an estimate, not a bound.
+    """
+    contact = fem.contact
+    forces = np.zeros(fem.basis.N)
+    forces[contact.dofs.ravel()] = state.forces.ravel()
+    residual = (fem.K_full @ u - fem.f_full - forces)[fem.free]
+    diagonal = fem.K_full.diagonal()[fem.free]
+    normal_force = -(state.forces * contact.normals).sum(axis=1)
+    squared = residual @ (residual / diagonal) + np.abs(normal_force) @ np.abs(state.normal_displacement - state.gap)
+    if state.slip is not None:
+        tangential = state.forces + normal_force[:, None] * contact.normals
+        squared += (np.linalg.norm(tangential, axis=1) * np.linalg.norm(state.slip, axis=1)
+                    + (tangential * state.slip).sum(axis=1)).sum()
+    return float(np.sqrt(max(squared, 0.0)))
