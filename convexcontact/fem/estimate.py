@@ -120,7 +120,7 @@ def interior(fem: FEModel, elem: fe.Element, u_components: np.ndarray) -> np.nda
     body_force = np.asarray(fem.scene.body_force, dtype=float)
     if body_force.any():
         residual = residual + (body_force * fem.scaling.length / fem.scaling.pressure)[:, None, None]
-    h = cells.mesh_parameters().value
+    h = np.asarray(cells.mesh_parameters())
     return (h**2 * (residual**2).sum(axis=0) * cells.dx).sum(axis=1)
 
 
@@ -128,9 +128,9 @@ def jumps(fem: FEModel, elem: fe.Element, u_components: np.ndarray) -> np.ndarra
     """½ Σ h_E ‖[σ n]‖²_E per cell over its interior facets, each side weighted by its own 1/2μ."""
     sides = [fe.InteriorFacetBasis(fem.mesh, elem, side=side) for side in (0, 1)]
     lam, mu = fem.lame
-    traction = [np.einsum("abep,bep->aep", stress(gradient(b, u_components), lam[b.tind], mu[b.tind]), b.normals.value)
+    traction = [np.einsum("abep,bep->aep", stress(gradient(b, u_components), lam[b.tind], mu[b.tind]), np.asarray(b.normals))
                 for b in sides]
-    h = sides[0].mesh_parameters().value
+    h = np.asarray(sides[0].mesh_parameters())
     per_facet = (h * ((traction[0] - traction[1]) ** 2).sum(axis=0) * sides[0].dx).sum(axis=1)
     out = np.zeros(fem.mesh.nelements)
     for b in sides:
@@ -157,7 +157,7 @@ def applied_traction(fem: FEModel, boundary: fe.FacetBasis) -> np.ndarray:
     for load in fem.scene.tractions:
         rows = [position[f] for f in check_boundary(fem.mesh, load.boundary, "traction.boundary")]
         if load.pressure is not None:
-            out[:, rows] += -load.pressure / fem.scaling.pressure * boundary.normals.value[:, rows]
+            out[:, rows] += -load.pressure / fem.scaling.pressure * np.asarray(boundary.normals)[:, rows]
         else:
             vector = np.zeros(fem.dim)
             vector[:len(load.vector)] = load.vector
@@ -183,29 +183,29 @@ def boundary_terms(fem: FEModel, elem: fe.Element, u_components: np.ndarray, sta
     # t_h = Σ τ_i ψ_i with M τ = F: its moments against the trace space are the discrete nodal forces
     tau = splu(sp.csc_matrix(contact.mass)).solve(np.ascontiguousarray(state.forces))
     target = np.where(on_contact[None, :, None],
-                      np.stack([boundary.interpolate(t).value for t in trace_field(fem, tau)]),
+                      np.stack([np.asarray(boundary.interpolate(t)) for t in trace_field(fem, tau)]),
                       applied_traction(fem, boundary))
-    n = boundary.normals.value
+    n = np.asarray(boundary.normals)
     residual = np.einsum("abep,bep->aep", stress(gradient(boundary, u_components), lam[cell], mu[cell]), n) - target
     residual = np.where(held_components(fem, boundary.find)[:, :, None], 0.0, residual)
-    h = boundary.mesh_parameters().value
+    h = np.asarray(boundary.mesh_parameters())
     weighted = (h * (residual**2).sum(axis=0) * boundary.dx).sum(axis=1) / (2.0 * mu[cell])
     out = {name: np.zeros(fem.mesh.nelements) for name in TERMS[2:]}
     np.add.at(out["neumann"], cell[~on_contact], weighted[~on_contact])
     np.add.at(out["contact"], cell[on_contact], weighted[on_contact])
 
     facets = fe.FacetBasis(fem.mesh, elem, facets=contact.facets)
-    cell, n, dx, h = facets.tind, facets.normals.value, facets.dx, facets.mesh_parameters().value
-    traction = np.stack([facets.interpolate(t).value for t in trace_field(fem, tau)])
+    cell, n, dx, h = facets.tind, np.asarray(facets.normals), facets.dx, np.asarray(facets.mesh_parameters())
+    traction = np.stack([np.asarray(facets.interpolate(t)) for t in trace_field(fem, tau)])
     pressure = -(traction * n).sum(axis=0)
     if state.constrained:
-        opening = facets.interpolate(trace_field(fem, state.gap - state.normal_displacement)).value
+        opening = np.asarray(facets.interpolate(trace_field(fem, state.gap - state.normal_displacement)))
         np.add.at(out["complementarity"], cell,
                   (np.maximum(pressure, 0.0) * np.maximum(opening, 0.0) * dx).sum(axis=1))
         np.add.at(out["penetration"], cell, 2.0 * mu[cell] * (np.maximum(-opening, 0.0) ** 2 / h * dx).sum(axis=1))
     if state.slip is not None:
         tangential = traction + pressure * n
-        slip = np.stack([facets.interpolate(v).value for v in trace_field(fem, state.slip)])
+        slip = np.stack([np.asarray(facets.interpolate(v)) for v in trace_field(fem, state.slip)])
         slip = slip - (slip * n).sum(axis=0) * n
         misdirected = np.linalg.norm(tangential, axis=0) * np.linalg.norm(slip, axis=0) + (tangential * slip).sum(axis=0)
         np.add.at(out["friction"], cell, (misdirected * dx).sum(axis=1))

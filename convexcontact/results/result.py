@@ -156,9 +156,9 @@ class ContactResult:
         calibration = EFFECTIVITY[self.scene.body.element]
         discretization = estimated.eta / calibration / norm if norm > 0 else estimated.relative
         return {
-            "algebraic": algebraic / norm if norm > 0 else algebraic,
+            "algebraic": float(algebraic / norm if norm > 0 else algebraic),
             "discretization": float(discretization),
-            "eta": estimated.eta * np.sqrt(self.fem.scaling.energy),
+            "eta": float(estimated.eta * np.sqrt(self.fem.scaling.energy)),
             "energy_norm": float(norm * np.sqrt(self.fem.scaling.energy)),
             "calibration": calibration,
             "terms": {name: value / estimated.eta**2 if estimated.eta > 0 else 0.0
