@@ -40,6 +40,27 @@ def test_patch_exact_solution_estimates_zero(scene):
     assert result.error_budget["discretization"] < 1e-12
 
 
+def under_gravity(scene: cc.Scene) -> cc.Scene:
+    """``scene`` under its own weight instead of the pressure, ν = 0: σ along the weight grows linearly with depth,
+    u is quadratic (in the P2/Q2 space) and rests on the whole foundation."""
+    weight = (0.0,) * (scene.body.geometry.__class__ is Box) + (0.0, -0.1)
+    return dataclasses.replace(scene, tractions=(), body_force=weight, materials=cc.Material(1.0, 0.0))
+
+
+@pytest.mark.parametrize("scene", [under_gravity(pressure_patch(4, e)) for e in ("P2", "Q2")]
+                         + [under_gravity(box_patch("Q2"))], ids=lambda s: f"{s.name}-{s.body.element}")
+def test_quadratic_elements_under_gravity_estimate_zero(scene):
+    """The interior term f + div σ(u_h) (σ's divergence from the element's nodes) and the body force cancel."""
+    result = cc.solve(scene)
+    assert result.error_estimate.relative < 1e-12
+
+
+def test_linear_elements_under_gravity_do_not():
+    """P1 cannot hold the quadratic displacement: the estimate, its interior term included, is far from zero."""
+    estimated = cc.solve(under_gravity(pressure_patch(4, "P1"))).error_estimate
+    assert estimated.relative > 0.1 and estimated.terms["interior"] > 0.3 * estimated.eta**2
+
+
 def hertz_levels(element: str, levels: int, finer: int):
     """Hertz 2-D on the nx = 8 mesh refined uniformly 0..levels−1 times (nested), and a reference ``finer`` levels
     beyond; the true energy error of each level against the reference (coarse u_h prolonged exactly)."""

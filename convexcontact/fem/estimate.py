@@ -115,9 +115,11 @@ def stress_divergence(fem: FEModel, elem: fe.Element, cells: fe.CellBasis, u_com
 
 def interior(fem: FEModel, elem: fe.Element, u_components: np.ndarray) -> np.ndarray:
     """h_T² ‖f + div σ‖²_T per cell (f the body force)."""
+    body_force = np.asarray(fem.scene.body_force, dtype=float)
+    if elem.maxdeg == 1 and not body_force.any():  # P1 without body force: nothing to integrate
+        return np.zeros(fem.mesh.nelements)
     cells = fe.CellBasis(fem.mesh, elem)
     residual = stress_divergence(fem, elem, cells, u_components)
-    body_force = np.asarray(fem.scene.body_force, dtype=float)
     if body_force.any():
         residual = residual + (body_force * fem.scaling.length / fem.scaling.pressure)[:, None, None]
     h = np.asarray(cells.mesh_parameters())
