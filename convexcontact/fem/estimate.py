@@ -33,6 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 import skfem as fe
 from scipy.sparse.linalg import splu
+from skfem.assembly import Dofs
 
 from ..scene.model import Dirichlet
 from .assembly import FEModel
@@ -99,44 +100,73 @@ def stress(grad_u: np.ndarray, lam: np.ndarray, mu: np.ndarray) -> np.ndarray:
     return sigma
 
 
-def stress_divergence(fem: FEModel, elem: fe.Element, cells: fe.CellBasis, u_components: np.ndarray) -> np.ndarray:
+CHUNK = 50_000
+"""Cells or facets integrated at once: bounds the memory of the shape functions at the quadrature points (Q2
+hexahedra: 27 functions, value and gradient, at 9 points of each facet)."""
+
+ORDER = {"P1": 1, "Q1": 1, "P2": 2, "Q2": 2}
+"""Polynomial order per variable of each element: σ(u_h) has at most this degree per variable and its squares twice
+it, the quadrature order of every term (scikit-fem's default, from the total degree, would be up to 3× as costly)."""
+
+
+def chunks(indices: np.ndarray):
+    for start in range(0, indices.size, CHUNK):
+        yield indices[start:start + CHUNK]
+
+
+def scalar_space(fem: FEModel) -> dict:
+    """Keyword arguments of scikit-fem's bases for the scalar element of ``fem``: its DOFs (numbered once), the
+    quadrature order, no DOF locations."""
+    elem = fem.basis.elem.elem
+    return {"elem": elem, "dofs": Dofs(fem.mesh, elem), "disable_doflocs": True,
+            "intorder": 2 * ORDER[fem.scene.body.element]}
+
+
+def stress_divergence(fem: FEModel, space: dict, cells: fe.CellBasis, u_components: np.ndarray) -> np.ndarray:
     """div σ(u_h) at the quadrature points of ``cells`` (d, elements, points).
 
     scikit-fem's Lagrange elements give no second derivatives. On affine cells (and on the tensor meshes'
     rectangles) σ(u_h) lies in the element's broken space, so its values at the element's reference nodes
     interpolate it exactly and the shape functions' gradients give its divergence."""
+    elem = space["elem"]
     if elem.maxdeg == 1:  # P1: σ is constant per cell
         return np.zeros((fem.dim, *cells.dx.shape))
-    nodes = fe.CellBasis(fem.mesh, elem, quadrature=(elem.doflocs.T, np.ones(elem.doflocs.shape[0])))
-    sigma = stress(gradient(nodes, u_components), *fem.lame)  # (d, d, elements, local nodes)
+    nodes = fe.CellBasis(fem.mesh, elem, elements=cells.tind, dofs=space["dofs"], disable_doflocs=True,
+                         quadrature=(elem.doflocs.T, np.ones(elem.doflocs.shape[0])))
+    lam, mu = fem.lame
+    sigma = stress(gradient(nodes, u_components), lam[cells.tind], mu[cells.tind])  # (d, d, elements, nodes)
     shape_gradients = np.stack([cells.basis[j][0].grad for j in range(cells.Nbfun)])  # (nodes, d, elements, points)
     return np.einsum("akej,jkep->aep", sigma, shape_gradients)
 
 
-def interior(fem: FEModel, elem: fe.Element, u_components: np.ndarray) -> np.ndarray:
-    """h_T² ‖f + div σ‖²_T per cell (f the body force)."""
-    body_force = np.asarray(fem.scene.body_force, dtype=float)
-    if elem.maxdeg == 1 and not body_force.any():  # P1 without body force: nothing to integrate
-        return np.zeros(fem.mesh.nelements)
-    cells = fe.CellBasis(fem.mesh, elem)
-    residual = stress_divergence(fem, elem, cells, u_components)
-    if body_force.any():
-        residual = residual + (body_force * fem.scaling.length / fem.scaling.pressure)[:, None, None]
-    h = np.asarray(cells.mesh_parameters())
-    return (h**2 * (residual**2).sum(axis=0) * cells.dx).sum(axis=1)
-
-
-def jumps(fem: FEModel, elem: fe.Element, u_components: np.ndarray) -> np.ndarray:
-    """½ Σ h_E ‖[σ n]‖²_E per cell over its interior facets, each side weighted by its own 1/2μ."""
-    sides = [fe.InteriorFacetBasis(fem.mesh, elem, side=side) for side in (0, 1)]
-    lam, mu = fem.lame
-    traction = [np.einsum("abep,bep->aep", stress(gradient(b, u_components), lam[b.tind], mu[b.tind]), np.asarray(b.normals))
-                for b in sides]
-    h = np.asarray(sides[0].mesh_parameters())
-    per_facet = (h * ((traction[0] - traction[1]) ** 2).sum(axis=0) * sides[0].dx).sum(axis=1)
+def interior(fem: FEModel, space: dict, u_components: np.ndarray) -> np.ndarray:
+    """h_T² ‖f + div σ‖²_T / 2μ_T per cell (f the body force)."""
     out = np.zeros(fem.mesh.nelements)
-    for b in sides:
-        np.add.at(out, b.tind, 0.5 * per_facet / (2.0 * mu[b.tind]))
+    body_force = np.asarray(fem.scene.body_force, dtype=float) * fem.scaling.length / fem.scaling.pressure
+    if space["elem"].maxdeg == 1 and not body_force.any():  # P1 without body force: nothing to integrate
+        return out
+    for chunk in chunks(np.arange(fem.mesh.nelements)):
+        cells = fe.CellBasis(fem.mesh, elements=chunk, **space)
+        residual = stress_divergence(fem, space, cells, u_components)
+        if body_force.any():
+            residual = residual + body_force[:, None, None]
+        h = np.asarray(cells.mesh_parameters())
+        out[chunk] = (h**2 * (residual**2).sum(axis=0) * cells.dx).sum(axis=1) / (2.0 * fem.lame[1][chunk])
+    return out
+
+
+def jumps(fem: FEModel, space: dict, u_components: np.ndarray) -> np.ndarray:
+    """½ Σ h_E ‖[σ n]‖²_E per cell over its interior facets, each side weighted by its own 1/2μ."""
+    lam, mu = fem.lame
+    out = np.zeros(fem.mesh.nelements)
+    for chunk in chunks(np.flatnonzero(fem.mesh.f2t[1] != -1)):
+        sides = [fe.InteriorFacetBasis(fem.mesh, facets=chunk, side=side, **space) for side in (0, 1)]
+        traction = [np.einsum("abep,bep->aep", stress(gradient(b, u_components), lam[b.tind], mu[b.tind]),
+                              np.asarray(b.normals)) for b in sides]
+        h = np.asarray(sides[0].mesh_parameters())
+        per_facet = (h * ((traction[0] - traction[1]) ** 2).sum(axis=0) * sides[0].dx).sum(axis=1)
+        for b in sides:
+            np.add.at(out, b.tind, 0.5 * per_facet / (2.0 * mu[b.tind]))
     return out
 
 
@@ -176,10 +206,10 @@ def trace_field(fem: FEModel, nodal: np.ndarray) -> np.ndarray:
     return out
 
 
-def boundary_terms(fem: FEModel, elem: fe.Element, u_components: np.ndarray, state: ContactState) -> dict:
+def boundary_terms(fem: FEModel, space: dict, u_components: np.ndarray, state: ContactState) -> dict:
     """The Neumann, contact, complementarity, penetration and friction terms per cell."""
     contact, (lam, mu) = fem.contact, fem.lame
-    boundary = fe.FacetBasis(fem.mesh, elem, facets=fem.mesh.boundary_facets())
+    boundary = fe.FacetBasis(fem.mesh, facets=fem.mesh.boundary_facets(), **space)
     cell = boundary.tind
     on_contact = np.isin(boundary.find, contact.facets)
     # t_h = Σ τ_i ψ_i with M τ = F: its moments against the trace space are the discrete nodal forces
@@ -196,7 +226,7 @@ def boundary_terms(fem: FEModel, elem: fe.Element, u_components: np.ndarray, sta
     np.add.at(out["neumann"], cell[~on_contact], weighted[~on_contact])
     np.add.at(out["contact"], cell[on_contact], weighted[on_contact])
 
-    facets = fe.FacetBasis(fem.mesh, elem, facets=contact.facets)
+    facets = fe.FacetBasis(fem.mesh, facets=contact.facets, **space)
     cell, n, dx, h = facets.tind, np.asarray(facets.normals), facets.dx, np.asarray(facets.mesh_parameters())
     traction = np.stack([np.asarray(facets.interpolate(t)) for t in trace_field(fem, tau)])
     pressure = -(traction * n).sum(axis=0)
@@ -216,11 +246,10 @@ def boundary_terms(fem: FEModel, elem: fe.Element, u_components: np.ndarray, sta
 
 def estimate(fem: FEModel, u: np.ndarray, state: ContactState) -> ErrorEstimate:
     """The residual estimate of the full (scaled) displacement ``u`` under the contact ``state``."""
-    elem = fem.basis.elem.elem  # the scalar element of the vector basis
+    space = scalar_space(fem)
     u_components = components(fem, u)
-    parts = {"interior": interior(fem, elem, u_components) / (2.0 * fem.lame[1]),
-             "jump": jumps(fem, elem, u_components),
-             **boundary_terms(fem, elem, u_components, state)}
+    parts = {"interior": interior(fem, space, u_components), "jump": jumps(fem, space, u_components),
+             **boundary_terms(fem, space, u_components, state)}
     indicators = sum(parts[name] for name in TERMS)
     return ErrorEstimate(indicators, {name: float(parts[name].sum()) for name in TERMS}, float(u @ (fem.K_full @ u)))
 
