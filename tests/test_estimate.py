@@ -185,3 +185,12 @@ def test_estimate_is_zero_for_a_zero_load():
     result = cc.solve(scene)
     assert estimate(result.fem, result.displacement, contact_state(result)).eta == 0.0
     assert result.error_budget["discretization"] == 0.0
+
+
+@pytest.mark.parametrize("non_penetration", ["nodal", "weak", "gauss"])
+def test_certified_answers_have_a_negligible_algebraic_error(non_penetration):
+    """A certified answer is the discrete solution to round-off, whatever the constraint rows (λᵀC(u_N − g) for
+    the weak rows, not node by node; Gauss points leave their complementarity to the certificate)."""
+    result = cc.solve(hertz_punch(nx=16, law=cc.Signorini(non_penetration=non_penetration)))
+    assert result.certificate.passes(1e-6)
+    assert result.error_budget["algebraic"] < 1e-5 < result.error_budget["discretization"]

@@ -78,6 +78,8 @@ class ContactState:
     gap: np.ndarray
     slip: np.ndarray | None = None
     constrained: bool = True  # non-penetration (False: normal compliance, no complementarity)
+    gap_at_nodes: bool = True  # the discrete constraint rows weigh the nodal gap (nodal, weak); False at Gauss points
+    nodal_friction: bool = True  # the discrete friction law holds node by node (lumped, not weak or Gauss)
 
 
 def components(fem: FEModel, u: np.ndarray) -> np.ndarray:
@@ -257,18 +259,21 @@ def estimate(fem: FEModel, u: np.ndarray, state: ContactState) -> ErrorEstimate:
 def algebraic_error(fem: FEModel, u: np.ndarray, state: ContactState) -> float:
     """An estimate of ‖u_h − u_h*‖_E, u_h* the exact discrete solution, from the discrete residuals (scaled).
 
-    With K(u − u*) = r − (contact forces' error), ‖u − u*‖²_E ≤ ‖r‖²_{K⁻¹} + Σ_i |F_N,i| |u_N,i − g_i| +
-    Σ_i (|F_T,i| |v_T,i| + F_T,i·v_T,i) (the nodal complementarity and friction-direction gaps, energies), up to
-    the multipliers' own error; ‖r‖²_{K⁻¹} is estimated by rᵀ diag(K)⁻¹ r (no solve): an estimate, not a bound.
+    With K(u − u*) = r − Bᵀ(λ − λ*), ‖u − u*‖²_E ≤ ‖r‖²_{K⁻¹} + λᵀC(g − u_N) + λ*ᵀC(u_N − g)_+ (λ* ≥ 0,
+    λ*ᵀC(u_N* − g) = 0). λᵀC(u_N − g) = F_N·(u_N − g) for rows that weigh the nodal gap (nodal, weak); the friction law
+    held node by node adds Σ_i |F_T,i| |v_T,i| + F_T,i·v_T,i. ‖r‖²_{K⁻¹} is estimated by rᵀ diag(K)⁻¹ r (no solve) and
+    the penetration term is left to the certificate: an estimate, not a bound. Gauss-point rows (their gap lives at
+    the points) and weak or Gauss friction contribute their equilibrium residual only.
     """
     contact = fem.contact
     forces = np.zeros(fem.basis.N)
     forces[contact.dofs.ravel()] = state.forces.ravel()
     residual = (fem.K_full @ u - fem.f_full - forces)[fem.free]
-    diagonal = fem.K_full.diagonal()[fem.free]
+    squared = residual @ (residual / fem.K_full.diagonal()[fem.free])
     normal_force = -(state.forces * contact.normals).sum(axis=1)
-    squared = residual @ (residual / diagonal) + np.abs(normal_force) @ np.abs(state.normal_displacement - state.gap)
-    if state.slip is not None:
+    if state.constrained and state.gap_at_nodes:
+        squared += abs(normal_force @ (state.normal_displacement - state.gap))
+    if state.slip is not None and state.nodal_friction:
         tangential = state.forces + normal_force[:, None] * contact.normals
         squared += (np.linalg.norm(tangential, axis=1) * np.linalg.norm(state.slip, axis=1)
                     + (tangential * state.slip).sum(axis=1)).sum()

@@ -263,8 +263,12 @@ def contact_state(result: ContactResult) -> ContactState:
         along = c.slip[:, None] if c.slip.ndim == 1 else c.slip
         frame = [c.tangents] if c.bitangents is None else [c.tangents, c.bitangents]
         slip = sum(along[:, [j]] * t for j, t in enumerate(frame)) / scaling.displacement
+    law = result.scene.contact.law
+    non_penetration = getattr(law, "non_penetration", "nodal")
     return ContactState(c.forces / scaling.force, c.normal_displacement / scaling.displacement,
-                        c.gap / scaling.displacement, slip, compliance_of(result.scene.contact.law) is None)
+                        c.gap / scaling.displacement, slip, constrained=compliance_of(law) is None,
+                        gap_at_nodes=non_penetration != "gauss",
+                        nodal_friction=non_penetration == "nodal" and getattr(law, "quadrature", "nodal") == "nodal")
 
 
 def contact_nodes(
