@@ -11,7 +11,7 @@ import pytest
 import skfem as fe
 
 import convexcontact as cc
-from convexcontact.fem.estimate import TERMS, algebraic_error, estimate
+from convexcontact.fem.estimate import TERMS, algebraic_error, dorfler, estimate
 from convexcontact.fem.mesh import build_mesh
 from convexcontact.results.result import EFFECTIVITY, LARGE_ERROR, contact_state
 from convexcontact.scene.library import hertz_punch, pressure_patch
@@ -194,3 +194,15 @@ def test_certified_answers_have_a_negligible_algebraic_error(non_penetration):
     result = cc.solve(hertz_punch(nx=16, law=cc.Signorini(non_penetration=non_penetration)))
     assert result.certificate.passes(1e-6)
     assert result.error_budget["algebraic"] < 1e-5 < result.error_budget["discretization"]
+
+
+def test_dorfler_marks_the_fewest_cells_carrying_the_fraction():
+    """On the Hertz indicators: the marked cells carry ≥ half of η², dropping the smallest of them does not, and
+    every marked indicator is at least every unmarked one."""
+    indicators = cc.solve(hertz_punch(nx=16)).error_estimate.indicators
+    marked = dorfler(indicators, 0.5)
+    assert indicators[marked].sum() >= 0.5 * indicators.sum()
+    assert indicators[marked].sum() - indicators[marked].min() < 0.5 * indicators.sum()
+    assert indicators[marked].min() >= np.delete(indicators, marked).max()
+    with pytest.raises(ValueError, match="^fraction: "):
+        dorfler(indicators, 1.5)

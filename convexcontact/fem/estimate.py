@@ -278,3 +278,13 @@ def algebraic_error(fem: FEModel, u: np.ndarray, state: ContactState) -> float:
         squared += (np.linalg.norm(tangential, axis=1) * np.linalg.norm(state.slip, axis=1)
                     + (tangential * state.slip).sum(axis=1)).sum()
     return float(np.sqrt(max(squared, 0.0)))
+
+
+def dorfler(indicators: np.ndarray, fraction: float = 0.5) -> np.ndarray:
+    """The fewest cells whose indicators η_T² sum to at least ``fraction`` of η² (Dörfler marking), largest first:
+    the cells an adaptive step refines."""
+    if not 0 < fraction <= 1:
+        raise ValueError(f"fraction: must lie in (0, 1], got {fraction}; 0.5 is usual")
+    order = np.argsort(indicators)[::-1]
+    reached = np.cumsum(indicators[order]) >= fraction * indicators.sum()
+    return np.sort(order[:np.argmax(reached) + 1])
