@@ -11,6 +11,7 @@ import pytest
 import skfem as fe
 
 import convexcontact as cc
+from convexcontact.drivers.adapt import adapt, refine
 from convexcontact.fem.estimate import TERMS, algebraic_error, dorfler, estimate
 from convexcontact.fem.mesh import build_mesh
 from convexcontact.results.result import EFFECTIVITY, LARGE_ERROR, contact_state
@@ -206,3 +207,53 @@ def test_dorfler_marks_the_fewest_cells_carrying_the_fraction():
     assert indicators[marked].min() >= np.delete(indicators, marked).max()
     with pytest.raises(ValueError, match="^fraction: "):
         dorfler(indicators, 1.5)
+
+
+def flat_punch(nx: int = 8) -> cc.Scene:
+    scene = hertz_punch(nx=nx)
+    return dataclasses.replace(scene, contact=cc.Contact("top", cc.Obstacle("flat_punch", radius=0.5, depth=0.01)))
+
+
+def test_local_refinement_keeps_every_named_boundary_whole():
+    """One Dörfler step on the Hertz block: each named side has the same length as before, every new boundary facet
+    carries exactly the names of the side it lies on, and the mesh got finer only where it was marked."""
+    result = cc.solve(hertz_punch(nx=8))
+    coarse = build_mesh(result.scene.body)
+    fine = refine(coarse, result.error_estimate.indicators, 0.5)
+
+    def lengths(mesh):
+        return {name: np.linalg.norm(np.diff(mesh.p[:, mesh.facets[:, f]], axis=1), axis=0).sum()
+                for name, f in mesh.boundaries.items()}
+
+    assert lengths(fine).keys() == lengths(coarse).keys()
+    np.testing.assert_allclose(list(lengths(fine).values()), list(lengths(coarse).values()), rtol=1e-12)
+    named = np.concatenate(list(fine.boundaries.values()))
+    assert np.array_equal(np.sort(named), np.sort(fine.boundary_facets()))
+    assert coarse.nelements < fine.nelements < 4 * coarse.nelements
+
+
+def test_adaptive_refinement_reaches_the_target_with_fewer_dofs_on_the_flat_punch():
+    """The punch's singular edges: uniform refinement needs 4160 DOFs for an estimated 20 %, the adaptive loop
+    (measured: 1196) fewer than half of that; each level is certified and reported to progress."""
+    seen = []
+    levels = adapt(flat_punch(), target=0.2, max_dofs=20_000, progress=lambda level, result: seen.append(level))
+    assert seen == list(range(len(levels))) and all(r.status == "solved" for r in levels)
+    assert levels[-1].error_budget["discretization"] <= 0.2 < levels[-2].error_budget["discretization"]
+    uniform = cc.solve(dataclasses.replace(flat_punch(), body=cc.Body(build_mesh(flat_punch().body).refined(3))))
+    assert uniform.ndof == 4160 and uniform.error_budget["discretization"] < 0.2 + 0.01
+    assert 2 * levels[-1].ndof < uniform.ndof
+
+
+def test_quadrilaterals_refine_uniformly_and_say_so():
+    """Q1 meshes have no local refinement: each level has four times the cells, and the results say why."""
+    levels = adapt(hertz_punch(nx=4, element="Q1"), target=0.01, max_dofs=300)
+    assert [r.fem.mesh.nelements for r in levels] == [8, 32]
+    assert all("uniform" in r.extra["refinement"] for r in levels)
+
+
+@pytest.mark.parametrize("option, value", [("target", 0.0), ("target", 1.5), ("target", float("nan")),
+                                           ("target", "1%"), ("max_dofs", 0), ("max_dofs", 2.5),
+                                           ("fraction", 0.0), ("fraction", 2.0)])
+def test_adapt_refuses_bad_options_naming_them(option, value):
+    with pytest.raises(ValueError, match=f"^{option}: "):
+        adapt(pressure_patch(2), **{option: value})

@@ -1,0 +1,130 @@
+"""Adaptive refinement: solve → estimate → mark (Dörfler) → refine → solve again (docs/estimate.md).
+
+Triangles and tetrahedra (P1, P2) are refined where the residual indicators say
+(:func:`~convexcontact.fem.estimate.dorfler`, scikit-fem's local refinement); quadrilateral and hexahedral
+scenes refine uniformly, and say so. Each level is an ordinary certified solve of the scene on the new mesh.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+
+import numpy as np
+import skfem as fe
+from scipy.spatial import cKDTree
+
+from ..fem.estimate import dorfler
+from ..fem.mesh import build_mesh
+from ..results.result import ContactResult
+from ..scene.bodies import Bodies
+from ..scene.model import Body, Material, Scene, SceneError, of_type
+from .solve import solve
+
+LOCAL = (fe.MeshTri1, fe.MeshTet1)
+"""The meshes scikit-fem refines locally (others refine uniformly)."""
+
+CANDIDATES = 8
+"""Old boundary facets (nearest by midpoint) tested as the parent of a new one."""
+
+
+def check_adapt_options(target, max_dofs, fraction) -> tuple[float, int, float]:
+    """The options of :func:`adapt`, refused where they enter."""
+    if isinstance(target, bool) or not isinstance(target, (int, float)) or not (0 < target < 1):
+        raise ValueError(f"target: a relative energy error in (0, 1), got {target!r}; e.g. 1e-2 for 1 %")
+    if isinstance(max_dofs, bool) or not isinstance(max_dofs, (int, np.integer)) or max_dofs <= 0:
+        raise ValueError(f"max_dofs: a positive number of DOFs, got {max_dofs!r}; e.g. 200000")
+    if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not (0 < fraction <= 1):
+        raise ValueError(f"fraction: the share of η² to refine, in (0, 1], got {fraction!r}; 0.5 is usual")
+    return float(target), int(max_dofs), float(fraction)
+
+
+def dofs_of(mesh: fe.Mesh, element: str) -> int:
+    """The DOF count of ``element`` on ``mesh`` (before Dirichlet elimination), without building a basis."""
+    nodes = mesh.nvertices
+    if element in ("P2", "Q2"):
+        nodes += (mesh.nfacets if mesh.dim() == 2 else mesh.nedges)
+        if element == "Q2":
+            nodes += mesh.nelements + (mesh.nfacets if mesh.dim() == 3 else 0)
+    return mesh.dim() * nodes
+
+
+def parent_facets(new: fe.Mesh, old: fe.Mesh, facets: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """For each of ``new``'s boundary ``facets``, the one of ``old``'s ``candidates`` (boundary facets) it lies in."""
+    midpoints = new.p[:, new.facets[:, facets]].mean(axis=1).T
+    old_points = old.p[:, old.facets[:, candidates]]  # (d, vertices, candidates)
+    tree = cKDTree(old_points.mean(axis=1).T)
+    _, nearest = tree.query(midpoints, k=min(CANDIDATES, candidates.size))
+    nearest = nearest.reshape(len(facets), -1)
+    parent = np.full(len(facets), -1)
+    for column in nearest.T:
+        corners = old_points[:, :, column].transpose(2, 1, 0)  # (facets, vertices, d)
+        edges = corners[:, 1:] - corners[:, :1]  # (facets, d − 1, d)
+        offset = midpoints - corners[:, 0]
+        gram = np.einsum("fik,fjk->fij", edges, edges)
+        local = np.linalg.solve(gram, np.einsum("fik,fk->fi", edges, offset)[..., None])[..., 0]
+        distance = np.linalg.norm(offset - np.einsum("fi,fik->fk", local, edges), axis=1)
+        size = np.sqrt(np.abs(np.linalg.det(gram))) ** (1 / max(edges.shape[1], 1))
+        inside = (distance <= 1e-9 * size) & (local >= -1e-9).all(axis=1) & (local.sum(axis=1) <= 1 + 1e-9)
+        found = inside & (parent < 0)
+        parent[found] = candidates[column[found]]
+    if (parent < 0).any():
+        raise RuntimeError(f"{(parent < 0).sum()} boundary facets of the refined mesh lie on no boundary facet of "
+                           "the coarse one")
+    return parent
+
+
+def inherit_boundaries(new: fe.Mesh, old: fe.Mesh) -> fe.Mesh:
+    """``new`` (a refinement of ``old``) with ``old``'s named boundaries: each new boundary facet gets the names of
+    the coarse facet it lies in (scikit-fem's local refinement drops the names)."""
+    facets = new.boundary_facets()
+    parent = parent_facets(new, old, facets, old.boundary_facets())
+    names = {}
+    for name, old_facets in (old.boundaries or {}).items():
+        member = np.zeros(old.nfacets, dtype=bool)
+        member[old_facets] = True
+        names[name] = facets[member[parent]]
+    # scikit-fem's refinement leaves transposed (Fortran-ordered) arrays, which every later mesh copies with a warning
+    return dataclasses.replace(new, doflocs=np.ascontiguousarray(new.doflocs), t=np.ascontiguousarray(new.t),
+                               _boundaries=names)
+
+
+def refine(mesh: fe.Mesh, indicators: np.ndarray, fraction: float) -> fe.Mesh:
+    """The next mesh: the Dörfler cells refined locally on triangles and tetrahedra, every cell otherwise."""
+    if isinstance(mesh, LOCAL):
+        return inherit_boundaries(mesh.refined(dorfler(indicators, fraction)), mesh)
+    return mesh.refined()
+
+
+def adapt(scene: Scene, target: float = 1e-2, max_dofs: int = 200_000, fraction: float = 0.5,
+          solver: str = "auto", progress: Callable | None = None, **options) -> list[ContactResult]:
+    """Solve ``scene`` on meshes refined where the error indicators are largest, until the estimated relative
+    discretization error (``result.error_budget["discretization"]``) is at most ``target`` or the next mesh would
+    exceed ``max_dofs``. Returns every level's certified result; ``progress(level, result)`` after each."""
+    of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
+    target, max_dofs, fraction = check_adapt_options(target, max_dofs, fraction)
+    if isinstance(scene.body, Bodies):
+        raise SceneError("body", "adaptive refinement is for one body (the estimator does not cover pairs)",
+                         "solve the bodies on a finer mesh with cc.solve")
+    if not isinstance(scene.materials, Material):
+        raise SceneError("materials", "materials per subdomain are not carried through local refinement",
+                         "give one material, or refine the mesh file yourself")
+    mesh = build_mesh(scene.body)
+    how = ("local (Dörfler)" if isinstance(mesh, LOCAL) else
+           "uniform: quadrilaterals and hexahedra are not refined locally")
+    levels: list[ContactResult] = []
+    while True:
+        body = Body(mesh, scene.body.element, scene.body.plane)
+        result = solve(dataclasses.replace(scene, body=body), solver, **options)
+        result.extra["refinement"] = how
+        levels.append(result)
+        if progress is not None:
+            progress(len(levels) - 1, result)
+        budget = result.error_budget
+        if budget is None or not math.isfinite(budget["discretization"]) or budget["discretization"] <= target:
+            return levels
+        refined = refine(mesh, result.error_estimate.indicators, fraction)
+        if dofs_of(refined, scene.body.element) > max_dofs:
+            return levels
+        mesh = refined
