@@ -54,8 +54,9 @@ def table(result) -> str:
         ]
         if s["error_budget"] is not None:
             budget = s["error_budget"]
-            errors = (f'algebraic {budget["algebraic"]:.1e}, discretization ≈ {budget["discretization"]:.1e} '
-                      "(estimated, docs/estimate.md)")
+            algebraic, discretization = ("— (zero answer)" if budget[name] is None else f"{budget[name]:.1e}"
+                                         for name in ("algebraic", "discretization"))
+            errors = f"algebraic {algebraic}, discretization ≈ {discretization} (estimated, docs/estimate.md)"
             rows.append(("error / ‖u‖_E", errors))
     if s["message"]:
         rows.append(("message", s["message"]))

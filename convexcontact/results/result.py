@@ -147,17 +147,21 @@ class ContactResult:
     @cached_property
     def error_budget(self) -> dict | None:
         """The algebraic and the estimated discretization error side by side, relative to ‖u_h‖_E (docs/estimate.md);
-        None where :attr:`error_estimate` is."""
+        None where :attr:`error_estimate` is. Relative errors of a zero answer are 0 when the error is, else None
+        (no scale to measure them against)."""
         estimated = self.error_estimate
         if estimated is None:
             return None
         norm = np.sqrt(estimated.energy)
         algebraic = algebraic_error(self.fem, self.displacement / self.fem.scaling.displacement, contact_state(self))
         calibration = EFFECTIVITY[self.scene.body.element]
-        discretization = estimated.eta / calibration / norm if norm > 0 else estimated.relative
+
+        def relative(error: float) -> float | None:
+            return float(error / norm) if norm > 0 else 0.0 if error == 0 else None
+
         return {
-            "algebraic": float(algebraic / norm if norm > 0 else algebraic),
-            "discretization": float(discretization),
+            "algebraic": relative(algebraic),
+            "discretization": relative(estimated.eta / calibration),
             "eta": float(estimated.eta * np.sqrt(self.fem.scaling.energy)),
             "energy_norm": float(norm * np.sqrt(self.fem.scaling.energy)),
             "calibration": calibration,
@@ -169,10 +173,10 @@ class ContactResult:
     def warnings(self) -> list[str]:
         """The model's warnings, and one naming a remedy when the estimated discretization error is large."""
         budget = self.error_budget
-        if budget is None or budget["discretization"] <= LARGE_ERROR:
+        if budget is None or budget["discretization"] is None or budget["discretization"] <= LARGE_ERROR:
             return list(self.fem.warnings)
         element = self.scene.body.element
-        remedy = ("refine the mesh, or use P2/Q2 elements if ν is near 0.5 (P1/Q1 lock)" if element in ("P1", "Q1")
+        remedy = ("refine the mesh, or use P2/Q2 elements if ν is near 0.5 (volumetric locking of P1/Q1)" if element in ("P1", "Q1")
                   else "refine the mesh (for ν near 0.5 the residual estimate overstates the error: docs/estimate.md)")
         large = f"estimated discretization error {budget['discretization']:.0%} of the energy norm (over {LARGE_ERROR:.0%})"
         return [*self.fem.warnings, f"{large}: {remedy}"]
