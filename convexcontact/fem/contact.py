@@ -8,7 +8,7 @@ import numpy as np
 import scipy.sparse as sp
 import skfem as fe
 
-from ..scene.model import COVERED, Contact, SceneError
+from ..scene.model import COVERED, Contact, SceneError, check_order
 from .mesh import check_boundary
 from .scaling import Scaling
 
@@ -288,6 +288,8 @@ def contact_trace(
     normals = normals if obstacle_normals is None else obstacle_normals
     points = None
     if getattr(contact.law, "non_penetration", None) == "gauss":
+        if contact.law.order is not None:  # before the rule is built: its size grows with the order
+            check_order(contact.law.order, basis.elem.elem.maxdeg, f"a {dim}-D {type(basis.elem.elem).__name__.removeprefix('Element')} body")
         G, weights_q, coords_q = gauss_interpolation(mesh, basis, facets, dofs, contact.law.order)
         gap_q, _ = obstacle_gap(obstacle, coords_q * scaling.length, coords_q @ mean_tangent * scaling.length,
                                 mean_normal, mean_tangent)

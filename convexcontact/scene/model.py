@@ -216,6 +216,30 @@ COVERED = 1e-12
 the half-width of Γ_C: the gap there is R, along a vertical tangent)."""
 
 
+MOTION = ("depth", "force", "tangential_force", "normal")
+SHAPE_FIELDS = {"flat": ("gap", *MOTION), "expression": ("expression", *MOTION),
+                **dict.fromkeys(("parabolic", "cylinder", "sphere", "flat_punch"), ("radius", "center", *MOTION))}
+"""The fields each obstacle shape reads (besides ``shape``); another one given is refused, not ignored."""
+
+
+def check_shape_fields(shape: str, given) -> None:
+    """Refuse the obstacle fields in ``given`` that a ``shape`` does not read (a gap given to a punch was
+    ignored): the one check of the Python API and of the TOML reader, which passes the keys of [obstacle]."""
+    if shape not in Obstacle.SHAPES:
+        raise SceneError("obstacle.shape", f"unknown shape {shape!r}", f"use one of {Obstacle.SHAPES}")
+    for name in given:
+        if name != "shape" and name not in SHAPE_FIELDS[shape]:
+            takers = [other for other, names in SHAPE_FIELDS.items() if name in names]
+            raise SceneError(f"obstacle.{name}", f"a {shape} obstacle has no {name} (shape = {shape!r} reads "
+                             f"{', '.join(SHAPE_FIELDS[shape])})",
+                             f"drop {name}, or use a shape that reads it: {', '.join(takers)}")
+
+
+def _same(value, default) -> bool:
+    """Whether a field holds its default (a point given as a tuple or an array is never the default 0)."""
+    return np.ndim(value) == 0 and np.ndim(default) == 0 and (value is default or value == default)
+
+
 @dataclass(frozen=True)
 class Obstacle:
     """Rigid obstacle, described by the initial gap g along the outward normal of Γ_C.
@@ -262,8 +286,9 @@ class Obstacle:
     """The shapes whose closest point is known (``normal = "obstacle"``)."""
 
     def __post_init__(self):
-        if self.shape not in self.SHAPES:
-            raise SceneError("obstacle.shape", f"unknown shape {self.shape!r}", f"use one of {self.SHAPES}")
+        defaults = {name: spec.default for name, spec in self.__dataclass_fields__.items()}
+        check_shape_fields(self.shape, [name for name in ("gap", "radius", "center", "expression")
+                                        if not _same(getattr(self, name), defaults[name])])
         for name in ("gap", "radius", "depth", "force", "tangential_force"):
             value = getattr(self, name)
             if value is not None:
@@ -272,12 +297,18 @@ class Obstacle:
             finite_vector(self.center, "obstacle.center", 3)
         object.__setattr__(self, "center", center)
         if self.shape in ("parabolic", "cylinder", "sphere", "flat_punch") and (self.radius is None or self.radius <= 0):
-            raise SceneError("obstacle.radius", "a punch needs a positive radius")
+            raise SceneError("obstacle.radius", f"a {self.shape} obstacle needs a positive radius, got {self.radius}",
+                             "give radius = R > 0 (a length)")
         if self.normal not in self.NORMALS:
             raise SceneError("obstacle.normal", f"got {self.normal!r}", f"use one of {self.NORMALS}")
         if self.normal == "obstacle" and self.shape not in self.CLOSEST_POINT:
             raise SceneError("obstacle.normal", f"the {self.shape} obstacle has no closest point to measure along",
                              f"use normal = 'body', or a shape among {self.CLOSEST_POINT}")
+        if self.normal == "obstacle" and self.shape in ("cylinder", "sphere") and (self.depth or 0.0) >= self.radius:
+            raise SceneError("obstacle.depth", f"{self.depth} ≥ the radius {self.radius}: the {self.shape}'s centre "
+                             "lies on or behind the contact boundary's mean plane, so its normal is undefined at the "
+                             "point on the axis (obstacle.center) and points away from the body at every other node",
+                             "give a depth below the radius, or normal = 'body' (the gap along Γ_C's own normal)")
         if self.shape == "expression":
             if self.expression is None:
                 raise SceneError("obstacle.expression", "missing", "give a formula in x and y, e.g. 'x**2/2 - 0.01'")
@@ -327,7 +358,9 @@ class Obstacle:
                 "use a larger radius, normal = 'obstacle' (the distance to the obstacle, defined everywhere), "
                 "the parabolic shape, or a smaller contact boundary",
             )
-        return self.radius - np.sqrt(np.maximum(self.radius**2 - r**2, 0.0))
+        # R − sqrt(R² − r²) written without its cancellation (R ≫ r lost every digit) or R² (overflow)
+        ratio = r / self.radius
+        return r * ratio / (1.0 + np.sqrt(np.maximum(1.0 - ratio**2, 0.0)))
 
     def closest_point(self, offset: np.ndarray, mean_normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(gap, unit normals) along the obstacle's normal (``normal = "obstacle"``), in user units, the
@@ -341,9 +374,12 @@ class Obstacle:
         depth = self.depth or 0.0
         if self.shape in ("flat", "flat_punch"):
             return self.shape_gap(offset, np.zeros(len(offset))) - depth, np.tile(mean_normal, (len(offset), 1))
-        to_centre = (self.radius - depth) * mean_normal - offset
-        distance = np.linalg.norm(to_centre, axis=1)
-        return distance - self.radius, to_centre / distance[:, None]
+        # the offsets lie in the mean plane: ‖c_i‖ = hypot(R − d, ‖o_i‖), and ‖c_i‖ − R = (‖o_i‖² − d(2R − d)) /
+        # (‖c_i‖ + R) in factors that neither cancel (R ≫ ‖o_i‖) nor overflow (R², ‖o_i‖²); R > d (__post_init__)
+        height, across = self.radius - depth, np.linalg.norm(offset, axis=1)
+        distance = np.hypot(height, across)
+        gap = across * (across / (distance + self.radius)) - depth * ((self.radius + height) / (distance + self.radius))
+        return gap, (height * mean_normal - offset) / distance[:, None]
 
 
 @dataclass(frozen=True)
@@ -364,6 +400,30 @@ class Signorini:
         _check_points(self, ("nodal", "weak", "gauss"))
 
 
+ORDER_PER_DEGREE = 4
+"""The highest Gauss rule on Γ_C that means something is of order 4 × the element's degree (scikit-fem's
+``maxdeg``; its default rule is 2 ×): it integrates exactly a penalty energy (u_N − g)₊^(p+1), p ≤ 3, of a gap
+in the element's space. More points only sample a curved gap between nodes, which a finer mesh does properly
+(order 10⁶ asked for 1.8 TiB)."""
+
+ELEMENT_DEGREES = {"P1": (1, 1), "P2": (2, 2), "Q1": (2, 3), "Q2": (4, 6)}
+"""scikit-fem's ``maxdeg`` of each element in 2-D and 3-D."""
+
+
+def check_order(order, degree: int | None = None, body: str = "") -> int:
+    """A Gauss rule's ``order`` in 1 … :data:`ORDER_PER_DEGREE` × ``degree`` (the element's ``maxdeg``; None:
+    the largest of any element, before the body is known); ``body`` says which element in the message."""
+    order = positive_integer(order, "contact.order", "give the degree the rule integrates exactly, e.g. 2")
+    limit = ORDER_PER_DEGREE * (degree or max(max(pair) for pair in ELEMENT_DEGREES.values()))
+    if order > limit:
+        ranges = ", ".join(f"{name} 1 to {ORDER_PER_DEGREE * pair[0]} (3-D: to {ORDER_PER_DEGREE * pair[1]})"
+                           for name, pair in ELEMENT_DEGREES.items())
+        raise SceneError("contact.order", f"{order} is beyond the Gauss rules that mean anything on "
+                         f"{body or 'any element'}: 1 to {limit} ({ORDER_PER_DEGREE} × the element's degree; "
+                         f"{ranges})", "give an order in that range, or refine the mesh where the obstacle curves")
+    return order
+
+
 def _check_points(law, allowed: tuple[str, ...]) -> None:
     """The ``non_penetration`` of a frictionless law, and the Gauss rule's ``order`` that goes with "gauss"."""
     if law.non_penetration not in allowed:
@@ -372,7 +432,7 @@ def _check_points(law, allowed: tuple[str, ...]) -> None:
         if law.non_penetration != "gauss":
             raise SceneError("contact.order", "a Gauss rule's order is for non_penetration = 'gauss'",
                              "drop order, or set non_penetration = 'gauss'")
-        object.__setattr__(law, "order", positive_integer(law.order, "contact.order"))
+        object.__setattr__(law, "order", check_order(law.order))
 
 
 @dataclass(frozen=True)
