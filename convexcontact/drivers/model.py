@@ -107,6 +107,10 @@ class Model:
 
     def cvxpy(self) -> solvers.cvxpy_model.CvxpyModel:
         """The cvxpy Problem of this model, to inspect or extend before :meth:`solve`."""
+        if solvers.matrix_free(self.program):
+            raise SceneError("formulation", f"{MATRIX_FREE!r} applies W = B K⁻¹ Bᵀ through K's factorization and never "
+                             "forms it, and a cvxpy model needs the matrix",
+                             "prepare(scene, 'dual') (W formed) or prepare(scene, 'primal') for the cvxpy model")
         return solvers.cvxpy_model.model(self.program)
 
     def solve(self, solver: str = "auto", progress: Callable | None = None, **options) -> ContactResult:
@@ -386,9 +390,40 @@ class ProgramSession:
 def matrix_free_applies(fem: FEModel, law) -> bool:
     """Whether the matrix-free dual is in bound form (newton-cg's programs): no equality (force control) and
     exact friction."""
-    contact = fem.contact
-    return (contact.obstacle_coupling is None and contact.tangential_coupling is None
-            and getattr(law, "regularization", None) is None)
+    return matrix_free_obstruction(fem.scene.contact.obstacle, law) is None
+
+
+def matrix_free_obstruction(obstacle, law) -> str | None:
+    """What keeps the dual of a scene out of newton-cg's bound form (None: nothing)."""
+    if compliance_of(law) is not None:
+        return "normal compliance is posed in the primal only"
+    if obstacle.force_controlled:
+        return "a force-controlled obstacle (obstacle.force) adds an equality row"
+    if obstacle.tangential_force is not None:
+        return "a tangential obstacle force (obstacle.tangential_force) adds an equality row"
+    if getattr(law, "regularization", None) is not None:
+        return "the ε-regularized friction (contact.regularization) has no bound form"
+    return None
+
+
+def check_formulation(scene: Scene, formulation: str, solver: str = "auto") -> None:
+    """Refuse, before any assembly, a formulation the scene (or the ``solver``) cannot have, naming the ones it can."""
+    if formulation not in (*FORMULATIONS, MATRIX_FREE, "auto"):
+        raise SceneError("formulation", f"unknown {formulation!r}",
+                         f"use one of {sorted(FORMULATIONS)}, {MATRIX_FREE!r} or 'auto'")
+    if formulation == MATRIX_FREE and solver.partition(":")[0] not in ("auto", "newton-cg"):
+        raise SceneError("formulation", f"{MATRIX_FREE!r} applies W as an operator, which only newton-cg solves, "
+                         f"and solver = {solver!r} needs it as a matrix",
+                         f"use formulation='dual', 'primal' or 'auto' with {solver}, or solver='newton-cg'")
+    law = scene.contact.law
+    if formulation == "dual" and compliance_of(law) is not None:
+        raise SceneError("formulation", "'dual': normal compliance is posed in the primal only",
+                         "use formulation='primal' or 'auto'")
+    obstruction = matrix_free_obstruction(scene.contact.obstacle, law) if formulation == MATRIX_FREE else None
+    if obstruction is not None:
+        usable = "'primal' or 'auto'" if compliance_of(law) is not None else "'dual', 'primal' or 'auto'"
+        raise SceneError("formulation", f"{MATRIX_FREE!r} takes the dual in newton-cg's bound form, and {obstruction}",
+                         f"use formulation={usable}")
 
 
 def contact_columns(fem: FEModel) -> np.ndarray:
@@ -406,9 +441,7 @@ def prepare(scene: Scene, formulation: str = "auto") -> Model:
     picks one from the problem's shape and records why in ``Model.reason``.
     """
     of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
-    if formulation not in (*FORMULATIONS, MATRIX_FREE, "auto"):
-        raise SceneError("formulation", f"unknown {formulation!r}",
-                         f"use one of {sorted(FORMULATIONS)}, {MATRIX_FREE!r} or 'auto'")
+    check_formulation(scene, formulation)
     timings: dict = {}
     with timed(timings, "assembly"):
         fem = assemble(scene)

@@ -8,6 +8,7 @@ described in docs/scenes.md.
 from __future__ import annotations
 
 import difflib
+import os
 import re
 from pathlib import Path
 
@@ -35,6 +36,7 @@ from .model import (
     Traction,
     Tresca,
     check_shape_fields,
+    of_type,
 )
 
 NUMBER, INTEGER, TEXT, PAIR = "a number", "an integer", "a string", "two numbers [a, b]"
@@ -98,7 +100,7 @@ EXAMPLES = {
 
 def load_scene(path) -> Scene:
     """Read the TOML scene file at ``path``; mesh paths are relative to its folder."""
-    path = Path(path)
+    path = Path(of_type(path, (str, os.PathLike), "path", "give the scene file's path, e.g. load_scene('scene.toml')"))
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as error:
