@@ -36,6 +36,7 @@ from ..scene.model import (
     has_friction,
     of_type,
 )
+from .scales import check_gap_scale, check_law_scales
 
 LAW_DRIVERS: dict[type, Callable] = {}
 """Drivers of the laws that are no single convex program, registered by their modules (:mod:`.picard`
@@ -56,6 +57,20 @@ def field_at_points(value, name: str, fem: FEModel, friction: FrictionPoints) ->
         nodal = field_at_nodes(value, name, fem.contact.coords * fem.scaling.length, getattr(fem.contact, "pieces", ()))
         return friction.interpolation @ nodal
     return evaluate_field(value, name, friction.coords * fem.scaling.length)  # x, y[, z] columns
+
+
+def law_fields(law, fem: FEModel, friction: FrictionPoints | None, slip_bound) -> dict[str, np.ndarray]:
+    """The friction law's fields at the friction points for :func:`check_law_scales`: Tresca's slip bound and
+    Coulomb's initial pressure over the pressure scale, Coulomb's coefficient as it is."""
+    if isinstance(law, Tresca):
+        return {"slip_bound": slip_bound}
+    if not isinstance(law, Coulomb):
+        return {}
+    fields = {"friction": field_at_points(law.friction, "contact.friction", fem, friction)}
+    if law.initial_pressure is not None:
+        fields["initial_pressure"] = field_at_points(law.initial_pressure, "contact.initial_pressure", fem,
+                                                     friction) / fem.scaling.pressure
+    return fields
 
 
 def frictional_rows(law, contact) -> np.ndarray | None:
@@ -470,6 +485,8 @@ def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, 
         if compliance_of(law) is not None:
             c_N, p = compliance_of(law).stiffness, compliance_of(law).exponent
             compliance = (c_N * fem.scaling.displacement**p / fem.scaling.pressure, p)
+        check_gap_scale(fem)
+        check_law_scales(fem, law, law_fields(law, fem, friction, slip_bound), compliance)
     if formulation == "auto":
         unknowns = fem.contact.m + (friction.R.shape[0] if friction is not None else 0)
         formulation, reason = choose_formulation(fem, law, unknowns)

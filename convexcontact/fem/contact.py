@@ -251,8 +251,17 @@ def obstacle_gap(obstacle, user_coords: np.ndarray, user_coordinate: np.ndarray,
     the obstacle's normals there (None: the body's)."""
     offset = axis_offset(obstacle, user_coords, user_coordinate, mean_normal, mean_tangent)
     if obstacle.normal == "obstacle":
-        return obstacle.closest_point(offset, mean_normal)
-    return obstacle.shape_gap(user_coords, axis_distance(offset, mean_tangent)) - (obstacle.depth or 0.0), None
+        gap, normals = obstacle.closest_point(offset, mean_normal)
+    else:
+        gap, normals = obstacle.shape_gap(user_coords, axis_distance(offset, mean_tangent)) - (obstacle.depth or 0.0), None
+    if not np.isfinite(gap).all():  # r²/2R with a radius of 1e-300
+        point = np.flatnonzero(~np.isfinite(gap))[0]
+        far = np.abs(axis_distance(offset, mean_tangent)).max() > 1e6 * np.ptp(user_coords, axis=0).max()
+        field_name = {"flat": "obstacle.gap", "expression": "obstacle.expression"}.get(
+            obstacle.shape, "obstacle.center" if far else "obstacle.radius")
+        raise SceneError(field_name, f"the gap at {np.round(user_coords[point], 12).tolist()} on Γ_C is "
+                         f"{gap[point]}, beyond the floats", "give a radius, centre, gap and depth on the body's scale")
+    return gap, normals
 
 
 def under_punch(contact: Contact, facets: np.ndarray, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling):
@@ -267,6 +276,18 @@ def under_punch(contact: Contact, facets: np.ndarray, mesh: fe.Mesh, basis: fe.B
         raise SceneError("obstacle.radius", f"no facet of {contact.boundary!r} lies entirely under the flat punch "
                          f"(radius {contact.obstacle.radius})", "use a larger radius or a finer mesh under the punch")
     return kept
+
+
+def check_force(force: float | None, scaling: Scaling, dim: int) -> None:
+    """Refuse an obstacle force too small for the solve to resolve beside the body's stiffness (P = 1e-13 on the
+    Hertz block, E = 1, was reported infeasible): below the smallest strain the assembly's scales resolve."""
+    from .assembly import MIN_STRAIN  # the assembly imports this module
+
+    stiffness = scaling.stress * scaling.length ** (dim - 1)  # E L^(d−1): a force of unit strain
+    if force is not None and 0 < force < MIN_STRAIN * stiffness:
+        raise SceneError("obstacle.force", f"{force:.3g} is {force / stiffness:.1e} of E·L^(d−1) = {stiffness:.3g}, "
+                         f"below the strain {MIN_STRAIN:g} a solve resolves",
+                         f"give 0 (the obstacle just touching) or at least {MIN_STRAIN * stiffness:.3g}")
 
 
 def contact_trace(
@@ -300,6 +321,7 @@ def contact_trace(
     T_full = sp.vstack([_rows(t, dofs, basis.N) for t in frame]).tocsr()
 
     coupling = normals @ mean_normal if obstacle.force_controlled else None
+    check_force(obstacle.force, scaling, dim)
     tangential = None
     if obstacle.tangential_force is not None:
         if dim == 3:

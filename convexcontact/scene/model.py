@@ -289,7 +289,8 @@ class Obstacle:
         defaults = {name: spec.default for name, spec in self.__dataclass_fields__.items()}
         check_shape_fields(self.shape, [name for name in ("gap", "radius", "center", "expression")
                                         if not _same(getattr(self, name), defaults[name])])
-        for name in ("gap", "radius", "depth", "force", "tangential_force"):
+        object.__setattr__(self, "gap", finite(self.gap, "obstacle.gap", "give the gap as a number (0: touching)"))
+        for name in ("radius", "depth", "force", "tangential_force"):
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, finite(value, f"obstacle.{name}"))
@@ -614,10 +615,11 @@ class Coulomb:
             raise SceneError("contact.smoothing_radius", "must be ≥ 0 (0 is the local law)")
         if not 0 < finite(self.relaxation, "contact.relaxation") <= 1:
             raise SceneError("contact.relaxation", f"ω must lie in (0, 1], got {self.relaxation}")
-        if finite(self.tol, "contact.tol") <= 0:
-            raise SceneError("contact.tol", "must be positive")
+        if not 0 < finite(self.tol, "contact.tol") < 1:
+            raise SceneError("contact.tol", f"a relative change of the slip bounds, in (0, 1), got {self.tol}",
+                             "give e.g. 1e-8")
         positive_integer(self.max_iterations, "contact.max_iterations")
-        if self.acceleration != 0:
+        if not (isinstance(self.acceleration, (int, np.integer)) and self.acceleration == 0):
             positive_integer(self.acceleration, "contact.acceleration", "give 0 (the plain map) or a depth such as 5")
         if not isinstance(self.newton, bool):
             raise SceneError("contact.newton", f"expected true or false, got {self.newton!r}")
