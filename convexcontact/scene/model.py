@@ -34,6 +34,7 @@ class Material:
     viscosity: float = 0.0
 
     def __post_init__(self):
+        of_type(self.name, str, "material.name", "name the mesh subdomain it is for, e.g. 'steel'")
         E = finite(self.E, f"{self.name}.E")
         nu = finite(self.nu, f"{self.name}.nu")
         if E <= 0:
