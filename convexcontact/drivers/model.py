@@ -36,7 +36,7 @@ from ..scene.model import (
     has_friction,
     of_type,
 )
-from .scales import check_gap_scale, check_law_scales
+from .scales import check_force, check_gap_scale, check_law_scales
 
 LAW_DRIVERS: dict[type, Callable] = {}
 """Drivers of the laws that are no single convex program, registered by their modules (:mod:`.picard`
@@ -485,6 +485,7 @@ def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, 
         if compliance_of(law) is not None:
             c_N, p = compliance_of(law).stiffness, compliance_of(law).exponent
             compliance = (c_N * fem.scaling.displacement**p / fem.scaling.pressure, p)
+        check_force(fem)
         check_gap_scale(fem)
         check_law_scales(fem, law, law_fields(law, fem, friction, slip_bound), compliance)
     if formulation == "auto":

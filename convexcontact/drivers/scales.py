@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..fem.assembly import MIN_STRAIN
 from ..scene.model import SceneError, compliance_of
 
 TRACTION_RANGE = 1e6
@@ -26,6 +27,17 @@ GAP_RANGE = 1e13
 displacements and lose them beyond (a parabolic punch of radius 1e-10 on the 4 × 2 Hertz block, gaps up to 2e12 of
 the displacement scale: solved; radius 1e-12, 2e14: inaccurate with certificate 0.9 on the dual, failed on the
 primal). A node that far never touches."""
+
+
+def check_force(fem) -> None:
+    """Refuse an obstacle force too small for the solve to resolve beside the body's stiffness (P = 1e-13 on the
+    Hertz block, E = 1, was reported infeasible): below the smallest strain the assembly's scales resolve."""
+    force, scaling = fem.scene.contact.obstacle.force, fem.scaling
+    stiffness = scaling.stress * scaling.length ** (scaling.dim - 1)  # E L^(d−1): a force of unit strain
+    if force is not None and 0 < force < MIN_STRAIN * stiffness:
+        refuse("obstacle.force", f"{force:.3g} is {force / stiffness:.1e} of E·L^(d−1) = {stiffness:.3g}, below the "
+               f"strain {MIN_STRAIN:g} a solve resolves",
+               f"give 0 (the obstacle just touching) or at least {MIN_STRAIN * stiffness:.3g}")
 
 
 def check_gap_scale(fem) -> None:

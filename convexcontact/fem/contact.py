@@ -278,18 +278,6 @@ def under_punch(contact: Contact, facets: np.ndarray, mesh: fe.Mesh, basis: fe.B
     return kept
 
 
-def check_force(force: float | None, scaling: Scaling, dim: int) -> None:
-    """Refuse an obstacle force too small for the solve to resolve beside the body's stiffness (P = 1e-13 on the
-    Hertz block, E = 1, was reported infeasible): below the smallest strain the assembly's scales resolve."""
-    from .assembly import MIN_STRAIN  # the assembly imports this module
-
-    stiffness = scaling.stress * scaling.length ** (dim - 1)  # E L^(d−1): a force of unit strain
-    if force is not None and 0 < force < MIN_STRAIN * stiffness:
-        raise SceneError("obstacle.force", f"{force:.3g} is {force / stiffness:.1e} of E·L^(d−1) = {stiffness:.3g}, "
-                         f"below the strain {MIN_STRAIN:g} a solve resolves",
-                         f"give 0 (the obstacle just touching) or at least {MIN_STRAIN * stiffness:.3g}")
-
-
 def contact_trace(
     contact: Contact, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray, prescribed: np.ndarray
 ) -> ContactTrace:
@@ -321,7 +309,6 @@ def contact_trace(
     T_full = sp.vstack([_rows(t, dofs, basis.N) for t in frame]).tocsr()
 
     coupling = normals @ mean_normal if obstacle.force_controlled else None
-    check_force(obstacle.force, scaling, dim)
     tangential = None
     if obstacle.tangential_force is not None:
         if dim == 3:
