@@ -110,8 +110,10 @@ def load_mesh(geometry: MeshFile) -> fe.Mesh:
         mesh = from_meshio(kept)
     except SceneError:
         raise
-    except Exception as error:  # meshio raises many types; the user needs the file and the cause
-        raise SceneError("body.mesh", f"could not read {geometry.path}: {error}") from error
+    except (Exception, SystemExit) as error:  # meshio raises many types (and exits on a bad VTK header)
+        raise SceneError("body.mesh", f"could not read {geometry.path}: {error or type(error).__name__}",
+                         "give a mesh file meshio reads (gmsh .msh, .vtk, .vtu, .xdmf, …) with the body's cells") \
+            from error
     if mesh.dim() == 2 and raw.points.shape[1] == 3 and np.ptp(kept.points[:, 2]) > 0:
         raise SceneError("body.mesh", f"{geometry.path}: 2-D cells with z from {kept.points[:, 2].min():g} to "
                          f"{kept.points[:, 2].max():g}: the body would be flattened without a word",
@@ -255,6 +257,13 @@ def check_mesh(mesh: fe.Mesh, source: str) -> fe.Mesh:
     return mesh
 
 
+def not_a_body(mesh: fe.Mesh):
+    """Cells of one dimension (lines): a wire, not a body of plane or 3-D elasticity."""
+    if mesh.dim() not in (2, 3):
+        return (f"its cells are {mesh.dim()}-D ({type(mesh).__name__})",
+                "mesh the body with triangles or quadrilaterals (2-D), tetrahedra or hexahedra (3-D)")
+
+
 def out_of_plane(mesh: fe.Mesh):
     """Nodes with more coordinates than the cells have dimensions (triangles in 3-D space)."""
     if mesh.p.shape[0] != mesh.dim():
@@ -333,7 +342,7 @@ def folded_facets(mesh: fe.Mesh) -> np.ndarray:
     return interior[side[0] * side[1] > 0]
 
 
-MESH_CHECKS = (out_of_plane, orphan_nodes, coincident_nodes, degenerate_cells, inverted_cells)
+MESH_CHECKS = (not_a_body, out_of_plane, orphan_nodes, coincident_nodes, degenerate_cells, inverted_cells)
 
 
 def cell_measures(mesh: fe.Mesh) -> np.ndarray:

@@ -87,7 +87,7 @@ class Rectangle:
         refine_x = self.origin[0] + self.width / 2 if self.refine_x is None else finite(self.refine_x, "body.refine_x")
         object.__setattr__(self, "refine_x", refine_x)
         if self.refine_y not in ("top", "bottom"):
-            raise SceneError("body.refine_y", f"expected 'top' or 'bottom', got {self.refine_y!r}")
+            raise SceneError("body.refine_y", f"got {self.refine_y!r}", "use 'top' or 'bottom' (the side graded finest)")
 
 
 @dataclass(frozen=True)
@@ -623,7 +623,8 @@ class Coulomb:
         if not (isinstance(self.acceleration, (int, np.integer)) and self.acceleration == 0):
             positive_integer(self.acceleration, "contact.acceleration", "give 0 (the plain map) or a depth such as 5")
         if not isinstance(self.newton, bool):
-            raise SceneError("contact.newton", f"expected true or false, got {self.newton!r}")
+            raise SceneError("contact.newton", f"expected true or false, got {self.newton!r}",
+                             "give True (Newton's method first) or False (the Picard map alone)")
         if self.initial_pressure is not None:
             object.__setattr__(
                 self, "initial_pressure", check_field(self.initial_pressure, "contact.initial_pressure")
