@@ -38,7 +38,8 @@ class Material:
         E = finite(self.E, f"{self.name}.E")
         nu = finite(self.nu, f"{self.name}.nu")
         if E <= 0:
-            raise SceneError(f"{self.name}.E", f"Young's modulus must be positive, got {E}")
+            raise SceneError(f"{self.name}.E", f"Young's modulus must be positive, got {E}",
+                             "give E > 0 (a stress, in the units of the loads)")
         if not -1 < nu < 0.5:
             raise SceneError(
                 f"{self.name}.nu",
@@ -46,7 +47,8 @@ class Material:
                 "for near-incompressible bodies use e.g. 0.4999 with P2 or Q2",
             )
         if finite(self.viscosity, f"{self.name}.viscosity") < 0:
-            raise SceneError(f"{self.name}.viscosity", f"must be ≥ 0 (0 is elastic), got {self.viscosity}")
+            raise SceneError(f"{self.name}.viscosity", f"must be ≥ 0 (0 is elastic), got {self.viscosity}",
+                             "give η ≥ 0, a stress times a time")
         object.__setattr__(self, "E", E)
         object.__setattr__(self, "nu", nu)
         object.__setattr__(self, "viscosity", float(self.viscosity))
@@ -75,14 +77,14 @@ class Rectangle:
         for name in ("width", "height"):
             value = finite(getattr(self, name), f"body.{name}")
             if value <= 0:
-                raise SceneError(f"body.{name}", "must be positive")
+                raise SceneError(f"body.{name}", f"must be positive, got {value}", "give the side's length")
             object.__setattr__(self, name, value)
         for name in ("nx", "ny"):
             positive_integer(getattr(self, name), f"body.{name}")
         object.__setattr__(self, "origin", finite_vector(self.origin, "body.origin"))
         grading = finite_vector(self.grading, "body.grading")
         if min(grading) < 1:
-            raise SceneError("body.grading", f"ratios must be ≥ 1, got {grading}")
+            raise SceneError("body.grading", f"ratios must be ≥ 1, got {grading}", "give 1 for uniform cells")
         object.__setattr__(self, "grading", grading)
         refine_x = self.origin[0] + self.width / 2 if self.refine_x is None else finite(self.refine_x, "body.refine_x")
         object.__setattr__(self, "refine_x", refine_x)
@@ -109,14 +111,15 @@ class Box:
     def __post_init__(self):
         size = finite_vector(self.size, "body.size", 3)
         if min(size) <= 0:
-            raise SceneError("body.size", f"side lengths must be positive, got {size}")
+            raise SceneError("body.size", f"side lengths must be positive, got {size}", "give [Lx, Ly, Lz] > 0")
         if np.ndim(self.cells) != 1 or len(self.cells) != 3:
-            raise SceneError("body.cells", f"expected 3 integers [nx, ny, nz], got {self.cells!r}")
+            raise SceneError("body.cells", f"expected 3 integers [nx, ny, nz], got {self.cells!r:.60}",
+                             "give e.g. [8, 8, 8]")
         cells = tuple(positive_integer(n, f"body.cells[{i}]") for i, n in enumerate(self.cells))
         origin = finite_vector(self.origin, "body.origin", 3)
         grading = finite_vector(self.grading, "body.grading", 3)
         if min(grading) < 1:
-            raise SceneError("body.grading", f"ratios must be ≥ 1, got {grading}")
+            raise SceneError("body.grading", f"ratios must be ≥ 1, got {grading}", "give 1 for uniform cells")
         top_middle = (origin[0] + size[0] / 2, origin[1] + size[1] / 2, origin[2] + size[2])
         refine = top_middle if self.refine is None else finite_vector(self.refine, "body.refine", 3)
         for name, value in (("size", size), ("cells", cells), ("origin", origin), ("grading", grading),
@@ -202,7 +205,8 @@ class Traction:
         of_type(self.boundary, str, "traction.boundary", "name a boundary of the mesh, e.g. 'top'")
         where = f"traction[{self.boundary}]"
         if (self.pressure is None) == (self.vector is None):
-            raise SceneError(where, "give exactly one of pressure or vector")
+            raise SceneError(where, "pressure and vector both given, or neither",
+                             "give exactly one: pressure = p (pushing inward) or vector = (tx, ty[, tz])")
         if self.pressure is not None:
             object.__setattr__(self, "pressure", finite(self.pressure, f"{where}.pressure"))
         else:
@@ -319,9 +323,11 @@ class Obstacle:
             if isinstance(self.expression, str):
                 compile_expression(self.expression, "obstacle.expression")
         if self.depth is not None and self.force is not None:
-            raise SceneError("obstacle", "both depth and force given", "give depth (displacement control) or force")
+            raise SceneError("obstacle", "both depth and force given",
+                             "give depth (displacement control) or force (force control), not both")
         if self.force is not None and self.force < 0:
-            raise SceneError("obstacle.force", "must be ≥ 0 (it presses the obstacle on the body)")
+            raise SceneError("obstacle.force", f"must be ≥ 0 (it presses the obstacle on the body), got {self.force}",
+                             "give P ≥ 0, or depth to pull the obstacle back")
 
     @property
     def force_controlled(self) -> bool:
@@ -459,9 +465,10 @@ class NormalCompliance:
     def __post_init__(self):
         _check_points(self, ("nodal", "gauss"))
         if finite(self.stiffness, "contact.stiffness") <= 0:
-            raise SceneError("contact.stiffness", f"c_N must be positive, got {self.stiffness}")
+            raise SceneError("contact.stiffness", f"c_N must be positive, got {self.stiffness}",
+                             "give c_N > 0 (a pressure per length^p), or Signorini() for no penetration")
         if finite(self.exponent, "contact.exponent") < 1:
-            raise SceneError("contact.exponent", f"p must be ≥ 1, got {self.exponent}")
+            raise SceneError("contact.exponent", f"p must be ≥ 1, got {self.exponent}", "give 1 (a QP) or more")
         object.__setattr__(self, "stiffness", float(self.stiffness))
         object.__setattr__(self, "exponent", float(self.exponent))
 
@@ -513,7 +520,7 @@ def check_field(value, field_name: str, minimum: float = 0.0):
     if np.ndim(value) == 0:
         number = finite(value, field_name)
         if number < minimum:
-            raise SceneError(field_name, f"must be ≥ {minimum}, got {number}")
+            raise SceneError(field_name, f"must be ≥ {minimum}, got {number}", f"give a value ≥ {minimum}")
         return number
     try:
         array = np.array(value, dtype=float)  # a copy: the user's array is never changed
@@ -521,7 +528,8 @@ def check_field(value, field_name: str, minimum: float = 0.0):
         raise SceneError(field_name, f"expected numbers, got {value!r:.60}",
                          "give a number, a formula, a function or one number per contact node") from None
     if array.ndim != 1 or not np.isfinite(array).all() or (array < minimum).any():
-        raise SceneError(field_name, f"nodal values must be a 1-D array of finite numbers ≥ {minimum}")
+        raise SceneError(field_name, f"nodal values must be a 1-D array of finite numbers ≥ {minimum}",
+                         "give one number per contact node, ordered as result.contact.coords")
     return array
 
 
@@ -546,7 +554,8 @@ def evaluate_field(value, field_name: str, points: np.ndarray, minimum: float = 
         values = np.array(value)
     if not np.isfinite(values).all() or (values < minimum).any():
         raise SceneError(field_name, f"values must be finite and ≥ {minimum}" if minimum > -np.inf
-                         else "the function returned NaN or infinity")
+                         else "the function returned NaN or infinity",
+                         "give a formula or function finite (and within bounds) at every point of Γ_C")
     return values
 
 
@@ -613,9 +622,11 @@ class Coulomb:
         object.__setattr__(self, "friction", check_field(self.friction, "contact.friction"))
         _check_options(self)
         if finite(self.smoothing_radius, "contact.smoothing_radius") < 0:
-            raise SceneError("contact.smoothing_radius", "must be ≥ 0 (0 is the local law)")
+            raise SceneError("contact.smoothing_radius", f"must be ≥ 0, got {self.smoothing_radius}",
+                             "give 0 (the local law) or a roughness length ρ > 0")
         if not 0 < finite(self.relaxation, "contact.relaxation") <= 1:
-            raise SceneError("contact.relaxation", f"ω must lie in (0, 1], got {self.relaxation}")
+            raise SceneError("contact.relaxation", f"ω must lie in (0, 1], got {self.relaxation}",
+                             "give 1 (the plain map) or less to damp it, e.g. 0.5")
         if not 0 < finite(self.tol, "contact.tol") < 1:
             raise SceneError("contact.tol", f"a relative change of the slip bounds, in (0, 1), got {self.tol}",
                              "give e.g. 1e-8")
@@ -633,7 +644,8 @@ class Coulomb:
 
 def _check_options(law):
     if law.compliance is not None and not isinstance(law.compliance, NormalCompliance):
-        raise SceneError("contact.compliance", "expected NormalCompliance(stiffness, exponent)")
+        raise SceneError("contact.compliance", f"expected NormalCompliance, got {law.compliance!r:.40}",
+                         "give cc.NormalCompliance(stiffness, exponent)")
     if law.compliance is not None and law.compliance.non_penetration != "nodal":
         raise SceneError("contact.compliance", "a friction law's compliance is lumped node-wise",
                          "give NormalCompliance(stiffness, exponent) without non_penetration")
@@ -648,7 +660,8 @@ def _check_options(law):
         raise SceneError("contact.quadrature", "Gauss points go with nodal non-penetration",
                          "the weak form already integrates the friction term with the boundary mass M")
     if law.regularization is not None and finite(law.regularization, "contact.regularization") <= 0:
-        raise SceneError("contact.regularization", "ε must be positive (omit it for the exact law)")
+        raise SceneError("contact.regularization", f"ε must be positive, got {law.regularization}",
+                         "give ε > 0 (a length), or omit it for the exact law")
 
 
 ContactLaw = Signorini | NormalCompliance | Tresca | Coulomb
