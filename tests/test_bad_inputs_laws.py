@@ -289,3 +289,34 @@ def test_a_mesh_file_of_lines_only_is_named(tmp_path):
     write_msh(path, np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), [("line", np.array([[0, 1]]))])
     refused(lambda: cc.prepare(dataclasses.replace(PATCH, body=cc.Body(cc.MeshFile(path)))), "body.mesh",
             "1-D", "tetrahedra")
+
+
+@pytest.mark.parametrize("build, field, words", [
+    (lambda: cc.Rectangle(width=math.nan), "body.width", ["finite"]),
+    (lambda: cc.Rectangle(height=-1.0), "body.height", ["positive"]),
+    (lambda: cc.Rectangle(origin=(0.0,)), "body.origin", ["2 finite numbers"]),
+    (lambda: cc.Rectangle(grading=(0.5, 1.0)), "body.grading", ["uniform"]),
+    (lambda: cc.Rectangle(nx=2.5), "body.nx", ["whole number"]),
+    (lambda: cc.Box(size=(1.0, 1.0)), "body.size", ["3 finite numbers"]),
+    (lambda: cc.Box(size=(1e200, 1e200, 1e200)), "body.size", ["length unit"]),
+    (lambda: cc.Box(cells=3), "body.cells", ["[8, 8, 8]"]),
+    (lambda: cc.Box(cells=(1, 1, True)), "body.cells[2]", ["whole number"]),
+    (lambda: cc.Box(grading=(1.0, 1.0, math.nan)), "body.grading[2]", ["finite"]),
+    (lambda: cc.Body(None), "body.geometry", ["cc.MeshFile(path)"]),
+    (lambda: cc.MeshFile(3), "body.mesh", ["path"]),
+    (lambda: cc.MeshFile("/nonexistent.msh"), "body.mesh", ["check the path"]),
+    (lambda: cc.Dirichlet("bottom", ux="0"), "dirichlet[bottom].ux", ["finite number"]),
+    (lambda: cc.Dirichlet("bottom"), "dirichlet[bottom]", ["ux, uy"]),
+    (lambda: cc.Traction("top", vector=(1.0,)), "traction[top].vector", ["2 or 3 finite numbers"]),
+    (lambda: cc.Traction("top", pressure=1.0, vector=(1.0, 0.0)), "traction[top]", ["exactly one"]),
+    (lambda: cc.Contact(None), "contact.boundary", ["name a boundary"]),
+    (lambda: cc.Contact("top", law=cc.Signorini(), obstacle=cc.Obstacle(tangential_force=1.0)),
+     "obstacle.tangential_force", ["tresca"]),
+    (lambda: dataclasses.replace(PATCH, body_force=(math.nan, 0.0)), "body_force[0]", ["finite"]),
+    (lambda: dataclasses.replace(PATCH, name=3), "name", ["str"]),
+    (lambda: dataclasses.replace(PATCH, materials={}), "materials", ["E and nu"]),
+    (lambda: cc.prepare(PATCH).with_law("coulomb"), "contact.law", ["cc.Coulomb(F)"]),
+    (lambda: cc.prepare(PATCH).with_law(cc.Coulomb(1e12)), "contact.friction", ["at most 1e+06"]),
+])
+def test_the_scenes_other_classes_name_the_field_and_a_fix(build, field, words):
+    refused(build, field, *words)

@@ -92,6 +92,10 @@ class Rectangle:
             raise SceneError("body.refine_y", f"got {self.refine_y!r}", "use 'top' or 'bottom' (the side graded finest)")
 
 
+SIZES = (1e-100, 1e100)
+"""The sides a 3-D box may have, in any unit: the scales' products (E L², E u² L) stay floats."""
+
+
 @dataclass(frozen=True)
 class Box:
     """Built-in box [x0, x0+Lx] × [y0, y0+Ly] × [z0, z0+Lz] of tetrahedra (P1, P2) or hexahedra (Q1, Q2).
@@ -112,6 +116,10 @@ class Box:
         size = finite_vector(self.size, "body.size", 3)
         if min(size) <= 0:
             raise SceneError("body.size", f"side lengths must be positive, got {size}", "give [Lx, Ly, Lz] > 0")
+        if not SIZES[0] <= min(size) <= max(size) <= SIZES[1]:
+            raise SceneError("body.size", f"{size} leaves the floats in a 3-D body's scales (forces ∝ L², energies "
+                             "∝ L³; sides of 1e200 overflowed)", f"give sides within {SIZES[0]:g} to {SIZES[1]:g}: "
+                             "change the length unit")
         if np.ndim(self.cells) != 1 or len(self.cells) != 3:
             raise SceneError("body.cells", f"expected 3 integers [nx, ny, nz], got {self.cells!r:.60}",
                              "give e.g. [8, 8, 8]")
