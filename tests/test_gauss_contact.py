@@ -116,3 +116,18 @@ def test_a_node_held_tangentially_is_flagged_and_the_rest_agrees_across_solvers(
         assert result.contact.friction[held][0] == 0.0
     assert np.abs(clarabel.contact.friction - osqp.contact.friction).max() < 1e-6 * 0.05
     assert np.abs(clarabel.contact.friction[~held]).min() > 1e-3  # sticking and slipping nodes carry friction
+
+
+def test_a_node_held_normally_reports_no_pressure_at_gauss_points_either():
+    """The patch clamped on its left side: the corner's normal displacement is prescribed, and not_unique said its
+    pressure was reported as 0 — but from the Gauss points' multipliers it was 0.0954 with Clarabel and 0.0723 with
+    OSQP. Now 0 from both, and the other nodes' pressures agree."""
+    scene = dataclasses.replace(pressure_patch(nx=4, law=cc.Signorini("gauss")),
+                                dirichlet=(cc.Dirichlet("left", ux=0.0, uy=0.0),))
+    clarabel, osqp = (cc.prepare(scene, "primal").solve(solver) for solver in ("clarabel", "osqp"))
+    held = np.isclose(clarabel.contact.coords[:, 0], 0.0)
+    for result in (clarabel, osqp):
+        assert result.status == "solved" and "prescribed normal displacement" in result.not_unique["pressure"]
+        assert result.contact.pressure[held][0] == 0.0
+    assert np.abs(clarabel.contact.pressure - osqp.contact.pressure).max() < 1e-6 * 0.1
+    assert clarabel.contact.pressure[~held].min() > 0.01
