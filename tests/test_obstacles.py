@@ -147,6 +147,6 @@ def test_a_huge_cylinder_is_the_parabola_it_tends_to(normal):
     """R − sqrt(R² − r²) lost every digit for R ≫ r (and R² overflowed beyond 1e154): written without the
     cancellation, the gap of a cylinder of radius 1e10 is r²/2R to round-off, along either normal."""
     R = 1e10
-    gaps = [cc.prepare(punch(obstacle, nx=8)).fem.contact.gap for obstacle in
-            (cc.Obstacle("cylinder", radius=R, depth=0.0, normal=normal), cc.Obstacle("parabolic", radius=R, depth=0.0))]
+    obstacles = (cc.Obstacle("cylinder", radius=R, depth=0.0, normal=normal), cc.Obstacle("parabolic", radius=R))
+    gaps = [cc.prepare(punch(obstacle, nx=8)).fem.contact.gap for obstacle in obstacles]
     assert np.allclose(gaps[0], gaps[1], rtol=1e-12, atol=0) and gaps[1].max() > 0  # the old form gave 0

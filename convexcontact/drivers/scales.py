@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..fem.assembly import MIN_STRAIN
+from ..fem.contact import gap_field
 from ..scene.model import SceneError, compliance_of
 
 TRACTION_RANGE = 1e6
@@ -35,23 +36,21 @@ def check_force(fem) -> None:
     force, scaling = fem.scene.contact.obstacle.force, fem.scaling
     stiffness = scaling.stress * scaling.length ** (scaling.dim - 1)  # E L^(d−1): a force of unit strain
     if force is not None and 0 < force < MIN_STRAIN * stiffness:
-        refuse("obstacle.force", f"{force:.3g} is {force / stiffness:.1e} of E·L^(d−1) = {stiffness:.3g}, below the "
-               f"strain {MIN_STRAIN:g} a solve resolves",
-               f"give 0 (the obstacle just touching) or at least {MIN_STRAIN * stiffness:.3g}")
+        raise SceneError("obstacle.force", f"{force:.3g} is {force / stiffness:.1e} of E·L^(d−1) = "
+                         f"{stiffness:.3g}, below the strain {MIN_STRAIN:g} a solve resolves",
+                         f"give 0 (the obstacle just touching) or at least {MIN_STRAIN * stiffness:.3g}")
 
 
 def check_gap_scale(fem) -> None:
     """Refuse an obstacle whose gap at some node is beyond :data:`GAP_RANGE` of the displacement scale."""
-    gap, obstacle = np.abs(fem.contact.gap), fem.scene.contact.obstacle
+    gap, displacement = np.abs(fem.contact.gap), fem.scaling.displacement
     if gap.max(initial=0.0) > GAP_RANGE:
         node = int(np.argmax(gap))
         at = np.round(fem.contact.coords[node] * fem.scaling.length, 12).tolist()
-        field_name = {"flat": "obstacle.gap", "expression": "obstacle.expression"}.get(obstacle.shape,
-                                                                                      "obstacle.radius")
-        refuse(field_name, f"the gap at {at} on Γ_C is {gap[node] * fem.scaling.displacement:.3g}, {gap[node]:.1e} "
-               f"times the displacements the loads make ({fem.scaling.displacement:.3g}): the solvers lose it",
-               "give a radius, centre, gap or depth on the scale of the body and its loads (a node that far never "
-               "touches: cut Γ_C, or use flat_punch)")
+        raise SceneError(gap_field(fem.scene.contact.obstacle), f"the gap at {at} on Γ_C is "
+                         f"{gap[node] * displacement:.3g}, {gap[node]:.1e} times the displacements the loads make "
+                         f"({displacement:.3g}): the solvers lose it", "give a radius, centre, gap or depth on the "
+                         "scale of the body and its loads (a node that far never touches: cut Γ_C, or use flat_punch)")
 
 
 def check_law_scales(fem, law, fields: dict[str, np.ndarray], compliance: tuple[float, float] | None) -> None:
@@ -59,32 +58,38 @@ def check_law_scales(fem, law, fields: dict[str, np.ndarray], compliance: tuple[
     range. ``fields``: the law's fields at the friction points by name (``slip_bound`` and ``initial_pressure``
     scaled by the pressure, ``friction`` as it is); ``compliance``: (c_N, p) scaled."""
     scaling = fem.scaling
-    length = f"the body's size L = {scaling.length:.3g}"
-    if compliance is not None and not 0 < compliance[0] < np.inf:
-        refuse("contact.exponent", f"p = {compliance[1]:g} takes u^p of the load's displacement scale u = "
-               f"{scaling.displacement:.3g} beyond the floats", "give an exponent of a contact law, 1 ≤ p ≤ 4 or so")
-    if compliance is not None and not COMPLIANCE_RANGE[0] <= compliance[0] <= COMPLIANCE_RANGE[1]:
-        c_N = compliance_of(law).stiffness
-        low, high = (bound * c_N / compliance[0] for bound in COMPLIANCE_RANGE)
-        refuse("contact.stiffness", f"c_N = {c_N:.3g} is {compliance[0]:.1e} times the body's stiffness (E/L at "
-               f"these loads), outside the {COMPLIANCE_RANGE[0]:g} to {COMPLIANCE_RANGE[1]:g} a solve resolves",
-               f"give c_N between {low:.3g} and {high:.3g}, or Signorini() for a contact stiffer than that")
+    if compliance is not None:
+        check_compliance(law, compliance, scaling)
     for name, values in fields.items():
-        largest = values.max(initial=0.0)
+        largest, pressure = values.max(initial=0.0), 1.0 if name == "friction" else scaling.pressure
         if largest > TRACTION_RANGE:
-            scale = "" if name == "friction" else f", {largest:.1e} times the load's pressure scale"
-            bound = f"{TRACTION_RANGE:g}" if name == "friction" else f"{TRACTION_RANGE * scaling.pressure:.3g}"
-            refuse(f"contact.{name}", f"up to {largest * (1 if name == 'friction' else scaling.pressure):.3g}{scale}",
-                   f"beyond {TRACTION_RANGE:g}{'' if name == 'friction' else ' times that'} every touching point "
-                   f"already sticks and the solvers lose the scale: give at most {bound} (a bonded contact)")
+            times = "" if name == "friction" else f", {largest:.1e} times the load's pressure scale"
+            raise SceneError(f"contact.{name}", f"up to {largest * pressure:.3g}{times}",
+                             f"beyond {TRACTION_RANGE:g}{times and ' times that'} every touching point already "
+                             f"sticks and the solvers lose the scale: give at most {TRACTION_RANGE * pressure:.3g} "
+                             "(a bonded contact)")
+    length = f"the body's size L = {scaling.length:.3g}"
     regularization = getattr(law, "regularization", None)
     if regularization is not None and regularization > scaling.length:
-        refuse("contact.regularization", f"ε = {regularization:.3g} exceeds {length}: it smooths away the friction "
-               "it regularizes", "give ε well below the slips you expect (e.g. 1e-6 L)")
+        raise SceneError("contact.regularization", f"ε = {regularization:.3g} exceeds {length}: it smooths away "
+                         "the friction it regularizes", "give ε well below the slips you expect (e.g. 1e-6 L)")
     if getattr(law, "smoothing_radius", 0.0) > scaling.length:
-        refuse("contact.smoothing_radius", f"ρ = {law.smoothing_radius:.3g} exceeds {length}: a roughness length "
-               "averages the pressure near a point, not over the whole body", "give ρ ≤ L, e.g. a few element sizes")
+        raise SceneError("contact.smoothing_radius", f"ρ = {law.smoothing_radius:.3g} exceeds {length}: a "
+                         "roughness length averages the pressure near a point, not over the whole body",
+                         "give ρ ≤ L, e.g. a few element sizes")
 
 
-def refuse(field_name: str, problem: str, fix: str):
-    raise SceneError(field_name, problem, fix)
+def check_compliance(law, compliance: tuple[float, float], scaling) -> None:
+    """The scaled compliance (c_N u^p / p of the scales) a float, and within :data:`COMPLIANCE_RANGE`."""
+    scaled, exponent = compliance
+    if not 0 < scaled < np.inf:
+        raise SceneError("contact.exponent", f"p = {exponent:g} takes u^p of the load's displacement scale u = "
+                         f"{scaling.displacement:.3g} beyond the floats",
+                         "give a contact law's exponent, 1 ≤ p ≤ 4 or so")
+    if not COMPLIANCE_RANGE[0] <= scaled <= COMPLIANCE_RANGE[1]:
+        c_N = compliance_of(law).stiffness
+        low, high = (bound * c_N / scaled for bound in COMPLIANCE_RANGE)
+        raise SceneError("contact.stiffness", f"c_N = {c_N:.3g} is {scaled:.1e} times the body's stiffness (E/L at "
+                         f"these loads), outside the {COMPLIANCE_RANGE[0]:g} to {COMPLIANCE_RANGE[1]:g} a solve "
+                         f"resolves", f"give c_N between {low:.3g} and {high:.3g}, or Signorini() for a contact "
+                         "stiffer than that")

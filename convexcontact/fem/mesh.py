@@ -147,7 +147,7 @@ def without_unused_nodes(raw, source) -> tuple:
     cells = [meshio.CellBlock(raw.cells[i].type, number[raw.cells[i].data[kept_cells[i]]]) for i in blocks]
     cell_data = {name: [np.asarray(data[i])[kept_cells[i]] for i in blocks] for name, data in raw.cell_data.items()}
     renumbered = [np.cumsum(keep) - 1 for keep in kept_cells]
-    members = {name: [np.asarray(indices, dtype=int) for indices in blocks_of] for name, blocks_of in raw.cell_sets.items()}
+    members = {name: [np.asarray(indices, dtype=int) for indices in of] for name, of in raw.cell_sets.items()}
     cell_sets = {name: [renumbered[i][of[i][kept_cells[i][of[i]]]] for i in blocks] for name, of in members.items()}
     kept = meshio.Mesh(raw.points[used], cells, point_data={name: data[used] for name, data in raw.point_data.items()},
                        cell_data=cell_data, field_data=raw.field_data, cell_sets=cell_sets)

@@ -51,7 +51,8 @@ def finite_vector(value, field_name: str, length: int | tuple[int, ...] = 2) -> 
 def positive_integer(value, field_name: str, fix: str = "") -> int:
     """Return ``value`` if it is an integer ≥ 1 (booleans refused)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise SceneError(field_name, f"expected a positive integer, got {value!r:.60}", fix or "give a whole number ≥ 1")
+        raise SceneError(field_name, f"expected a positive integer, got {value!r:.60}",
+                         fix or "give a whole number ≥ 1")
     return int(value)
 
 
@@ -61,7 +62,8 @@ def of_type(value, kinds: type | tuple[type, ...], field_name: str, fix: str = "
     if not isinstance(value, kinds) or (isinstance(value, (bool, np.bool_)) and bool not in kinds):
         expected = " or ".join(kind.__name__ for kind in kinds)
         shown = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
-        raise SceneError(field_name, f"expected {expected}, got {type(value).__name__} {shown}", fix or f"give a {expected}")
+        raise SceneError(field_name, f"expected {expected}, got {type(value).__name__} {shown}",
+                         fix or f"give a {expected}")
     return value
 
 

@@ -89,7 +89,8 @@ class Rectangle:
         refine_x = self.origin[0] + self.width / 2 if self.refine_x is None else finite(self.refine_x, "body.refine_x")
         object.__setattr__(self, "refine_x", refine_x)
         if self.refine_y not in ("top", "bottom"):
-            raise SceneError("body.refine_y", f"got {self.refine_y!r}", "use 'top' or 'bottom' (the side graded finest)")
+            raise SceneError("body.refine_y", f"got {self.refine_y!r}",
+                             "use 'top' or 'bottom' (the side graded finest)")
 
 
 SIZES = (1e-100, 1e100)
