@@ -282,6 +282,9 @@ class Obstacle:
     obstacle or an expression uses ``depth`` = 0 unless told otherwise.
     ``tangential_force`` Q (friction laws, 2-D only) pulls the obstacle along the mean
     tangent of Γ_C; its tangential translation becomes an unknown.
+    A field the shape does not read (:data:`SHAPE_FIELDS`: a gap given to a punch) is refused, as in a
+    scene file; with ``normal = "obstacle"`` a cylinder or sphere needs ``depth`` < ``radius`` (its centre
+    in front of Γ_C, where its normal is defined).
     """
 
     shape: str = "flat"
