@@ -469,6 +469,8 @@ CHOSEN = "chosen by the user"
 
 def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, reason: str = CHOSEN):
     """The Model of an assembled scene (``condensation``: K's, when already built)."""
+    if reason == CHOSEN:  # the user's choice, whichever driver passes it on (a history's too)
+        check_formulation(fem.scene, formulation)
     with timed(timings, "formulation"):
         law = fem.scene.contact.law
         C = contact_weights(fem.contact, law.non_penetration)
