@@ -10,7 +10,7 @@ from __future__ import annotations
 from .. import solvers
 from ..scene.model import Scene, SceneError, of_type
 from .history import run
-from .model import prepare
+from .model import check_formulation, prepare
 from .solutions import all_solutions
 
 
@@ -25,6 +25,7 @@ def solve(scene: Scene, solver: str = "auto", formulation: str = "auto", solutio
     of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
     solvers.check_name(solver)
     solvers.check_options(options, solver)  # before any assembly
+    check_formulation(scene, formulation, solver)
     if solutions not in ("one", "all"):
         raise SceneError("solutions", f"got {solutions!r}", "use 'one' (the default) or 'all'")
     if solutions == "all":
