@@ -369,7 +369,8 @@ class Obstacle:
         if dim == 3 and self.shape == "cylinder":
             raise SceneError("obstacle.shape", "a cylinder is a 2-D punch", "use 'sphere' or 'parabolic' in 3-D")
         if self.shape == "parabolic":
-            return r**2 / (2.0 * self.radius)
+            with np.errstate(over="ignore"):  # a gap past the floats is refused by name (drivers/scales.py)
+                return r**2 / (2.0 * self.radius)
         outside = np.abs(r) > self.radius * (1.0 + COVERED)
         if outside.any():
             raise SceneError(
