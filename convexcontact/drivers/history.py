@@ -17,16 +17,19 @@ updating q and b and starting from the previous answer (Clarabel's polish, OSQP'
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import scipy.sparse as sp
 
 from .. import solvers
 from ..fem.assembly import FEModel, assemble, viscous_stiffness
+from ..fem.mesh import available_memory
 from ..results.result import ContactResult
 from ..scene.history import History
-from ..scene.model import Coulomb, Scene, SceneError
-from .model import Model, ProgramSession, condensed, formulate, timed
+from ..scene.model import Coulomb, Scene, SceneError, of_type
+from .model import Model, ProgramSession, check_formulation, condensed, formulate, timed
 
 
 @dataclass
@@ -117,7 +120,8 @@ class Process:
             fem, self.key = viscous_step(fem, self.viscous, dt, self.u), dt
         self.absolute = fem.contact
         if self.slip is not None:
-            fem = replace(fem, contact=replace(fem.contact, tangent_offset=fem.contact.tangent_offset - self.slip))
+            fem = keeping_K(replace(fem, contact=replace(fem.contact, tangent_offset=fem.contact.tangent_offset -
+                                                         self.slip)), fem)
         if self.model.formulation == "dual" and self.key not in self.condensations:
             self.condensations[self.key] = condensed(fem, timings)
         condensation = self.condensations.get(self.key)
@@ -136,40 +140,119 @@ class Process:
         self.slip = contact.T @ u[fem.free] + contact.tangent_offset - coupling
 
 
+def keeping_K(copy: FEModel, fem: FEModel) -> FEModel:
+    """``copy`` (of ``fem`` with another contact trace) with ``fem``'s K, not its own: each step held a K of its own
+    (42 kB of a 306-DOF block's 57 kB a step)."""
+    copy.__dict__.update({"K": fem.__dict__["K"]} if "K" in fem.__dict__ else {})
+    return copy
+
+
 def viscous_step(fem: FEModel, viscous, dt: float, u_previous: np.ndarray) -> FEModel:
     """Backward Euler for Kelvin–Voigt: K + K_A/Δt and f + K_A u^{k−1}/Δt (full DOF vectors)."""
     step = replace(fem, K_full=(fem.K_full + viscous / dt).tocsr(), f_full=fem.f_full + viscous @ u_previous / dt)
     return step
 
 
-def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progress=None,
+def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progress=None, confirm: bool = False,
         **options) -> HistoryResult:
     """Solve ``scene``'s history step by step; ``progress(step, count, result)`` after each step.
 
     A step that fails ends the history there (later steps start from its state): the result
-    holds the steps solved so far, and its status and message name the failing step.
+    holds the steps solved so far, and its status and message name the failing step. Every step's
+    result is kept. After :data:`MEASURED_STEPS` steps the rest is estimated from the last one (time, and the
+    memory its result holds): beyond the memory available it is refused, beyond :data:`LONG_RUN` seconds it
+    needs ``confirm=True`` (``convexcontact run --confirm``).
     """
     if scene.history is None:
         raise SceneError("history", "the scene has no history", "give history = {times = [...], ...} or solve it statically")
     solvers.check_name(solver)
+    check_formulation(formulation, what=" for a history")
+    of_type(confirm, bool, "confirm", "give confirm=True to run a history estimated to take long, else leave it out")
     scene.history.check(scene)
     timings: dict = {}
     process = Process(scene, formulation, timings)
     stepper = Stepper(solver, options)
-    results = []
-    for k in range(len(scene.history)):
+    results, count = [], len(scene.history)
+    for k in range(count):
         step_timings: dict = {}
+        start = time.perf_counter()
         with timed(timings, "steps"):
             model = process.step_model(k, step_timings)
             result = stepper.solve(model, process.key, step_timings)
         result.extra["time"] = scene.history.times[k]
         results.append(result)
         if progress is not None:
-            progress(k + 1, len(scene.history), result)
+            progress(k + 1, count, result)
         if not result.solved:
             break
         process.advance(result)
+        if k + 1 == MEASURED_STEPS and count > MEASURED_STEPS:
+            check_cost(count, results, time.perf_counter() - start, confirm)
     return HistoryResult(scene, scene.history, results, timings)
+
+
+MEASURED_STEPS = 2
+"""Steps solved before the rest of a history is estimated: the first sets up the solver session, the second
+starts from the first's answer, as every later step does."""
+LONG_RUN = 3600.0
+"""Seconds a history may be estimated to take without ``confirm=True``: a 10⁶-step history of a small scene would
+have run about 4 hours, every step kept in memory, without a word."""
+
+
+def check_cost(count: int, steps: list[ContactResult], seconds: float, confirm: bool) -> None:
+    """Refuse the rest of a history whose steps, estimated from the last one, would not fit in memory, or would take
+    more than :data:`LONG_RUN` unless ``confirm``."""
+    done, remaining = len(steps), count - len(steps)
+    held = footprint(steps[-1], reachable(steps[:-1]))
+    measured = f"measured on step {done}: {seconds:.3g} s and {held / 1e3:.3g} kB held"
+    need, have = remaining * held, available_memory()
+    if need > have:
+        raise SceneError("history.times", f"{count} steps would hold about {need / 2**30:.3g} GiB (every step's "
+                         f"result is kept; {measured}), and this machine has {have / 2**30:.3g} GiB available",
+                         f"give fewer steps (about {done + int(have // held)} fit), or a coarser mesh")
+    if remaining * seconds > LONG_RUN and not confirm:
+        raise SceneError("history.times", f"{count} steps would take about {duration(remaining * seconds)} more "
+                         f"({measured}; {need / 2**30:.3g} GiB held in all)",
+                         "give fewer steps, or confirm=True (convexcontact run --confirm) to run them all")
+
+
+def duration(seconds: float) -> str:
+    return f"{seconds / 3600:.3g} h" if seconds > 3600 else f"{seconds / 60:.3g} min"
+
+
+def reachable(objects) -> set[int]:
+    """Ids of everything :func:`footprint` walks from ``objects``."""
+    seen: set[int] = set()
+    footprint(objects, seen)
+    return seen
+
+
+def footprint(root, seen: set[int]) -> int:
+    """Bytes of the arrays (dense and sparse) reachable from ``root`` through this package's objects, containers and
+    arrays, leaving out what ``seen`` holds (updated): what a step's result adds to the ones before it (the mesh,
+    the basis and K are shared). Written by hand: sys.getsizeof does not follow references, and tracemalloc slows
+    the whole run."""
+    total, stack = 0, [root]
+    while stack:
+        item = stack.pop()
+        if id(item) in seen:
+            continue
+        seen.add(id(item))
+        if isinstance(item, np.ndarray):
+            total += item.nbytes if item.base is None else 0
+            stack += [] if item.base is None else [item.base]
+        elif sp.issparse(item):
+            stack += [getattr(item, name) for name in ("data", "indices", "indptr", "row", "col", "coords")
+                      if isinstance(getattr(item, name, None), np.ndarray)]
+        elif isinstance(item, dict):
+            stack += list(item.values())
+        elif isinstance(item, (list, tuple)):
+            stack += list(item)
+        elif isinstance(item, Scene):  # the user's, its history shared by every step
+            continue
+        elif type(item).__module__.startswith("convexcontact") and hasattr(item, "__dict__"):
+            stack += list(vars(item).values())
+    return total
 
 
 class Stepper:

@@ -406,13 +406,20 @@ def prepare(scene: Scene, formulation: str = "auto") -> Model:
     picks one from the problem's shape and records why in ``Model.reason``.
     """
     of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
-    if formulation not in (*FORMULATIONS, MATRIX_FREE, "auto"):
-        raise SceneError("formulation", f"unknown {formulation!r}",
-                         f"use one of {sorted(FORMULATIONS)}, {MATRIX_FREE!r} or 'auto'")
+    check_formulation(formulation)
     timings: dict = {}
     with timed(timings, "assembly"):
         fem = assemble(scene)
     return formulate(fem, formulation, timings)
+
+
+def check_formulation(formulation, allowed=(*FORMULATIONS, MATRIX_FREE, "auto"), what: str = "") -> str:
+    """Return ``formulation`` if it is one of ``allowed``, else a SceneError naming them (``what``: for which use)."""
+    if not isinstance(formulation, str) or formulation not in allowed:
+        known = isinstance(formulation, str) and formulation in (*FORMULATIONS, MATRIX_FREE, "auto")
+        raise SceneError("formulation", f"{'' if known else 'unknown '}{formulation!r:.60}{what}",
+                         f"use one of {', '.join(map(repr, allowed))}")
+    return formulation
 
 
 CHOSEN = "chosen by the user"
