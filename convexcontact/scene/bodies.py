@@ -255,6 +255,16 @@ def body_of(boundary: str, names: list[str], field_name: str) -> str:
     return part
 
 
+def check_named(mesh: fe.Mesh, boundary: str, names: list[str], field_name: str) -> None:
+    """Refuse ``"<part>.<boundary>"`` where the part has no such boundary, listing the ones it has."""
+    part = body_of(boundary, names, field_name)
+    if boundary not in (mesh.boundaries or {}):
+        own = sorted(name for name in mesh.boundaries or {} if name.startswith(f"{part}."))
+        raise SceneError(field_name, f"body {part!r} has no boundary {boundary.split('.', 1)[1]!r}",
+                         f"use one of {own}" if own else f"body {part!r} has no named boundary: name its facets in "
+                         "the mesh file")
+
+
 def concatenate(parts: tuple[Part, ...], meshes: list[fe.Mesh]) -> fe.Mesh:
     """One mesh of all parts, node sets disjoint, boundaries and subdomains prefixed by the part's name."""
     shifts = np.cumsum([0] + [m.p.shape[1] for m in meshes[:-1]])
@@ -294,8 +304,11 @@ def bodies_scene(
     ``history`` names the bodies' boundaries as the scene does, e.g. ``dirichlet[punch.top].ux``."""
     parts = sequence_of(parts, Part, "parts", "give a list of cc.Part(name, geometry, material)")
     names = [part.name for part in parts]
-    if not parts or len(set(names)) != len(names):
-        raise SceneError("parts", f"expected distinct names, got {names}", "give each body its own name")
+    if not parts:
+        raise SceneError("parts", "no body", "give a list of cc.Part(name, geometry, material), one per body")
+    if len(set(names)) != len(names):
+        twice = next(name for name in names if names.count(name) > 1)
+        raise SceneError("parts", f"two bodies named {twice!r} (the names are {names})", "give each body its own name")
     for field_name in ("element", "plane"):
         kinds = {getattr(part, field_name) for part in parts}
         if len(kinds) > 1:
@@ -313,24 +326,36 @@ def bodies_scene(
     dirichlet = sequence_of(dirichlet, Dirichlet, "dirichlet", "give a list of cc.Dirichlet(boundary, ux=…, uy=…)")
     tractions = sequence_of(tractions, Traction, "tractions", "give a list of cc.Traction(boundary, pressure=…)")
     if isinstance(contact, (list, tuple)):
+        if not contact:
+            pair = f"a pair, e.g. cc.Pair('{names[0]}.bottom', master='{names[1]}.top'), or " if len(names) > 1 else ""
+            raise SceneError("contact", "an empty list: the bodies touch nowhere", f"add {pair}a rigid obstacle, "
+                             f"e.g. cc.Contact('{names[0]}.bottom', cc.Obstacle('flat'))")
         contact = several(sequence_of(contact, Contact, "contact", "give a list of cc.Pair(slave, master=…, law=…) "
                                       "and cc.Contact(boundary, obstacle, law)"))
     of_type(contact, Contact, "contact", "give cc.Pair(slave, master=…, law=…), a list of them, or "
             "cc.Contact(boundary, obstacle)")
+    merged = concatenate(parts, meshes)
+    named = [(d.boundary, f"dirichlet[{d.boundary}].boundary") for d in dirichlet]
+    named += [(traction.boundary, f"traction[{traction.boundary}].boundary") for traction in tractions]
+    several_contacts = isinstance(contact, Pairs)
+    for index, pair in enumerate(contact.pairs if several_contacts else (contact,)):
+        field_name = f"contact[{index}]" if several_contacts else "contact"
+        named.append((pair.boundary, f"{field_name}.boundary"))
+        slave = body_of(pair.boundary, names, f"{field_name}.boundary")
+        if isinstance(pair, Pair):
+            named.append((pair.master, f"{field_name}.master"))
+            if body_of(pair.master, names, f"{field_name}.master") == slave:
+                raise SceneError(f"{field_name}.master", f"{pair.master!r} and {pair.boundary!r} are boundaries of "
+                                 "one body", "pair a boundary of one body with a boundary of another (self-contact is "
+                                 "not built)")
+    for boundary, field_name in named:
+        check_named(merged, boundary, names, field_name)
     supported = {body_of(d.boundary, names, f"dirichlet[{d.boundary}].boundary") for d in dirichlet}
-    for traction in tractions:
-        body_of(traction.boundary, names, f"traction[{traction.boundary}].boundary")
-    for pair in contact.pairs if isinstance(contact, Pairs) else (contact,):
-        slave = body_of(pair.boundary, names, "contact.boundary")
-        if isinstance(pair, Pair) and body_of(pair.master, names, "contact.master") == slave:
-            raise SceneError("contact.master", f"{pair.master!r} and {pair.boundary!r} are boundaries of one body",
-                             "pair a boundary of one body with a boundary of another (self-contact is not built)")
     floating = [name for name in names if name not in supported]
     if floating:
         raise SceneError("dirichlet", f"body {floating[0]!r} has no Dirichlet boundary: it can move rigidly "
                          "(contact alone does not hold a body)",
                          f"fix at least a component on one of its boundaries, e.g. boundary = '{floating[0]}.top', ux = 0")
-    merged = concatenate(parts, meshes)
     return Scene(
         body=Bodies(merged, parts[0].element, parts[0].plane, parts=parts),
         materials={part.name: part.material for part in parts},
