@@ -52,7 +52,7 @@ class History:
     values: Mapping[str, Sequence]
 
     def __post_init__(self):
-        if np.ndim(self.times) != 1 or len(self.times) == 0:
+        if not listed(self.times) or len(self.times) == 0 or any(listed(t) for t in self.times):
             raise SceneError("history.times", f"expected a list of step times, got {self.times!r}",
                              "give times = [t1, t2, …], increasing and positive")
         times = tuple(finite(t, f"history.times[{i}]") for i, t in enumerate(self.times))
@@ -66,16 +66,17 @@ class History:
             match = PATH.match(path) if isinstance(path, str) else None
             if match is None:
                 raise SceneError(f"history.{path}", "unknown quantity", f"use one of {', '.join(PATHS)}")
-            if np.ndim(series) == 0 or len(series) != len(times):
+            if not listed(series) or len(series) != len(times):
                 raise SceneError(f"history.{path}", f"{np.size(series)} values for {len(times)} step times",
                                  "give one value per step time")
             vector = path.rsplit(".", 1)[-1] in VECTORS
             values[path] = tuple(finite_vector(v, f"history.{path}[{i}]", (2, 3)) for i, v in enumerate(series)) \
                 if vector else numbers(series, f"history.{path}")
             lengths = [len(v) for v in values[path]] if vector else [0]
-            if len(set(lengths)) > 1:
-                raise SceneError(f"history.{path}[{lengths.index(lengths[-1])}]", f"{lengths[-1]} components after "
-                                 f"{lengths[0]} at the first step", "give every step's vector the body's dimension")
+            other = next((k for k, n in enumerate(lengths) if n != lengths[0]), None)
+            if other is not None:
+                raise SceneError(f"history.{path}[{other}]", f"{lengths[other]} components after {lengths[0]} at the "
+                                 "first step", "give every step's vector the body's dimension")
         object.__setattr__(self, "times", times)
         object.__setattr__(self, "values", values)
 
@@ -114,6 +115,11 @@ class History:
             magnitudes = np.abs(np.asarray(series, dtype=float)).reshape(len(series), -1).max(axis=1)
             scene = at(scene, path, series[int(np.argmax(magnitudes))])
         return scene
+
+
+def listed(value) -> bool:
+    """Whether ``value`` is a list of values (a string is not; ragged lists are, unlike for np.ndim)."""
+    return isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, (str, bytes))
 
 
 def numbers(series, field_name: str) -> tuple[float, ...]:
@@ -220,6 +226,8 @@ def set_on(items: tuple, boundary: str, name: str, value, path: str, table: str)
     exist and have that field given (its value at t = 0 is then irrelevant)."""
     matching = [item for item in items if item.boundary == boundary]
     if not matching or getattr(matching[0], name) is None:
+        given = [item.boundary for item in items if getattr(item, name) is not None]
         raise SceneError(f"history.{path}", f"the scene has no [[{table}]] {name} on {boundary!r}",
-                         f"add a [[{table}]] boundary = {boundary!r} with {name} (its value at t = 0)")
+                         f"add a [[{table}]] boundary = {boundary!r} with {name} (its value at t = 0)"
+                         + (f", or name a boundary that has one: {given}" if given else ""))
     return tuple(replace(item, **{name: value}) if item.boundary == boundary else item for item in items)
