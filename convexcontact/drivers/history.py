@@ -165,7 +165,7 @@ def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progr
     """
     if scene.history is None:
         raise SceneError("history", "the scene has no history", "give history = {times = [...], ...} or solve it statically")
-    solvers.check_name(solver)
+    solvers.check_options({**options, "progress": progress}, solvers.check_name(solver))
     check_formulation(formulation, what=" for a history")
     of_type(confirm, bool, "confirm", "give confirm=True to run a history estimated to take long, else leave it out")
     scene.history.check(scene)

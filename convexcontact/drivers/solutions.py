@@ -100,8 +100,11 @@ class SolutionSet:
 
     def save(self, directory) -> list:
         """summary.json, and each solution's outputs in solution_K/."""
-        from ..results.output import begin
+        from pathlib import Path
 
+        from ..results.output import begin, check_folder_target
+
+        check_folder_target(Path(directory), "directory")
         directory, paths = begin(self, directory)
         for k, solution in enumerate(self.solutions, start=1):
             paths += solution.result.save(directory / f"solution_{k}")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .output import FORMATS, begin, write_vtk
+from .output import FORMATS, begin, check_folder_target, write_vtk
 
 
 def write_pvd(times, files, path: Path):
@@ -23,6 +23,7 @@ def write_pvd(times, files, path: Path):
 
 def save_history(history, directory, formats=FORMATS) -> list[Path]:
     """Write the chosen outputs of a :class:`~convexcontact.drivers.history.HistoryResult`; return the paths."""
+    check_folder_target(Path(directory), "directory")
     directory, paths = begin(history, directory, formats)
     solved = [(t, s) for t, s in zip(history.times, history.steps) if s.solved]
     if "vtk" in formats and solved:
