@@ -233,16 +233,16 @@ def commands(argv=None) -> int:
     return run_command(args)
 
 
-OPTION_FIELDS = {"formulation": "--formulation", "solutions": "--solutions", "confirm": "--confirm"}
+OPTION_FIELDS = ("formulation", "solutions", "confirm", "solver", "tol")
 """Keywords of cc.solve whose errors the command line names by its option."""
 
 
 def as_option(error: Exception) -> str:
     """The error's message, a keyword of cc.solve named as the option that set it (``formulation:`` →
     ``--formulation:``)."""
-    field_name = getattr(error, "field", None)
     message = str(error)
-    return OPTION_FIELDS[field_name] + message[len(field_name):] if field_name in OPTION_FIELDS else message
+    keyword = message.split(":", 1)[0]
+    return f"--{message}" if keyword in OPTION_FIELDS else message
 
 
 def step_printer():

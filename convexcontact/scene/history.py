@@ -55,7 +55,7 @@ class History:
         if not listed(self.times) or len(self.times) == 0 or any(listed(t) for t in self.times):
             raise SceneError("history.times", f"expected a list of step times, got {self.times!r}",
                              "give times = [t1, t2, …], increasing and positive")
-        times = tuple(finite(t, f"history.times[{i}]") for i, t in enumerate(self.times))
+        times = numbers(self.times, "history.times")
         if times[0] <= 0 or any(b <= a for a, b in itertools.pairwise(times)):
             raise SceneError("history.times", f"must increase from above 0 (t0 = 0 is the unloaded state), got "
                              f"{list(times)}", "give strictly increasing positive times")
