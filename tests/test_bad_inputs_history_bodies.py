@@ -6,6 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+import skfem as fe
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -125,6 +126,8 @@ def test_run_history_checks_its_options_before_any_step(options, field, fix, mon
 
 def test_a_static_scene_is_no_history():
     raises(lambda: cc.run_history(PATCH), "history", "solve it statically")
+    raises(lambda: cc.run_history("scene.toml"), "scene", "history=cc.History(...)")
+    raises(lambda: cc.History([1.0], [("obstacle.depth", [0.1])]), "history.values", "{'obstacle.depth': [0.01, 0.02]}")
 
 
 def test_solutions_all_with_a_history_suggests_a_valid_value():
@@ -226,6 +229,7 @@ def test_a_history_result_refuses_a_file_as_its_folder(tmp_path):
     (tmp_path / "taken").write_text("mine")
     raises(lambda: result.save(tmp_path / "taken"), "directory", "give a folder")
     assert (tmp_path / "taken").read_text() == "mine"
+    raises(lambda: result.save(None), "directory", "a folder's path")
 
 
 # ------------------------------------------------------------------------------------------- several bodies
@@ -261,6 +265,11 @@ PAIR = cc.Pair("upper.bottom", master="lower.top")
      "['lower.bottom'"),
     ({"tractions": [cc.Traction("upper.tpo", pressure=0.1)]}, "traction[upper.tpo].boundary", "['upper.bottom'"),
     ({"contact": "upper.bottom"}, "contact", "cc.Pair(slave, master=…"),
+    ({"parts": upper()}, "parts", "give a list of cc.Part"),
+    ({"parts": [upper(plane="stress"), LOWER]}, "parts.plane", "plane = 'stress' for all"),
+    ({"parts": [upper(geometry=fe.MeshTri(fe.MeshTri().p * [[1.0], [np.nan]], fe.MeshTri().t)), LOWER]},
+     "parts[upper].geometry", "finite coordinates"),  # scipy's "data must be finite" before
+    ({"parts": [upper(offset=(0.0, 1e300)), LOWER]}, "parts[upper].offset", "near the origin"),  # overflows before
 ])
 def test_bodies_scene_refuses_a_broken_assembly_of_bodies_by_name(arguments, field, fix):
     """No pair, no body, two of one name, a string for a part, 2-D with 3-D, unknown parts and boundaries, a body
@@ -390,6 +399,7 @@ def test_a_solution_set_refuses_a_file_as_its_folder(tmp_path):
     found = cc.all_solutions(coulomb_block())
     (tmp_path / "taken").write_text("mine")
     raises(lambda: found.save(tmp_path / "taken"), "directory", "give a folder")
+    raises(lambda: cc.all_solutions(None), "scene", "cc.Coulomb law")
 
 
 # ------------------------------------------------------------------------------------- convexcontact run

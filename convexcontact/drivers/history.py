@@ -163,6 +163,7 @@ def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progr
     memory its result holds): beyond the memory available it is refused, beyond :data:`LONG_RUN` seconds it
     needs ``confirm=True`` (``convexcontact run --confirm``).
     """
+    of_type(scene, Scene, "scene", "build cc.Scene(...) or cc.bodies_scene(...) with history=cc.History(...)")
     if scene.history is None:
         raise SceneError("history", "the scene has no history", "give history = {times = [...], ...} or solve it statically")
     solvers.check_options({**options, "progress": progress}, solvers.check_name(solver))

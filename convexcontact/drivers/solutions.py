@@ -100,12 +100,10 @@ class SolutionSet:
 
     def save(self, directory) -> list:
         """summary.json, and each solution's outputs in solution_K/."""
-        from pathlib import Path
+        from ..results.history_out import output_folder
+        from ..results.output import begin
 
-        from ..results.output import begin, check_folder_target
-
-        check_folder_target(Path(directory), "directory")
-        directory, paths = begin(self, directory)
+        directory, paths = begin(self, output_folder(directory))
         for k, solution in enumerate(self.solutions, start=1):
             paths += solution.result.save(directory / f"solution_{k}")
         return paths
@@ -124,7 +122,7 @@ def all_solutions(scene: Scene, solver: str = "clarabel", formulation: str = "au
     after each Picard run of a search and each Picard slope. ``confirm=True`` runs a search estimated beyond
     :data:`LONG_SEARCH` seconds.
     """
-    law = scene.contact.law
+    law = of_type(scene, Scene, "scene", "build cc.Scene(...) with a cc.Coulomb law").contact.law
     if not isinstance(law, Coulomb):
         raise SceneError("contact.law", "several solutions are a Coulomb question: Signorini and Tresca problems "
                          "are convex, their answer is unique", "use a Coulomb law")

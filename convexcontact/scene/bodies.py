@@ -20,7 +20,6 @@ from ..fem.mesh import build_mesh
 from .checks import SceneError, finite_vector, of_type, sequence_of
 from .history import History
 from .model import (
-    ELEMENTS,
     Body,
     Box,
     Contact,
@@ -75,16 +74,32 @@ class Part:
             raise SceneError(field_name, str(error)[len(error.field) + 2:]) from None
 
     def mesh(self) -> fe.Mesh:
-        """The part's mesh in user units, checked, straight-sided (:func:`straight_sided`) and placed."""
+        """The part's mesh in user units, checked, straight-sided (:func:`straight_sided`) and placed where its
+        cells stay above round-off (:data:`PLACEMENT`)."""
+        if isinstance(self.geometry, fe.Mesh) and not np.isfinite(self.geometry.p).all():
+            raise SceneError(f"parts[{self.name}].geometry", "the mesh has NaN or infinite node coordinates",
+                             "give every node finite coordinates")
         with self.named():
             mesh = straight_sided(build_mesh(Body(self.geometry, self.element, self.plane)))
         if self.offset is None:
-            return mesh
-        if len(self.offset) != mesh.dim():
+            placed = mesh
+        elif len(self.offset) != mesh.dim():
             raise SceneError(f"parts[{self.name}].offset", f"{len(self.offset)} numbers for a {mesh.dim()}-D body",
                              f"give {mesh.dim()} numbers")
-        return mesh.translated(self.offset)
+        else:
+            placed = mesh.translated(self.offset)
+        size, reach = np.ptp(mesh.p, axis=1).max(), np.abs(placed.p).max()
+        if reach > PLACEMENT * size:
+            field_name = f"parts[{self.name}]." + ("geometry" if self.offset is None else "offset")
+            raise SceneError(field_name, f"the body lies {reach:.3g} from the origin, {reach / size:.2g} times its size: "
+                             "its cells are lost in round-off there (and lengths squared overflow)",
+                             "place the bodies near the origin (Rectangle origin, Part offset)")
+        return placed
 
+
+PLACEMENT = 1e8
+"""How far from the origin, in the body's sizes, a part may lie: coordinates of that magnitude hold a cell of 10⁻⁴
+the body's size only to 2·10⁻⁴ of itself; 10³⁰⁰ made NaN normals and overflows before the pair was refused."""
 
 LINEAR = {fe.MeshTri2: (fe.MeshTri1, fe.ElementTriP2), fe.MeshQuad2: (fe.MeshQuad1, fe.ElementQuad2),
           fe.MeshTet2: (fe.MeshTet1, fe.ElementTetP2), fe.MeshHex2: (fe.MeshHex1, fe.ElementHex2)}
@@ -314,7 +329,8 @@ def bodies_scene(
         if len(kinds) > 1:
             used = ", ".join(f"{part.name}: {getattr(part, field_name)}" for part in parts)
             raise SceneError(f"parts.{field_name}", f"mixed {field_name}s ({used})",
-                             f"give every body the same {field_name}, e.g. {ELEMENTS[0]} with {ELEMENTS[0]}")
+                             f"give every body the same {field_name}, e.g. {field_name} = "
+                             f"{getattr(parts[0], field_name)!r} for all")
     meshes = [part.mesh() for part in parts]
     if len({m.dim() for m in meshes}) > 1:
         raise SceneError("parts.geometry", "2-D and 3-D bodies mixed", "give every body the same dimension")

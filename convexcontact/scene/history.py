@@ -59,7 +59,10 @@ class History:
         if times[0] <= 0 or any(b <= a for a, b in itertools.pairwise(times)):
             raise SceneError("history.times", f"must increase from above 0 (t0 = 0 is the unloaded state), got "
                              f"{list(times)}", "give strictly increasing positive times")
-        if not isinstance(self.values, Mapping) or not self.values:
+        if not isinstance(self.values, Mapping):
+            raise SceneError("history.values", f"expected a mapping {{path: values}}, got {type(self.values).__name__}",
+                             "give e.g. {'obstacle.depth': [0.01, 0.02]}")
+        if not self.values:
             raise SceneError("history", "no quantity changes", "name at least one, e.g. 'obstacle.depth' = [...]")
         values = {}
         for path, series in self.values.items():
