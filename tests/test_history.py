@@ -291,3 +291,19 @@ def test_the_steps_of_a_history_share_one_stiffness():
     result = run(sliding_block([0.0, 0.002, 0.004]))
     assert result.status == "solved"
     assert all(step.fem.K is result.steps[0].fem.K for step in result.steps[1:])
+
+
+@pytest.mark.parametrize("small, status", [(1e-6, "solved"), (1e-9, "inaccurate"), (1e-12, "inaccurate")])
+def test_a_step_far_below_the_history_scale_is_judged_on_its_own(small, status):
+    """The pressure patch loaded with ``small``, then 1: the units are the second step's, on which the first step's
+    certificate passed while its contact force was 13 % off (10⁻⁹) or 0 (10⁻¹²). On its own scale it is
+    "inaccurate", and says why; at 10⁻⁶ it is solved and its force is the load to round-off."""
+    scene = dataclasses.replace(cc.library.pressure_patch(nx=3), history=History(
+        [1.0, 2.0], {"traction[top].pressure": [small, 1.0]}))
+    result = run(scene)
+    first = result.steps[0]
+    assert first.status == status and result.steps[1].status == "solved"
+    if status == "solved":
+        assert first.normal_force == pytest.approx(small, rel=1e-12)
+    else:
+        assert "on its own" in first.message and result.status == "inaccurate" and "step 1" in result.message

@@ -21,7 +21,6 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-import scipy.sparse as sp
 
 from .. import solvers
 from ..fem.assembly import FEModel, assemble, viscous_stiffness
@@ -29,7 +28,8 @@ from ..fem.mesh import available_memory
 from ..results.result import ContactResult
 from ..scene.history import History
 from ..scene.model import Coulomb, Scene, SceneError, of_type
-from .model import Model, ProgramSession, check_formulation, condensed, formulate, timed
+from .estimates import duration, footprint, reachable
+from .model import CERTIFIED, Model, ProgramSession, check_formulation, condensed, formulate, timed
 
 
 @dataclass
@@ -181,6 +181,7 @@ def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progr
             model = process.step_model(k, step_timings)
             result = stepper.solve(model, process.key, step_timings)
         result.extra["time"] = scene.history.times[k]
+        judge_on_its_own_scale(result, process.fem)
         results.append(result)
         if progress is not None:
             progress(k + 1, count, result)
@@ -190,6 +191,35 @@ def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progr
         if k + 1 == MEASURED_STEPS and count > MEASURED_STEPS:
             check_cost(count, results, time.perf_counter() - start, confirm)
     return HistoryResult(scene, scene.history, results, timings)
+
+
+def judge_on_its_own_scale(result: ContactResult, envelope: FEModel) -> None:
+    """Mark "inaccurate" a step certified only on the history's scale. The units are the largest step's, and the
+    certificate measures residuals against at least one unit, so a step loaded with 10⁻⁹ of the largest load passed
+    with its contact force 13 % off (10⁻¹²: reported 0). Divided by the step's own scale — its loads, prescribed
+    motion and obstacle motion against the largest ones (:func:`drive`), or its own pressures (a state locked in by
+    friction), at most one unit — its certificate must pass as well."""
+    if result.status != "solved":
+        return
+    scaling, worst = result.fem.scaling, result.certificate.worst
+    pressure = np.abs(result.contact.pressure).max(initial=0.0) / scaling.pressure
+    scale = min(1.0, max([pressure, *(a / b for a, b in zip(drive(result.fem), drive(envelope)) if b > 0)]))
+    own = worst / scale if scale > 0 else (0.0 if worst == 0 else np.inf)
+    if own > CERTIFIED:
+        result.status = "inaccurate"
+        result.message = (f"its loads, motion and pressures are {scale:.2g} of the history's largest: its certificate "
+                          f"{worst:.2g} passes on the history's scale, but is {own:.2g} on its own (over {CERTIFIED:g}); "
+                          "run the small steps as a history of their own, or give a smaller tol")
+
+
+def drive(fem: FEModel) -> tuple[float, ...]:
+    """What drives a step, in magnitudes: its load vector, its prescribed displacements, and its rigid obstacles'
+    depths, gaps and forces."""
+    contact = fem.scene.contact
+    obstacles = [c.obstacle for c in getattr(contact, "pairs", (contact,)) if not hasattr(c, "master")]
+    motion = [max((abs(getattr(obstacle, name) or 0.0) for obstacle in obstacles), default=0.0)
+              for name in ("depth", "force", "tangential_force", "gap")]
+    return (np.abs(fem.f_full).max(initial=0.0), np.abs(fem.prescribed).max(initial=0.0), *motion)
 
 
 MEASURED_STEPS = 2
@@ -215,45 +245,6 @@ def check_cost(count: int, steps: list[ContactResult], seconds: float, confirm: 
         raise SceneError("history.times", f"{count} steps would take about {duration(remaining * seconds)} more "
                          f"({measured}; {need / 2**30:.3g} GiB held in all)",
                          "give fewer steps, or confirm=True (convexcontact run --confirm) to run them all")
-
-
-def duration(seconds: float) -> str:
-    return f"{seconds / 3600:.3g} h" if seconds > 3600 else f"{seconds / 60:.3g} min"
-
-
-def reachable(objects) -> set[int]:
-    """Ids of everything :func:`footprint` walks from ``objects``."""
-    seen: set[int] = set()
-    footprint(objects, seen)
-    return seen
-
-
-def footprint(root, seen: set[int]) -> int:
-    """Bytes of the arrays (dense and sparse) reachable from ``root`` through this package's objects, containers and
-    arrays, leaving out what ``seen`` holds (updated): what a step's result adds to the ones before it (the mesh,
-    the basis and K are shared). Written by hand: sys.getsizeof does not follow references, and tracemalloc slows
-    the whole run."""
-    total, stack = 0, [root]
-    while stack:
-        item = stack.pop()
-        if id(item) in seen:
-            continue
-        seen.add(id(item))
-        if isinstance(item, np.ndarray):
-            total += item.nbytes if item.base is None else 0
-            stack += [] if item.base is None else [item.base]
-        elif sp.issparse(item):
-            stack += [getattr(item, name) for name in ("data", "indices", "indptr", "row", "col", "coords")
-                      if isinstance(getattr(item, name, None), np.ndarray)]
-        elif isinstance(item, dict):
-            stack += list(item.values())
-        elif isinstance(item, (list, tuple)):
-            stack += list(item)
-        elif isinstance(item, Scene):  # the user's, its history shared by every step
-            continue
-        elif type(item).__module__.startswith("convexcontact") and hasattr(item, "__dict__"):
-            stack += list(vars(item).values())
-    return total
 
 
 class Stepper:

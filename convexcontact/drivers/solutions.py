@@ -39,7 +39,7 @@ from ..fem.assembly import FEModel, assemble
 from ..fem.mesh import available_memory
 from ..results.result import ContactResult
 from ..scene.model import Coulomb, Scene, SceneError, of_type
-from .history import duration
+from .estimates import duration
 from .model import Model, check_formulation, field_at_points, formulate, timed
 
 EXHAUSTIVE_LIMIT = 10
