@@ -273,7 +273,7 @@ def run_command(args) -> int:
         options = {} if args.tol is None else {"tol": args.tol}
         solutions = getattr(args, "solutions", "one")
         if solutions == "all":
-            options["progress"] = lambda done, count, what: print(f"{what} {done}/{count}", flush=True)
+            options["progress"] = lambda done, count, what: print(f"{what} ({done}/{count})", flush=True)
         elif scene.history is not None:
             options["progress"] = step_printer()
         result = solve(scene, args.solver, formulation=args.formulation, solutions=solutions,

@@ -124,6 +124,10 @@ def test_run_history_checks_its_options_before_any_step(options, field, fix, mon
     raises(lambda: cc.run_history(patch_history(), **options), field, fix)
 
 
+def test_confirm_is_a_boolean_on_every_path():
+    raises(lambda: cc.solve(PATCH, confirm="yes"), "confirm", "confirm=True")
+
+
 def test_a_static_scene_is_no_history():
     raises(lambda: cc.run_history(PATCH), "history", "solve it statically")
     raises(lambda: cc.run_history("scene.toml"), "scene", "history=cc.History(...)")

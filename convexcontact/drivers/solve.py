@@ -29,6 +29,7 @@ def solve(scene: Scene, solver: str = "auto", formulation: str = "auto", solutio
     solvers.check_options(options, solver)  # before any assembly
     if solutions not in ("one", "all"):
         raise SceneError("solutions", f"got {solutions!r}", "use 'one' (the default) or 'all'")
+    of_type(confirm, bool, "confirm", "give confirm=True to run a long history or search, else leave it out")
     if solutions == "all":
         if scene.history is not None:
             raise SceneError("solutions", "'all' lists the solutions of one static problem, not of a history",
