@@ -98,7 +98,7 @@ def test_every_numeric_field_refuses_what_is_no_value_of_it(build, field, negati
     (lambda: cc.Body(cc.Rectangle(), plane="axisymmetric"), "body.plane", "'strain', 'stress'"),
     (lambda: cc.Rectangle(refine_y="left"), "body.refine_y", "'top' or 'bottom'"),
     (lambda: cc.Material(1.0, 0.3, name=3), "material.name", "subdomain"),
-    (lambda: cc.prepare(PATCH, "mixed"), "formulation", "'dual', 'primal'"),
+    (lambda: cc.prepare(PATCH, "mixed"), "formulation", "use one of 'primal', 'dual', 'dual-matrix-free', 'auto'"),
     (lambda: cc.solve(PATCH, solutions="some"), "solutions", "'one'"),
 ])
 def test_an_unknown_option_lists_the_valid_ones(build, field, listed):

@@ -423,9 +423,7 @@ def matrix_free_obstruction(obstacle, law) -> str | None:
 
 def check_formulation(scene: Scene, formulation: str, solver: str = "auto") -> None:
     """Refuse, before any assembly, a formulation the scene (or the ``solver``) cannot have, naming the ones it can."""
-    if formulation not in (*FORMULATIONS, MATRIX_FREE, "auto"):
-        raise SceneError("formulation", f"unknown {formulation!r}",
-                         f"use one of {sorted(FORMULATIONS)}, {MATRIX_FREE!r} or 'auto'")
+    check_formulation_name(formulation)
     if formulation == MATRIX_FREE and solver.partition(":")[0] not in ("auto", "newton-cg"):
         raise SceneError("formulation", f"{MATRIX_FREE!r} applies W as an operator, which only newton-cg solves, "
                          f"and solver = {solver!r} needs it as a matrix",
@@ -461,6 +459,15 @@ def prepare(scene: Scene, formulation: str = "auto") -> Model:
     with timed(timings, "assembly"):
         fem = assemble(scene)
     return formulate(fem, formulation, timings)
+
+
+def check_formulation_name(formulation, allowed=(*FORMULATIONS, MATRIX_FREE, "auto"), what: str = "") -> str:
+    """Return ``formulation`` if it is one of ``allowed``, else a SceneError naming them (``what``: for which use)."""
+    if not isinstance(formulation, str) or formulation not in allowed:
+        known = isinstance(formulation, str) and formulation in (*FORMULATIONS, MATRIX_FREE, "auto")
+        raise SceneError("formulation", f"{'' if known else 'unknown '}{formulation!r:.60}{what}",
+                         f"use one of {', '.join(map(repr, allowed))}")
+    return formulation
 
 
 CHOSEN = "chosen by the user"

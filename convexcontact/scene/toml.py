@@ -186,11 +186,13 @@ def _pair(table, index: int) -> Contact:
     """One ``[[contact]]`` table of several: a pair (``master``) or a rigid obstacle (``obstacle = {shape = …}``)."""
     table = dict(_table(table, f"contact[{index}]", None))  # a copy: the user's table keeps its obstacle
     obstacle = table.pop("obstacle", None)
-    if obstacle is None and not isinstance(table.get("master"), str):
+    if "master" in table:
+        _check_type(table["master"], TEXT, f"contact[{index}].master")
+    if obstacle is None and "master" not in table:
         raise SceneError(f"contact[{index}].master", "missing: each [[contact]] table of several is a pair of bodies "
                          "or a rigid obstacle", "name the master boundary, e.g. master = 'foundation.top', or give "
                          "obstacle = { shape = 'flat', gap = 0.0 }")
-    return _contact(table, obstacle or {}, PAIR_KEYS)
+    return _contact(table, obstacle or {}, PAIR_KEYS, f"contact[{index}]")
 
 
 def _body(table, base_dir: Path, path: str = "body", extra: dict | None = None) -> Body:
@@ -208,15 +210,17 @@ def _body(table, base_dir: Path, path: str = "body", extra: dict | None = None) 
     return Body(geometry, **options)
 
 
-def _contact(table, obstacle, pair: dict | None = None) -> Contact:
-    """``[contact]`` and ``[obstacle]``; with ``pair`` (several bodies) a ``master`` makes it a :class:`Pair`."""
-    law_name = _table(table, "contact", None).get("law", "signorini")
-    _check_type(law_name, TEXT, "contact.law")
+def _contact(table, obstacle, pair: dict | None = None, path: str = "contact") -> Contact:
+    """``[contact]`` and ``[obstacle]``; with ``pair`` (several bodies) a ``master`` makes it a :class:`Pair`.
+    ``path``: the table's name in errors (``contact[1]`` of several)."""
+    law_name = _table(table, path, None).get("law", "signorini")
+    _check_type(law_name, TEXT, f"{path}.law")
     if law_name not in LAWS:
-        raise SceneError("contact.law", f"unknown law {law_name!r}", f"available laws: {', '.join(LAWS)}")
+        raise SceneError(f"{path}.law", f"unknown law {law_name!r}", f"available laws: {', '.join(LAWS)}")
     law, law_keys = LAWS[law_name]
-    keys = _table(table, "contact", CONTACT | law_keys | (pair or {}), required=("boundary",))
+    keys = _table(table, path, CONTACT | law_keys | (pair or {}), required=("boundary",))
     obstacle = _table(obstacle, "obstacle", OBSTACLE)
+    _check_type(obstacle.get("shape", "flat"), TEXT, "obstacle.shape")
     check_shape_fields(obstacle.get("shape", "flat"), obstacle)
     options = {key: keys[key] for key in law_keys if key in keys}
     if law is NormalCompliance and "stiffness" not in options:
