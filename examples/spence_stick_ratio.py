@@ -38,7 +38,7 @@ def study(frictions, step_ratios, widths, h, out: Path) -> list[dict]:
                     row = indentation(friction, step_ratio, width, h)
                     row.update(cap=1 / row["a_growth"], half_plane=reference[friction])
                     rows.append(row)
-                    writer.writerow({k: round(v, 5) if isinstance(v, float) else v for k, v in row.items()})
+                    writer.writerow({k: f"{v:.6g}" if isinstance(v, float) else v for k, v in row.items()})
                     file.flush()
                     print(f"F = {friction}, width {width:g} ({width / row['final_a']:.0f} a), depth × {step_ratio}"
                           f" (a × {row['a_growth']:.3f}): c/a = {row['c_over_a']:.3f} ± {row['spread'] / 2:.3f}"

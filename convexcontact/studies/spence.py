@@ -57,8 +57,8 @@ def flat_punch(stick: float, friction: float, beta: float, cells: int = 200):
     p even, q odd), collocation at their midpoints, surface displacements in units of the compliance
     A = 2(1 − ν²)/E: a unit pressure on [s₁, s₂] moves the surface by u_z = −(1/π)[I(x − s₁) − I(x − s₂)]
     (into the body) and u_x = −(β/2)(|x − s₁| − |x − s₂|), a unit shear by u_x = −(1/π)[I(x − s₁) − I(x − s₂)]
-    and u_z = (β/2)(|x − s₁| − |x − s₂|), I = :func:`strip_integral` (Johnson, Contact Mechanics, eqs. 2.19–2.25,
-    integrated over the strip). We write these few lines by hand: no library solves half-plane contact.
+    and u_z = (β/2)(|x − s₁| − |x − s₂|), I = :func:`strip_integral` (the point-load kernels of Johnson, Contact Mechanics,
+    ch. 2, integrated over the strip). We write these few lines by hand: no library solves half-plane contact.
 
     Returns the midpoints x, pressure p, shear q and tangential displacement u_x (x ≥ 0).
     """
