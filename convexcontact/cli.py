@@ -192,6 +192,8 @@ def commands(argv=None) -> int:
             command.add_argument("scene", type=Path, help="scene file (see docs/scenes.md); a [history] runs every step")
             command.add_argument("--solutions", choices=["one", "all"], default="one",
                                  help="all: every solution of a Coulomb scene, each certified (docs/uniqueness.md)")
+            command.add_argument("--confirm", action="store_true", help="run a history or a --solutions all search "
+                                 "estimated to take over an hour (refused otherwise, with the estimate)")
         else:
             command.add_argument("--nx", type=int, default=80, help="elements across the block (default 80)")
         command.add_argument("--solver", default="auto", help="auto (newton-cg on a matrix-free dual, else clarabel) "
@@ -265,6 +267,32 @@ def commands(argv=None) -> int:
     return run_command(args)
 
 
+OPTION_FIELDS = ("formulation", "solutions", "confirm", "solver", "tol")
+"""Keywords of cc.solve whose errors the command line names by its option."""
+
+
+def as_option(error: Exception) -> str:
+    """The error's message, a keyword of cc.solve named as the option that set it (``formulation:`` →
+    ``--formulation:``)."""
+    message = str(error)
+    keyword = message.split(":", 1)[0]
+    return f"--{message}" if keyword in OPTION_FIELDS else message
+
+
+def step_printer():
+    """Progress of a history: each step's status, the time so far and the time left at the mean step's pace."""
+    import time
+
+    start = time.perf_counter()
+
+    def printer(k: int, count: int, step) -> None:
+        elapsed = time.perf_counter() - start
+        print(f"step {k}/{count}: {step.status} ({elapsed:.3g} s, about {elapsed / k * (count - k):.3g} s left)",
+              flush=True)
+
+    return printer
+
+
 def run_command(args) -> int:
     """``demo`` or ``run``: check the outputs, solve, report."""
     try:
@@ -277,12 +305,15 @@ def run_command(args) -> int:
 
             scene = load_scene(args.scene)
         options = {} if args.tol is None else {"tol": args.tol}
-        if scene.history is not None:
-            options["progress"] = lambda k, count, step: print(f"step {k}/{count}: {step.status}", flush=True)
-        result = solve(scene, args.solver, formulation=args.formulation,
-                       solutions=getattr(args, "solutions", "one"), **options)
+        solutions = getattr(args, "solutions", "one")
+        if solutions == "all":
+            options["progress"] = lambda done, count, what: print(f"{what} ({done}/{count})", flush=True)
+        elif scene.history is not None:
+            options["progress"] = step_printer()
+        result = solve(scene, args.solver, formulation=args.formulation, solutions=solutions,
+                       confirm=getattr(args, "confirm", False), **options)
     except (SceneError, ValueError) as error:
-        print(f"error: {error}", file=sys.stderr)
+        print(f"error: {as_option(error)}", file=sys.stderr)
         return 2
     try:
         return report(result, args.out, args.json)

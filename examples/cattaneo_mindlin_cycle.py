@@ -44,8 +44,8 @@ def main(h: float = 0.01, peak: float = 0.75, back: float = 0.25, out: str = "ou
     loading, unloading = result.steps[1], result.steps[2]
     measured = {"stick on loading": ratio(loading, "stick"), "stick on unloading": ratio(unloading, "stick")}
     theory = {"stick on loading": np.sqrt(1 - peak), "stick on unloading": np.sqrt(1 - (peak - back) / 2)}
-    for name in measured:
-        print(f"{name}: c/a = {measured[name]:.3f}, theory {theory[name]:.3f}")
+    for name, value in measured.items():
+        print(f"{name}: c/a = {value:.3f}, theory {theory[name]:.3f}")
     print(f"status {result.status}; certificates ≤ {max(s.certificate.worst for s in result.steps):.1e}")
     result.save(out)
     return result, measured, theory
