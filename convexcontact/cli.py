@@ -194,6 +194,12 @@ def commands(argv=None) -> int:
                                  help="all: every solution of a Coulomb scene, each certified (docs/uniqueness.md)")
             command.add_argument("--confirm", action="store_true", help="run a history or a --solutions all search "
                                  "estimated to take over an hour (refused otherwise, with the estimate)")
+            command.add_argument("--adapt", action="store_true", help="refine where the error indicators are "
+                                 "largest until --target is met (triangles, tetrahedra; docs/estimate.md)")
+            command.add_argument("--target", type=float, help="with --adapt: estimated relative energy error to "
+                                 "reach (default 1e-2)")
+            command.add_argument("--max-dofs", type=int, help="with --adapt: no mesh beyond this many DOFs "
+                                 "(default 200000)")
         else:
             command.add_argument("--nx", type=int, default=80, help="elements across the block (default 80)")
         command.add_argument("--solver", default="auto", help="auto (newton-cg on a matrix-free dual, else clarabel) "
@@ -293,6 +299,35 @@ def step_printer():
     return printer
 
 
+def adapt_command(args, scene, options: dict):
+    """``run SCENE --adapt``: the last level of :func:`~convexcontact.drivers.adapt.adapt`, every level's size and
+    estimate in its ``extra`` (summary.json); a level's line printed as it ends."""
+    from .drivers.adapt import adapt, check_adapt_options
+
+    for option, value in (("--target", args.target), ("--max-dofs", args.max_dofs)):
+        if value is not None and not args.adapt:
+            raise ValueError(f"{option}: only means something with --adapt; add --adapt or drop it")
+    if scene.history is not None or args.solutions != "one":
+        raise ValueError("--adapt: refines one static solve; drop it for a [history] or --solutions all")
+    target = 1e-2 if args.target is None else args.target
+    max_dofs = 200_000 if args.max_dofs is None else args.max_dofs
+    try:
+        check_adapt_options(target, max_dofs, 0.5)
+    except ValueError as error:
+        raise ValueError(f"--{str(error).replace('_', '-')}") from None
+
+    def progress(level, result):
+        budget = result.error_budget or {}
+        print(f"level {level}: {result.ndof} DOFs, {result.status}, estimated error "
+              f"{budget.get('discretization', float('nan')):.2e}", flush=True)
+
+    levels = adapt(scene, target, max_dofs, solver=args.solver, progress=progress, formulation=args.formulation,
+                   **options)
+    levels[-1].extra["adaptive_levels"] = [{"ndof": r.ndof, "status": r.status, **{
+        key: (r.error_budget or {}).get(key) for key in ("discretization", "eta")}} for r in levels]
+    return levels[-1]
+
+
 def run_command(args) -> int:
     """``demo`` or ``run``: check the outputs, solve, report."""
     try:
@@ -310,8 +345,12 @@ def run_command(args) -> int:
             options["progress"] = lambda done, count, what: print(f"{what} ({done}/{count})", flush=True)
         elif scene.history is not None:
             options["progress"] = step_printer()
-        result = solve(scene, args.solver, formulation=args.formulation, solutions=solutions,
-                       confirm=getattr(args, "confirm", False), **options)
+        if getattr(args, "adapt", False) or getattr(args, "target", None) is not None \
+                or getattr(args, "max_dofs", None) is not None:
+            result = adapt_command(args, scene, options)
+        else:
+            result = solve(scene, args.solver, formulation=args.formulation, solutions=solutions,
+                           confirm=getattr(args, "confirm", False), **options)
     except (SceneError, ValueError) as error:
         print(f"error: {as_option(error)}", file=sys.stderr)
         return 2

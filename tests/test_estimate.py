@@ -257,3 +257,22 @@ def test_quadrilaterals_refine_uniformly_and_say_so():
 def test_adapt_refuses_bad_options_naming_them(option, value):
     with pytest.raises(ValueError, match=f"^{option}: "):
         adapt(pressure_patch(2), **{option: value})
+
+
+def test_cli_adapt_reports_every_level_and_why_it_stopped(tmp_path, capsys):
+    """``run hertz.toml --adapt``: a line per level, the levels in summary.json with falling estimates, and the
+    message saying the DOF limit stopped it before the target."""
+    from pathlib import Path
+
+    from convexcontact import cli
+
+    scene = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "hertz.toml"
+    summary = tmp_path / "summary.json"
+    code = cli.main(["run", str(scene), "--adapt", "--target", "0.01", "--max-dofs", "7500", "--json", str(summary)])
+    printed = capsys.readouterr().out
+    assert code == 0 and "level 0: 6480 DOFs" in printed and "level 1: 7176 DOFs" in printed
+    written = json.loads(summary.read_text())
+    levels = written["adaptive_levels"]
+    assert [level["ndof"] for level in levels] == [6480, 7176]
+    assert levels[1]["discretization"] < levels[0]["discretization"]
+    assert "stopped before the target" in written["message"] and written["refinement"].startswith("local")

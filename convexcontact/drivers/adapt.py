@@ -8,6 +8,7 @@ scenes refine uniformly, and say so. Each level is an ordinary certified solve o
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 from collections.abc import Callable
 
@@ -92,9 +93,16 @@ def inherit_boundaries(new: fe.Mesh, old: fe.Mesh) -> fe.Mesh:
 
 def refine(mesh: fe.Mesh, indicators: np.ndarray, fraction: float) -> fe.Mesh:
     """The next mesh: the Dörfler cells refined locally on triangles and tetrahedra, every cell otherwise."""
-    if isinstance(mesh, LOCAL):
-        return inherit_boundaries(mesh.refined(dorfler(indicators, fraction)), mesh)
-    return mesh.refined()
+    if not isinstance(mesh, LOCAL):
+        return mesh.refined()
+    # scikit-fem logs that local refinement drops the named boundaries: they are carried over here
+    logger = logging.getLogger("skfem.mesh.mesh")
+    disabled, logger.disabled = logger.disabled, True
+    try:
+        refined = mesh.refined(dorfler(indicators, fraction))
+    finally:
+        logger.disabled = disabled
+    return inherit_boundaries(refined, mesh)
 
 
 def adapt(scene: Scene, target: float = 1e-2, max_dofs: int = 200_000, fraction: float = 0.5,
@@ -122,9 +130,12 @@ def adapt(scene: Scene, target: float = 1e-2, max_dofs: int = 200_000, fraction:
         if progress is not None:
             progress(len(levels) - 1, result)
         budget = result.error_budget
-        if budget is None or not math.isfinite(budget["discretization"]) or budget["discretization"] <= target:
+        estimated = None if budget is None else budget["discretization"]
+        if estimated is None or not math.isfinite(estimated) or estimated <= target:
             return levels
         refined = refine(mesh, result.error_estimate.indicators, fraction)
         if dofs_of(refined, scene.body.element) > max_dofs:
+            result.message = (f"adaptive refinement stopped before the target: the next mesh would exceed max_dofs "
+                              f"{max_dofs} (estimated error {estimated:.2e} > target {target:.2e})")
             return levels
         mesh = refined
