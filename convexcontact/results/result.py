@@ -176,10 +176,13 @@ class ContactResult:
         if budget is None or budget["discretization"] is None or budget["discretization"] <= LARGE_ERROR:
             return list(self.fem.warnings)
         element = self.scene.body.element
-        remedy = ("refine the mesh, or use P2/Q2 elements if ν is near 0.5 (volumetric locking of P1/Q1)" if element in ("P1", "Q1")
-                  else "refine the mesh (for ν near 0.5 the residual estimate overstates the error: docs/estimate.md)")
-        large = f"estimated discretization error {budget['discretization']:.0%} of the energy norm (over {LARGE_ERROR:.0%})"
-        return [*self.fem.warnings, f"{large}: {remedy}"]
+        if element in ("P1", "Q1"):
+            remedy = "refine the mesh, or use P2/Q2 elements if ν is near 0.5 (volumetric locking of P1/Q1)"
+        else:
+            remedy = "refine the mesh (for ν near 0.5 the residual estimate overstates the error: docs/estimate.md)"
+        share = budget["discretization"]
+        return [*self.fem.warnings,
+                f"estimated discretization error {share:.0%} of the energy norm (over {LARGE_ERROR:.0%}): {remedy}"]
 
     def summary(self) -> dict:
         """JSON-ready summary (see docs/certificate.md for the certificate, docs/estimate.md for the error budget)."""
