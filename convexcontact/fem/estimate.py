@@ -36,7 +36,7 @@ from scipy.sparse.linalg import splu
 from skfem.assembly import Dofs
 
 from ..scene.model import Dirichlet
-from .assembly import FEModel
+from .assembly import FEModel, check_length
 from .assembly import stress as elastic_stress
 from .mesh import check_boundary
 
@@ -190,8 +190,7 @@ def applied_traction(fem: FEModel, boundary: fe.FacetBasis) -> np.ndarray:
         if load.pressure is not None:
             out[:, rows] += -load.pressure / fem.scaling.pressure * np.asarray(boundary.normals)[:, rows]
         else:
-            vector = np.zeros(fem.dim)
-            vector[:len(load.vector)] = load.vector
+            vector = check_length(load.vector, fem.dim, f"traction[{load.boundary}].vector")
             out[:, rows] += (vector / fem.scaling.pressure)[:, None, None]
     return out
 
