@@ -33,7 +33,10 @@ def box_patch(element: str) -> cc.Scene:
 
 
 @pytest.mark.parametrize("scene", [pressure_patch(4, e) for e in ("P1", "P2", "Q1", "Q2")]
-                         + [box_patch(e) for e in ("P1", "Q1")], ids=lambda s: f"{s.name}-{s.body.element}")
+                         + [box_patch(e) for e in ("P1", "Q1")]
+                         + [dataclasses.replace(pressure_patch(4), name="patch_vector",
+                                                tractions=(cc.Traction("top", vector=(0.0, -0.1)),))],
+                         ids=lambda s: f"{s.name}-{s.body.element}")
 def test_patch_exact_solution_estimates_zero(scene):
     """u_h is the exact solution (uniform compression): every residual term vanishes to round-off."""
     result = cc.solve(scene)
