@@ -51,28 +51,33 @@ def dofs_of(mesh: fe.Mesh, element: str) -> int:
     return mesh.dim() * nodes
 
 
+def inside(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """Whether each point (n, d) lies in its facet, given by its corners (n, d vertices, d), to round-off."""
+    edges = corners[:, 1:] - corners[:, :1]  # (n, d − 1, d)
+    offset = points - corners[:, 0]
+    gram = np.einsum("fik,fjk->fij", edges, edges)
+    local = np.linalg.solve(gram, np.einsum("fik,fk->fi", edges, offset)[..., None])[..., 0]
+    distance = np.linalg.norm(offset - np.einsum("fi,fik->fk", local, edges), axis=1)
+    size = np.sqrt(np.abs(np.linalg.det(gram))) ** (1 / edges.shape[1])
+    return (distance <= 1e-9 * size) & (local >= -1e-9).all(axis=1) & (local.sum(axis=1) <= 1 + 1e-9)
+
+
 def parent_facets(new: fe.Mesh, old: fe.Mesh, facets: np.ndarray, candidates: np.ndarray) -> np.ndarray:
-    """For each of ``new``'s boundary ``facets``, the one of ``old``'s ``candidates`` (boundary facets) it lies in."""
+    """For each of ``new``'s boundary ``facets``, the one of ``old``'s ``candidates`` (boundary facets) it lies in:
+    among the nearest by midpoint, else (a large coarse facet among small ones: graded meshes) among all."""
     midpoints = new.p[:, new.facets[:, facets]].mean(axis=1).T
-    old_points = old.p[:, old.facets[:, candidates]]  # (d, vertices, candidates)
-    tree = cKDTree(old_points.mean(axis=1).T)
-    _, nearest = tree.query(midpoints, k=min(CANDIDATES, candidates.size))
-    nearest = nearest.reshape(len(facets), -1)
+    corners = old.p[:, old.facets[:, candidates]].transpose(2, 1, 0)  # (candidates, vertices, d)
+    _, nearest = cKDTree(corners.mean(axis=1)).query(midpoints, k=min(CANDIDATES, candidates.size))
     parent = np.full(len(facets), -1)
-    for column in nearest.T:
-        corners = old_points[:, :, column].transpose(2, 1, 0)  # (facets, vertices, d)
-        edges = corners[:, 1:] - corners[:, :1]  # (facets, d − 1, d)
-        offset = midpoints - corners[:, 0]
-        gram = np.einsum("fik,fjk->fij", edges, edges)
-        local = np.linalg.solve(gram, np.einsum("fik,fk->fi", edges, offset)[..., None])[..., 0]
-        distance = np.linalg.norm(offset - np.einsum("fi,fik->fk", local, edges), axis=1)
-        size = np.sqrt(np.abs(np.linalg.det(gram))) ** (1 / max(edges.shape[1], 1))
-        inside = (distance <= 1e-9 * size) & (local >= -1e-9).all(axis=1) & (local.sum(axis=1) <= 1 + 1e-9)
-        found = inside & (parent < 0)
+    for column in nearest.reshape(len(facets), -1).T:
+        found = (parent < 0) & inside(midpoints, corners[column])
         parent[found] = candidates[column[found]]
-    if (parent < 0).any():
-        raise RuntimeError(f"{(parent < 0).sum()} boundary facets of the refined mesh lie on no boundary facet of "
-                           "the coarse one")
+    for k in np.flatnonzero(parent < 0):
+        hits = np.flatnonzero(inside(np.broadcast_to(midpoints[k], (candidates.size, midpoints.shape[1])), corners))
+        if hits.size == 0:
+            raise RuntimeError(f"a boundary facet of the refined mesh (midpoint {midpoints[k]}) lies on no boundary "
+                               "facet of the coarse one")
+        parent[k] = candidates[hits[0]]
     return parent
 
 
