@@ -8,10 +8,13 @@ import sys
 from pathlib import Path
 
 from . import solvers
+from .drivers.model import MATRIX_FREE
 from .drivers.solve import solve
-from .results.output import check_file_target, check_folder_target, staged, write_text
+from .formulations import FORMULATIONS
+from .results.output import check_new_file, check_new_files, staged, write_text
 from .scene.library import hertz_punch
 from .scene.model import SceneError
+from .studies import arguments
 
 
 def table(result) -> str:
@@ -103,15 +106,9 @@ OUTPUTS = ("summary.json", "solution.vtu", "solution.pvd", "solution_*.vtu", "so
 def check_outputs(out: Path | None, json_file: Path | None, overwrite: bool) -> None:
     """Refuse, before any work, outputs that would fail or replace a file without --overwrite."""
     if out is not None:
-        check_folder_target(out, "--out")
-        ours = sorted({path.name for pattern in OUTPUTS for path in out.glob(pattern)}) if out.is_dir() else []
-        if ours and not overwrite:
-            raise ValueError(f"--out: {out} already holds {', '.join(ours[:5])}{' …' if len(ours) > 5 else ''}; "
-                             "give another folder, or --overwrite to replace them (nothing else there is touched)")
+        check_new_files(out, OUTPUTS, "--out", overwrite)
     if json_file is not None:
-        check_file_target(json_file, "--json")
-        if json_file.exists() and not overwrite:
-            raise ValueError(f"--json: {json_file} exists; choose another name, or --overwrite to replace it")
+        check_new_file(json_file, "--json", overwrite)
 
 
 def report(result, out: Path | None, json_file: Path | None) -> int:
@@ -146,6 +143,16 @@ def compare_scene(args) -> dict:
     return report
 
 
+ANSWERED = ("solved", "inaccurate")
+"""Statuses of a study's case that gave an answer."""
+
+
+def answered(found) -> bool:
+    """Whether a study (its rows, or a sweep holding them) answered at least one case; rows without a status
+    (``study uniqueness``: counts of solutions) are answers."""
+    return any(row.get("status", "solved") in ANSWERED for row in getattr(found, "rows", found))
+
+
 def main(argv=None) -> int:
     """The ``convexcontact`` command; Ctrl-C ends it quietly with code 130 (outputs are written whole or not
     at all: see :func:`~convexcontact.results.output.staged`)."""
@@ -166,13 +173,15 @@ def commands(argv=None) -> int:
             command.add_argument("--solutions", choices=["one", "all"], default="one",
                                  help="all: every solution of a Coulomb scene, each certified (docs/uniqueness.md)")
         else:
-            command.add_argument("--nx", type=int, default=80, help="elements across the block (default 80)")
+            command.add_argument("--nx", type=arguments.integer(2, 80), default=80,
+                                 help="elements across the block (default 80)")
         command.add_argument("--solver", default="auto", help="auto (newton-cg on a matrix-free dual, else clarabel) "
                              "| clarabel | osqp | cvxpy[:NAME] | newton-cg")
-        command.add_argument("--formulation", default="auto",
-                             help="auto (default: chosen from the problem's shape) | primal | dual (condensed on Γ_C) "
-                             "| dual-matrix-free (W through K's factors, never formed)")
-        command.add_argument("--tol", type=float, default=None, help="solver tolerance (default: the adapter's)")
+        command.add_argument("--formulation", default="auto", choices=("auto", *FORMULATIONS, MATRIX_FREE),
+                             metavar="FORMULATION", help="auto (default: chosen from the problem's shape) | primal "
+                             "| dual (condensed on Γ_C) | dual-matrix-free (W through K's factors, never formed)")
+        command.add_argument("--tol", type=arguments.number("1e-8"), default=None,
+                             help="solver tolerance (default: the adapter's)")
         command.add_argument("--out", type=Path, default=Path("out") if name == "demo" else None,
                              help="folder for summary.json, solution.vtu, PNG plots")
         command.add_argument("--json", type=Path, default=None, help="also write the JSON summary here")
@@ -208,7 +217,12 @@ def commands(argv=None) -> int:
     if argv[:1] == ["bench"]:  # its options (--dim …) belong to its own parser
         from .studies import bench, history_bench
 
-        rows = (history_bench if "--history" in argv else bench).main(argv[1:])
+        try:
+            history = any(word == "--history" or word.startswith("--history=") for word in argv)
+            rows = (history_bench if history else bench).main(argv[1:])
+        except (SceneError, ValueError) as error:  # bad input, named before any case runs
+            print(f"error: {error}", file=sys.stderr)
+            return 2
         return 0 if rows else 1  # every case failed (each said why)
     args = parser.parse_args(argv)
     if args.command == "study":
@@ -216,8 +230,15 @@ def commands(argv=None) -> int:
 
         studies = {"work-precision": work_precision, "sweep": sweeps, "stability": stability, "uniqueness": uniqueness,
                    "grid": grid, "sfepy": sfepy_peer}
-        studies[args.kind].main(args.arguments)
-        return 0
+        try:
+            found = studies[args.kind].main(args.arguments)
+        except (SceneError, ValueError) as error:  # bad input, named by the study before any work
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        except RuntimeError as error:  # a reference the study needs could not be solved: no answer
+            print(f"error: {error}", file=sys.stderr)
+            return 1
+        return 0 if answered(found) else 1  # every case failed (each said why)
     if args.command == "compare":
         from .studies.compare import compare_files, format_report
 
@@ -237,7 +258,11 @@ def run_command(args) -> int:
         check_outputs(args.out, args.json, args.overwrite)
         solvers.check_name(args.solver)
         if args.command == "demo":
+            from .fem.mesh import check_size
+
             scene = hertz_punch(nx=args.nx)
+            with arguments.named("--nx"):
+                check_size(scene.body)
         else:
             from .scene.toml import load_scene
 
