@@ -126,6 +126,8 @@ def test_no_bad_number_reaches_the_work(capsys, folder, value, command_option):
     (["demo", "--formulation", "both"], ["argument --formulation: invalid choice: 'both'", "dual-matrix-free"]),
     (["run", SCENE, "--formulation", "bogus"], ["argument --formulation: invalid choice", "primal"]),
     (["run", SCENE, "--solutions", "some"], ["argument --solutions: invalid choice: 'some'", "'all'"]),
+    (["run", "missing.toml"], ["cannot read missing.toml"]),
+    (["study", "granite"], ["argument kind: invalid choice: 'granite'", "work-precision"]),
     (["bench", "--dim", "4"], ["argument --dim: invalid choice: 4", "2, 3"]),
     (["bench", "--dim", "two"], ["argument --dim: invalid int value"]),
     (["bench", "--laws", "mohr"], ["argument --laws: invalid choice: 'mohr'", "coulomb"]),
