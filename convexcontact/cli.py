@@ -147,10 +147,11 @@ ANSWERED = ("solved", "inaccurate")
 """Statuses of a study's case that gave an answer."""
 
 
-def answered(found) -> bool:
-    """Whether a study (its rows, or a sweep holding them) answered at least one case; rows without a status
-    (``study uniqueness``: counts of solutions) are answers."""
-    return any(row.get("status", "solved") in ANSWERED for row in getattr(found, "rows", found))
+def failed_all(found) -> bool:
+    """Whether a study (its rows, or a sweep holding them) ran cases and none gave an answer; rows without a
+    status (``study uniqueness``: counts of solutions) are answers, a run with nothing left to do failed nothing."""
+    rows = list(getattr(found, "rows", found) or [])
+    return bool(rows) and not any(row.get("status", "solved") in ANSWERED for row in rows)
 
 
 def main(argv=None) -> int:
@@ -238,7 +239,7 @@ def commands(argv=None) -> int:
         except RuntimeError as error:  # a reference the study needs could not be solved: no answer
             print(f"error: {error}", file=sys.stderr)
             return 1
-        return 0 if answered(found) else 1  # every case failed (each said why)
+        return 1 if failed_all(found) else 0  # every case failed (each said why)
     if args.command == "compare":
         from .studies.compare import compare_files, format_report
 

@@ -256,6 +256,7 @@ def test_a_study_that_answered_no_case_exits_1(monkeypatch, tmp_path, capsys):
     assert cli.main(["study", "stability"]) == 1
     monkeypatch.setattr("convexcontact.studies.stability.run", lambda **kwargs: failed + [{"status": "inaccurate"}])
     assert cli.main(["study", "stability"]) == 0
+    assert not cli.failed_all([]) and not cli.failed_all(None)  # a resumed grid with nothing left failed nothing
 
 
 def test_a_study_reference_that_cannot_be_solved_is_an_error_without_a_traceback(monkeypatch, capsys, tmp_path):
