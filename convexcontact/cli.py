@@ -218,12 +218,8 @@ def commands(argv=None) -> int:
     if argv[:1] == ["bench"]:  # its options (--dim …) belong to its own parser
         from .studies import bench, history_bench
 
-        try:
-            history = any(word == "--history" or word.startswith("--history=") for word in argv)
-            rows = (history_bench if history else bench).main(argv[1:])
-        except (SceneError, ValueError) as error:  # bad input, named before any case runs
-            print(f"error: {error}", file=sys.stderr)
-            return 2
+        history = any(word == "--history" or word.startswith("--history=") for word in argv)
+        rows = (history_bench if history else bench).main(argv[1:])  # bad input: argparse's exit 2
         return 0 if rows else 1  # every case failed (each said why)
     args = parser.parse_args(argv)
     if args.command == "study":

@@ -318,7 +318,10 @@ def main(argv=None) -> list:
     if args.case:
         print(json.dumps(measure(*json.loads(args.case))))
         return []
-    check_arguments(args)
+    try:
+        check_arguments(args)
+    except ValueError as error:  # SceneError too: argparse's exit 2, usage and "error: --OPTION: …"
+        parser.error(str(error))
     if args.sweep:
         return [friction_sweep(args.dim, (args.sizes or SIZES[args.dim])[0], np.linspace(0.1, 0.5, args.sweep),
                                args.solver)]

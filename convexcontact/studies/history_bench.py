@@ -103,7 +103,10 @@ def main(argv=None) -> list[dict]:
     parser.add_argument("--out", type=Path, default=Path("out/bench"), help="folder for history_bench.csv")
     parser.add_argument("--overwrite", action="store_true", help="replace the history_bench.csv of an earlier bench")
     args = parser.parse_args(argv)
-    check_arguments(args)
+    try:
+        check_arguments(args)
+    except ValueError as error:  # SceneError too: argparse's exit 2, usage and "error: --OPTION: …"
+        parser.error(str(error))
     rows = []
     for dofs in args.sizes:
         rows.append(case(dofs, args.history, args.law))
