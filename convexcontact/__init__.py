@@ -20,6 +20,7 @@ from .scene.bodies import Pair, Part, bodies_scene
 from .scene.history import History
 from .scene.model import (
     Body,
+    Box,
     Contact,
     Coulomb,
     Dirichlet,
@@ -34,11 +35,12 @@ from .scene.model import (
     Traction,
     Tresca,
 )
+from .scene.toml import load_scene
 
 __all__ = [
-    "Body", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Coulomb", "Dirichlet", "History",
+    "Body", "Box", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Coulomb", "Dirichlet", "History",
     "HistoryResult", "Material", "MeshFile", "Model", "NormalCompliance", "Obstacle", "Pair", "Part", "Rectangle",
     "Scene", "SceneError", "Signorini", "SolutionSet", "Traction", "Tresca", "all_solutions", "bodies_library",
-    "bodies_scene", "library", "prepare", "run_history", "solve",
+    "bodies_scene", "library", "load_scene", "prepare", "run_history", "solve",
 ]
 __version__ = "0.1.0"

@@ -8,9 +8,7 @@ import sys
 from pathlib import Path
 
 from . import solvers
-from .drivers.model import MATRIX_FREE
 from .drivers.solve import solve
-from .formulations import FORMULATIONS
 from .results.output import check_new_file, check_new_files, staged, write_text
 from .scene.library import hertz_punch
 from .scene.model import SceneError
@@ -103,10 +101,11 @@ OUTPUTS = ("summary.json", "solution.vtu", "solution.pvd", "solution_*.vtu", "so
 """What a run writes into --out: the names it would replace."""
 
 
-def check_outputs(out: Path | None, json_file: Path | None, overwrite: bool) -> None:
-    """Refuse, before any work, outputs that would fail or replace a file without --overwrite."""
+def check_outputs(out: Path | None, json_file: Path | None, overwrite: bool, outputs=OUTPUTS) -> None:
+    """Refuse, before any work, outputs that would fail or replace a file without --overwrite (``outputs``: the
+    names the command writes into --out)."""
     if out is not None:
-        check_new_files(out, OUTPUTS, "--out", overwrite)
+        check_new_files(out, outputs, "--out", overwrite)
     if json_file is not None:
         check_new_file(json_file, "--json", overwrite)
 
@@ -125,22 +124,42 @@ def report(result, out: Path | None, json_file: Path | None) -> int:
     return EXIT.get(result.status, 1)
 
 
-def compare_scene(args) -> dict:
-    """The exact answer of the scene file against a peer's output file (``convexcontact compare SCENE PEER``)."""
+def compare_scene(args) -> dict | None:
+    """The exact answer of the scene file against a peer's output file (``convexcontact compare SCENE PEER``):
+    the outputs, the scene and the peer's file are checked before the solve; None when the solve has no answer."""
+    from .fem.mesh import build_mesh
     from .scene.toml import load_scene
-    from .studies.peer import compare_peer, plot_pressures
+    from .studies.peer import check_dimension, peer_errors, plot_pressures, read_peer
 
+    check_outputs(args.out, None, args.overwrite, ("pressures.png",))
     scene = load_scene(args.reference)
     if scene.history is not None:
         raise ValueError(f"{args.reference}: compare takes a static scene; drop its [history]")
+    peer = read_peer(args.other, args.displacement, args.pressure)
+    check_dimension(peer, build_mesh(scene.body).dim())
+    if args.out is not None and peer.pressure is None:
+        raise ValueError(f"--out: {args.other} has no contact pressure, so there is no pressures.png to write; drop "
+                         "--out, or name the peer's pressure with --pressure NAME")
     result = solve(scene)
-    if not result.solved:
-        raise ValueError(f"{args.reference}: the exact solve returned {result.status}: {result.message}")
-    report = compare_peer(result, args.other, args.displacement, args.pressure)
-    if args.out is not None and "pressure_curves" in report:
-        print("wrote", plot_pressures(report, args.out / "pressures.png"))
+    if not result.solved:  # no answer to compare with: exit 1, not a bad input
+        print(f"error: {args.reference}: the exact solve returned {result.status}: {result.message}", file=sys.stderr)
+        return None
+    report = peer_errors(result, peer)
+    if args.out is not None:  # written whole or not at all, as a run's outputs
+        print("wrote", *staged(args.out, lambda folder: [plot_pressures(report, folder / "pressures.png")]))
     report.pop("pressure_curves", None)
     return report
+
+
+def compare_summaries(args) -> dict:
+    """Two summary.json files (``convexcontact compare A.json B.json``); the options of a peer file are refused."""
+    from .studies.compare import compare_files
+
+    for option, value in (("--displacement", args.displacement), ("--pressure", args.pressure), ("--out", args.out)):
+        if value is not None:
+            raise ValueError(f"{option}: serves a scene compared with a peer's file (REFERENCE a .toml); two "
+                             "summary.json files have no point data and no pressure overlay — drop it")
+    return compare_files(args.reference, args.other)
 
 
 ANSWERED = ("solved", "inaccurate")
@@ -173,14 +192,16 @@ def commands(argv=None) -> int:
             command.add_argument("scene", type=Path, help="scene file (see docs/scenes.md); a [history] runs every step")
             command.add_argument("--solutions", choices=["one", "all"], default="one",
                                  help="all: every solution of a Coulomb scene, each certified (docs/uniqueness.md)")
+            command.add_argument("--confirm", action="store_true", help="run a history or a --solutions all search "
+                                 "estimated to take over an hour (refused otherwise, with the estimate)")
         else:
             command.add_argument("--nx", type=arguments.integer(2, 80), default=80,
                                  help="elements across the block (default 80)")
         command.add_argument("--solver", default="auto", help="auto (newton-cg on a matrix-free dual, else clarabel) "
                              "| clarabel | osqp | cvxpy[:NAME] | newton-cg")
-        command.add_argument("--formulation", default="auto", choices=("auto", *FORMULATIONS, MATRIX_FREE),
-                             metavar="FORMULATION", help="auto (default: chosen from the problem's shape) | primal "
-                             "| dual (condensed on Γ_C) | dual-matrix-free (W through K's factors, never formed)")
+        command.add_argument("--formulation", default="auto",
+                             help="auto (default: chosen from the problem's shape) | primal | dual (condensed on Γ_C) "
+                             "| dual-matrix-free (W through K's factors, never formed)")
         command.add_argument("--tol", type=arguments.number("1e-8"), default=None,
                              help="solver tolerance (default: the adapter's)")
         command.add_argument("--out", type=Path, default=Path("out") if name == "demo" else None,
@@ -206,6 +227,7 @@ def commands(argv=None) -> int:
     compare.add_argument("--displacement", default=None, help="the peer's displacement point data (default: found by name)")
     compare.add_argument("--pressure", default=None, help="the peer's contact pressure point data (default: by name)")
     compare.add_argument("--out", type=Path, default=None, help="folder for the pressure overlay PNG (peer files)")
+    compare.add_argument("--overwrite", action="store_true", help="replace a pressures.png already in --out")
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["study"] and (len(argv) == 1 or argv[1] in ("-h", "--help")):
         study.print_help()
@@ -237,16 +259,44 @@ def commands(argv=None) -> int:
             return 1
         return 1 if failed_all(found) else 0  # every case failed (each said why)
     if args.command == "compare":
-        from .studies.compare import compare_files, format_report
+        from .studies.compare import format_report
 
         try:
-            print(format_report(compare_files(args.reference, args.other) if args.reference.suffix != ".toml"
-                                else compare_scene(args)))
+            report = compare_scene(args) if args.reference.suffix.lower() == ".toml" else compare_summaries(args)
         except (OSError, ValueError) as error:
             print(f"error: {error}", file=sys.stderr)
             return 2
+        if report is None:
+            return 1
+        print(format_report(report))
         return 0
     return run_command(args)
+
+
+OPTION_FIELDS = ("formulation", "solutions", "confirm", "solver", "tol")
+"""Keywords of cc.solve whose errors the command line names by its option."""
+
+
+def as_option(error: Exception) -> str:
+    """The error's message, a keyword of cc.solve named as the option that set it (``formulation:`` →
+    ``--formulation:``)."""
+    message = str(error)
+    keyword = message.split(":", 1)[0]
+    return f"--{message}" if keyword in OPTION_FIELDS else message
+
+
+def step_printer():
+    """Progress of a history: each step's status, the time so far and the time left at the mean step's pace."""
+    import time
+
+    start = time.perf_counter()
+
+    def printer(k: int, count: int, step) -> None:
+        elapsed = time.perf_counter() - start
+        print(f"step {k}/{count}: {step.status} ({elapsed:.3g} s, about {elapsed / k * (count - k):.3g} s left)",
+              flush=True)
+
+    return printer
 
 
 def run_command(args) -> int:
@@ -265,12 +315,15 @@ def run_command(args) -> int:
 
             scene = load_scene(args.scene)
         options = {} if args.tol is None else {"tol": args.tol}
-        if scene.history is not None:
-            options["progress"] = lambda k, count, step: print(f"step {k}/{count}: {step.status}", flush=True)
-        result = solve(scene, args.solver, formulation=args.formulation,
-                       solutions=getattr(args, "solutions", "one"), **options)
+        solutions = getattr(args, "solutions", "one")
+        if solutions == "all":
+            options["progress"] = lambda done, count, what: print(f"{what} ({done}/{count})", flush=True)
+        elif scene.history is not None:
+            options["progress"] = step_printer()
+        result = solve(scene, args.solver, formulation=args.formulation, solutions=solutions,
+                       confirm=getattr(args, "confirm", False), **options)
     except (SceneError, ValueError) as error:
-        print(f"error: {error}", file=sys.stderr)
+        print(f"error: {as_option(error)}", file=sys.stderr)
         return 2
     try:
         return report(result, args.out, args.json)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 
 @dataclass(frozen=True)
@@ -27,9 +28,13 @@ class Cone:
 
     def __post_init__(self):
         if self.kind not in CONES:
-            raise ValueError(f"cone kind must be one of {CONES}, got {self.kind!r}")
+            raise ValueError(f"Cone.kind: must be one of {CONES}, got {self.kind!r}")
+        integer = isinstance(self.dim, (int, np.integer)) and not isinstance(self.dim, bool)
+        if not integer:  # a ValueError, as every bad input of the package (the CLI's exit code 2)
+            raise ValueError(f"Cone.dim: expected an integer, got {self.dim!r}")
         if self.dim < 1 or (self.kind == "soc" and self.dim < 2):
-            raise ValueError(f"{self.kind} cone of dimension {self.dim}")
+            raise ValueError(f"Cone.dim: a {self.kind} cone has dimension ≥ {2 if self.kind == 'soc' else 1}, "
+                             f"got {self.dim}")
         if self.kind == "power" and (self.dim != 3 or not 0 < (self.alpha or 0) < 1):
             raise ValueError(f"a power cone has dimension 3 and 0 < alpha < 1, got {self.dim}, {self.alpha}")
 
@@ -70,11 +75,32 @@ class ConicProgram:
     cones: tuple[Cone, ...]
 
     def __post_init__(self):
+        for name in ("q", "b"):
+            vector = getattr(self, name)
+            if not isinstance(vector, np.ndarray) or vector.ndim != 1 or vector.dtype.kind not in "fiu":
+                raise ValueError(f"ConicProgram.{name}: expected a 1-D numpy array of numbers, got "
+                                 f"{type(vector).__name__} {getattr(vector, 'shape', '')}; pass np.ravel(…)")
+        if not (sp.issparse(self.P) or isinstance(self.P, spla.LinearOperator)):
+            raise ValueError(f"ConicProgram.P: expected a scipy.sparse matrix or a scipy LinearOperator, got "
+                             f"{type(self.P).__name__}; pass scipy.sparse.csc_matrix(P)")
+        if not sp.issparse(self.A):
+            raise ValueError(f"ConicProgram.A: expected a scipy.sparse matrix, got {type(self.A).__name__}; pass "
+                             "scipy.sparse.csc_matrix(A)")
         n, m = self.q.size, self.b.size
         if self.P.shape != (n, n) or self.A.shape != (m, n):
-            raise ValueError(f"shapes P {self.P.shape}, A {self.A.shape} do not fit q ({n}) and b ({m})")
+            raise ValueError(f"ConicProgram: shapes P {self.P.shape}, A {self.A.shape} do not fit q ({n}) and b ({m})")
+        if not isinstance(self.cones, tuple) or not all(isinstance(c, Cone) for c in self.cones):
+            raise ValueError("ConicProgram.cones: expected a tuple of Cone (zero(m), nonnegative(m), soc(d), power(α))")
         if sum(c.dim for c in self.cones) != m:
-            raise ValueError("cone dimensions do not add up to the rows of A")
+            raise ValueError(f"ConicProgram.cones: dimensions add up to {sum(c.dim for c in self.cones)}, "
+                             f"not to the {m} rows of A")
+        for name, values in (("q", self.q), ("b", self.b), ("A", self.A.data)) + (
+                (("P", self.P.data),) if sp.issparse(self.P) else ()):
+            if not np.all(np.isfinite(values)):
+                raise ValueError(f"ConicProgram.{name}: holds NaN or inf; a convex program needs finite data")
+        if sp.issparse(self.P) and not symmetric(self.P):
+            raise ValueError("ConicProgram.P: not symmetric; the program is ½ xᵀPx with P symmetric (pass ½(P + Pᵀ), "
+                             "which has the same objective) — solvers read one triangle and would solve another")
 
     @property
     def n_variables(self) -> int:
@@ -95,6 +121,14 @@ class ConicProgram:
         for cone in self.cones:
             yield cone, slice(start, start + cone.dim)
             start += cone.dim
+
+
+def symmetric(P, rtol: float = 1e-10) -> bool:
+    """Whether xᵀPy = yᵀPx for random x, y (two products, no transpose formed: cheap beside any solve)."""
+    rng = np.random.default_rng(0)
+    x, y = rng.standard_normal((2, P.shape[0]))
+    Px = P @ x
+    return abs(y @ Px - x @ (P @ y)) <= rtol * np.linalg.norm(Px) * np.linalg.norm(y)
 
 
 @dataclass

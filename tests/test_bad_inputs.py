@@ -16,6 +16,9 @@ import convexcontact as cc
 from convexcontact import cli
 from convexcontact.scene.toml import scene_from_dict
 
+SURFACES = ("cc.Body", "cc.Contact", "cc.Coulomb", "cc.Dirichlet", "cc.Material", "cc.MeshFile", "cc.Obstacle",
+            "cc.Rectangle", "cc.Scene", "cc.Traction", "cc.Tresca", "cc.prepare", "cc.solve", "cc.scene.load_scene",
+            "reader toml", "reader mesh", "convexcontact run")
 BASE = cc.library.pressure_patch(nx=3)
 
 

@@ -120,11 +120,11 @@ def test_no_bad_number_reaches_the_work(capsys, folder, value, command_option):
 
 
 @pytest.mark.parametrize("arguments, texts", [
-    (["demo", "--solver", "bogus"], ["solver: unknown 'bogus'", "use one of"]),
-    (["run", SCENE, "--solver", "gurobi"], ["solver: unknown 'gurobi'", "use one of"]),
+    (["demo", "--solver", "bogus"], ["--solver: unknown 'bogus'", "use one of"]),
+    (["run", SCENE, "--solver", "gurobi"], ["--solver: unknown 'gurobi'", "use one of"]),
     (["demo", "--solver", "cvxpy:NOSUCH"], ["cvxpy has no solver 'NOSUCH'", "it has"]),
-    (["demo", "--formulation", "both"], ["argument --formulation: invalid choice: 'both'", "dual-matrix-free"]),
-    (["run", SCENE, "--formulation", "bogus"], ["argument --formulation: invalid choice", "primal"]),
+    (["demo", "--formulation", "both"], ["--formulation: unknown 'both'", "use one of", "'dual-matrix-free'"]),
+    (["run", SCENE, "--formulation", "bogus"], ["--formulation: unknown 'bogus'", "use one of", "'primal'"]),
     (["run", SCENE, "--solutions", "some"], ["argument --solutions: invalid choice: 'some'", "'all'"]),
     (["run", "missing.toml"], ["cannot read missing.toml"]),
     (["study", "granite"], ["argument kind: invalid choice: 'granite'", "work-precision"]),

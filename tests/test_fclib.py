@@ -2,6 +2,7 @@
 problem, fclib's merit function, and solving imported problems (docs/fclib.md)."""
 
 import dataclasses
+import os
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,10 @@ from convexcontact.interop import fclib, fclib_scene
 from convexcontact.interop.fclib_cli import main
 from convexcontact.interop.fclib_solve import condense, merit, natural_residuals, solve_global, solve_local
 
-SHIPPED = Path(__file__).parent / "data" / "fclib" / "local_problem_test.hdf5"
+DATA = Path(__file__).parent / "data" / "fclib"
+SHIPPED = DATA / "local_problem_test.hdf5"
+LMGC_GLOBAL = DATA / "LMGC_GlobalFrictionContactProblem00046.hdf5"  # Siconos' test data (NOTICE.md)
+LMGC_LOCAL = DATA / "LMGC_100_PR_PerioBox-i00361-60-03000.hdf5"
 
 
 def punch_2d():
@@ -92,6 +96,16 @@ def test_the_file_holds_what_was_written(exported):
             ()].decode()
     assert abs(read_back.W - problem.W).max() == 0 and np.array_equal(read_back.q, problem.q)
     assert np.array_equal(read_back.mu, problem.mu) and np.array_equal(stored.r, solution.r)
+
+
+def test_a_written_file_is_whole_and_readable_by_others(tmp_path):
+    """Written beside its name and moved in (nothing left behind), with the permissions of any new file (umask),
+    not a temporary file's 0600."""
+    umask = os.umask(0o022)
+    os.umask(umask)
+    path = fclib.write(tmp_path / "p.hdf5", one_contact())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.hdf5"]
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask
 
 
 def test_the_mapping_of_unknowns_and_signs():
@@ -175,6 +189,44 @@ def test_fclibs_own_test_problem():
     assert max(natural_residuals(problem, answer.r).values()) < 1e-8
 
 
+def test_siconos_global_lmgc_file_is_read_as_written():
+    """LMGC_GlobalFrictionContactProblem00046 (Siconos' test data, written by LMGC90 through Siconos): H is 162 × 27
+    in triplets, its p below n = 27 and its i up to 107 — only "i rows, p columns" fits; M is stored as its upper
+    triangle. Read so, the problem is solved to fclib merit 1e-14 with equilibrium 1e-13; judged on the literal
+    triangle instead, the same answer's equilibrium residual is of order one."""
+    with h5py.File(LMGC_GLOBAL) as file:
+        H = file["fclib_global/H"]
+        assert int(H["nz"][0]) == 405 and H["p"][()].max() < int(H["n"][0]) == 27 <= H["i"][()].max()
+        M = file["fclib_global/M"]
+        rows, columns = M["i"][()], M["p"][()]
+        assert np.all(rows <= columns) and np.sum(rows < columns) > 2800  # the upper triangle only
+        triangle = sp.csr_matrix((M["x"][()], (rows, columns)), shape=(162, 162))
+    problem, stored, guesses = fclib.read(LMGC_GLOBAL)
+    assert problem.H.shape == (162, 27) and problem.mu.size == 9 and np.all(problem.mu == 0.3) and stored is None and guesses == []
+    assert abs(problem.M - problem.M.T).max() == 0 and problem.warnings[0].startswith("fclib_global/M: stored as its")
+    answer = solve_global(problem)
+    assert answer.status == "solved" and answer.merit < 1e-12 and answer.residuals["equilibrium"] < 1e-10
+    literal = triangle @ answer.v - problem.H @ answer.r - problem.f
+    assert np.abs(literal).max() > 0.1 * np.abs(triangle @ answer.v).max()
+    from convexcontact.fem.factorization import _pardiso, factorize
+
+    if _pardiso() is not None:  # the backends agree on M as read (on the literal triangle they differed by 28 %)
+        superlu, pardiso = (factorize(problem.M, backend).solve(problem.f) for backend in ("superlu", "pardiso"))
+        assert np.linalg.norm(superlu - pardiso) < 1e-12 * np.linalg.norm(superlu)
+
+
+def test_siconos_local_lmgc_file_is_read_as_written():
+    """LMGC_100_PR_PerioBox (Siconos' test data): 60 contacts of rigid particles, W 180 × 180 in compressed rows,
+    symmetric and positive semi-definite of rank 72 (6 per particle), μ ∈ {0.3, 0.5}."""
+    problem, stored, guesses = fclib.read(LMGC_LOCAL)
+    assert problem.W.shape == (180, 180) and problem.mu.size == 60 and set(problem.mu) == {0.3, 0.5}
+    assert stored is None and guesses == [] and problem.warnings == []
+    W = problem.W.toarray()
+    assert np.abs(W - W.T).max() < 1e-15 * np.abs(W).max()
+    eigenvalues = np.linalg.eigvalsh(W)
+    assert eigenvalues[0] > -1e-12 * eigenvalues[-1] and np.sum(eigenvalues > 1e-10 * eigenvalues[-1]) == 72
+
+
 def test_refused_problems_say_why(tmp_path):
     with pytest.raises(cc.SceneError, match="contact.law"):
         fclib_scene.export(cc.library.tresca_punch(nx=8), tmp_path / "t.hdf5")
@@ -197,24 +249,95 @@ def test_refused_problems_say_why(tmp_path):
         fclib.LocalProblem(sp.identity(4, format="csr"), np.zeros(4), np.ones(1), 3)
 
 
-def test_matrices_in_all_three_storages(tmp_path):
+def siconos_matrix(group, A, storage="triplet"):
+    """An FClib matrix group as Siconos writes one: its CSparse matrix's fields one to one (fclib_interface.c:
+    ``W->p = spmat->p``, ``W->i = spmat->i``), so a triplet holds the row indices in i and the columns in p;
+    integers as int32 arrays of one entry (fclib.c, write_matrix)."""
+    coo, csc, csr = sp.coo_matrix(A), sp.csc_matrix(A), sp.csr_matrix(A)
+    nz, p, i, x = {"triplet": (coo.nnz, coo.col, coo.row, coo.data), "csc": (-1, csc.indptr, csc.indices, csc.data),
+                   "csr": (-2, csr.indptr, csr.indices, csr.data)}[storage]
+    for key, value in {"nzmax": len(x), "m": A.shape[0], "n": A.shape[1], "nz": nz}.items():
+        group.create_dataset(key, data=np.array([value], dtype=np.int32))
+    group.create_dataset("p", data=np.asarray(p, dtype=np.int32))
+    group.create_dataset("i", data=np.asarray(i, dtype=np.int32))
+    group.create_dataset("x", data=np.asarray(x, dtype=np.float64))
+
+
+@pytest.mark.parametrize("storage", ["triplet", "csc", "csr"])
+def test_matrices_are_read_as_siconos_writes_them(tmp_path, storage):
+    """A non-square and a non-symmetric matrix in each storage: read as the matrix written, not its transpose."""
+    H = sp.csr_matrix(np.array([[1.0, 0.0], [0.0, 2.0], [3.0, 0.0]]))  # 3 × 2: a transposed triplet is 2 × 3
     A = sp.random(5, 4, density=0.5, random_state=2, format="csr")
-    coo = A.tocoo()
-    stored = {
-        "triplet": (coo.nnz, coo.row, coo.col, coo.data),
-        "csc": (-1, A.tocsc().indptr, A.tocsc().indices, A.tocsc().data),
-        "csr": (-2, A.indptr, A.indices, A.data),
-    }
+    skew = sp.csr_matrix(np.array([[1.0, 0.2, 0.0], [-0.2, 1.0, 0.0], [0.0, 0.0, 1.0]]))
     with h5py.File(tmp_path / "m.hdf5", "w") as file:
-        for name, (nz, p, i, x) in stored.items():
-            group = file.create_group(name)
-            for key, value in {"nzmax": A.nnz, "m": 5, "n": 4, "nz": nz}.items():
-                group.create_dataset(key, data=np.array([value], dtype=np.int32))
-            group.create_dataset("p", data=np.asarray(p, dtype=np.int32))
-            group.create_dataset("i", data=np.asarray(i, dtype=np.int32))
-            group.create_dataset("x", data=x)
-        for name in stored:
-            assert abs(fclib.read_matrix(file[name]) - A).max() == 0
+        for name, matrix in (("H", H), ("A", A), ("skew", skew)):
+            siconos_matrix(file.create_group(name), matrix, storage)
+        for name, matrix in (("H", H), ("A", A), ("skew", skew)):
+            assert (fclib.read_matrix(file[name]) != matrix).nnz == 0
+
+
+def test_a_non_symmetric_triplet_w_keeps_its_exact_answer(tmp_path):
+    """W = [[1, .2, 0], [−.2, 1, 0], [0, 0, 1]], q = (−1, 0, 0), μ = .3: r = (1, .2, 0)/1.04 gives u = W r + q = 0 with
+    r inside the cone (|r_T| = .2/1.04 < μ r_N): sticking, a solution. Read transposed, the same r would slide:
+    u = (−.04, .4, 0)/1.04, and fclib's merit says so."""
+    W = np.array([[1.0, 0.2, 0.0], [-0.2, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    with h5py.File(tmp_path / "skew.hdf5", "w") as file:
+        group = file.create_group("fclib_local")
+        group.create_dataset("spacedim", data=np.array([3], dtype=np.int32))
+        siconos_matrix(group.create_group("W"), sp.csr_matrix(W))
+        group.create_dataset("vectors/q", data=np.array([-1.0, 0.0, 0.0]))
+        group.create_dataset("vectors/mu", data=np.array([0.3]))
+    problem, _, _ = fclib.read(tmp_path / "skew.hdf5")
+    np.testing.assert_array_equal(problem.W.toarray(), W)
+    r = np.array([1.0, 0.2, 0.0]) / 1.04
+    assert merit(problem, r) < 1e-15
+    transposed = dataclasses.replace(problem, W=sp.csr_matrix(W.T))
+    assert merit(transposed, r) > 0.1
+
+
+def test_a_global_problem_with_a_non_square_triplet_h(tmp_path):
+    """M = 2 I (4 DOFs), H 4 × 2 (one 2-D contact) in triplets: read as written, condensed to W = Hᵀ M⁻¹ H."""
+    H = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.5], [0.0, 0.0]])
+    with h5py.File(tmp_path / "g.hdf5", "w") as file:
+        group = file.create_group("fclib_global")
+        group.create_dataset("spacedim", data=np.array([2], dtype=np.int32))
+        siconos_matrix(group.create_group("M"), 2 * sp.identity(4))
+        siconos_matrix(group.create_group("H"), sp.csr_matrix(H))
+        for name, value in {"f": np.zeros(4), "w": np.array([-1.0, 0.0]), "mu": np.array([0.5])}.items():
+            group.create_dataset(f"vectors/{name}", data=value)
+    problem, _, _ = fclib.read(tmp_path / "g.hdf5")
+    np.testing.assert_array_equal(problem.H.toarray(), H)
+    local, _ = condense(problem)
+    np.testing.assert_allclose(local.W.toarray(), H.T @ H / 2, atol=1e-15)
+
+
+def upper_triangle_file(path, full):
+    """A global problem whose M is stored as its upper triangle only, as LMGC90's dumps are (i ≤ p)."""
+    with h5py.File(path, "w") as file:
+        group = file.create_group("fclib_global")
+        group.create_dataset("spacedim", data=np.array([3], dtype=np.int32))
+        siconos_matrix(group.create_group("M"), sp.triu(sp.csr_matrix(full)))
+        siconos_matrix(group.create_group("H"), sp.csr_matrix(np.eye(3)))
+        for name, value in {"f": full @ np.ones(3), "w": np.zeros(3), "mu": np.array([0.3])}.items():
+            group.create_dataset(f"vectors/{name}", data=value)
+
+
+@pytest.mark.parametrize("backend", ["superlu", "pardiso"])
+def test_a_matrix_stored_as_one_triangle_is_read_as_the_symmetric_one(tmp_path, backend):
+    """M = [[4, 1, 0], [1, 3, 1], [0, 1, 2]] stored as its upper triangle, f = M (1, 1, 1) = (5, 5, 3): read as the
+    full M (warned), so M⁻¹ f = (1, 1, 1) with either backend. The literal triangle would give (23/24, 7/6, 3/2) with SuperLU, (1, 1, 1) with
+    PARDISO (which reads one triangle): answers that depended on the backend."""
+    from convexcontact.fem.factorization import _pardiso, factorize
+
+    if backend == "pardiso" and _pardiso() is None:
+        pytest.skip("PARDISO (pypardiso) is not available")
+    full = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 2.0]])
+    upper_triangle_file(tmp_path / "triangle.hdf5", full)
+    problem, _, _ = fclib.read(tmp_path / "triangle.hdf5")
+    np.testing.assert_array_equal(problem.M.toarray(), full)
+    assert len(problem.warnings) == 1 and problem.warnings[0].startswith("fclib_global/M: stored as its upper triangle")
+    np.testing.assert_allclose(factorize(problem.M, backend).solve(problem.f), np.ones(3), rtol=1e-14)
+    np.testing.assert_allclose(np.linalg.solve(np.triu(full), problem.f), [23 / 24, 7 / 6, 1.5], rtol=1e-14)
 
 
 def test_command_line(tmp_path, capsys):
@@ -229,3 +352,11 @@ def test_command_line(tmp_path, capsys):
     assert "fclib merit" in capsys.readouterr().out
     assert main(["export", str(scene), "--out", str(out)]) == 2  # exists: --overwrite to replace
     assert "--overwrite" in capsys.readouterr().err
+
+
+def test_an_answer_above_the_certificate_exits_3_as_every_command(exported, capsys):
+    """Stopped at merit 0.5 (the frictionless first iterate, merit ~3e-4): an answer above the certificate's 1e-8,
+    reported inaccurate, exit 3 (cli.EXIT)."""
+    path = exported["2d", "local"][0]
+    assert main(["solve", str(path), "--merit-tol", "0.5"]) == 3
+    assert "inaccurate" in capsys.readouterr().out

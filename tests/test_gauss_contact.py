@@ -99,3 +99,35 @@ def test_the_penalty_at_the_points_tends_to_the_gauss_point_law():
     errors = np.array(errors)
     assert np.all(errors[1:] / errors[:-1] < 0.1)
     assert np.polyfit(np.log(stiffness), np.log(errors), 1)[0] <= -0.8
+
+
+@pytest.mark.parametrize("quadrature", ["nodal", "gauss"])
+def test_a_node_held_tangentially_is_flagged_and_the_rest_agrees_across_solvers(quadrature):
+    """The patch's bottom-left node has its ux prescribed (a roller), and it sticks. Its friction force goes into
+    the support: with Gauss points its share of the point tractions differed between solvers (Clarabel −1.263e-3,
+    OSQP −1.234e-3) while not_unique said nothing. Both quadratures report it as 0 and say so; every other node's
+    friction traction is the same from both solvers."""
+    scene = pressure_patch(nx=4, law=cc.Tresca(0.05, quadrature=quadrature))
+    clarabel, osqp = (cc.prepare(scene, "primal").solve(solver) for solver in ("clarabel", "osqp"))
+    held = np.isclose(clarabel.contact.coords[:, 0], 0.0)
+    assert held.sum() == 1 and clarabel.contact.status[held][0] == "stick"
+    for result in (clarabel, osqp):
+        assert result.status == "solved" and "prescribed tangential displacement" in result.not_unique["friction"]
+        assert result.contact.friction[held][0] == 0.0
+    assert np.abs(clarabel.contact.friction - osqp.contact.friction).max() < 1e-6 * 0.05
+    assert np.abs(clarabel.contact.friction[~held]).min() > 1e-3  # sticking and slipping nodes carry friction
+
+
+def test_a_node_held_normally_reports_no_pressure_at_gauss_points_either():
+    """The patch clamped on its left side: the corner's normal displacement is prescribed, and not_unique said its
+    pressure was reported as 0 — but from the Gauss points' multipliers it was 0.0954 with Clarabel and 0.0723 with
+    OSQP. Now 0 from both, and the other nodes' pressures agree."""
+    scene = dataclasses.replace(pressure_patch(nx=4, law=cc.Signorini("gauss")),
+                                dirichlet=(cc.Dirichlet("left", ux=0.0, uy=0.0),))
+    clarabel, osqp = (cc.prepare(scene, "primal").solve(solver) for solver in ("clarabel", "osqp"))
+    held = np.isclose(clarabel.contact.coords[:, 0], 0.0)
+    for result in (clarabel, osqp):
+        assert result.status == "solved" and "prescribed normal displacement" in result.not_unique["pressure"]
+        assert result.contact.pressure[held][0] == 0.0
+    assert np.abs(clarabel.contact.pressure - osqp.contact.pressure).max() < 1e-6 * 0.1
+    assert clarabel.contact.pressure[~held].min() > 0.01

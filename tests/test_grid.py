@@ -70,5 +70,28 @@ def test_the_command_line_runs_a_grid(tmp_path, capsys):
     assert cli.main(["study", "grid", str(scene), "--param", "contact.slip_bound=0.001,0.002",
                      "--scheduler", "serial", "--out", str(tmp_path / "out")]) == 0
     assert "2/2 cases solved" in capsys.readouterr().out
-    with pytest.raises(SystemExit):
-        cli.main(["study", "grid", str(scene), "--param", "contact.nosuch=1", "--scheduler", "serial"])
+    assert cli.main(["study", "grid", str(scene), "--param", "contact.nosuch=1", "--scheduler", "serial"]) == 2
+    assert capsys.readouterr().err.startswith("error: --param contact.nosuch: not a parameter")
+
+
+def test_a_rerun_with_the_parameters_in_another_order_resumes_under_the_tables_header(tmp_path):
+    """The table's columns stay as written; the rerun adds only the new case, under the same header."""
+    scene = block(cc.Tresca(slip_bound=0.001))
+    first = run_grid(scene, {"contact.slip_bound": [0.001], "body.nx": [6]}, tmp_path, scheduler="serial",
+                     progress=None)
+    rerun = run_grid(scene, {"body.nx": [6], "contact.slip_bound": [0.001, 0.002]}, tmp_path, scheduler="serial",
+                     progress=None)
+    assert [row["contact.slip_bound"] for row in first + rerun] == [0.001, 0.002]
+    with open(tmp_path / "grid.csv", newline="") as handle:
+        rows = list(csv.reader(handle))
+    assert rows[0][:3] == ["contact.slip_bound", "body.nx", "key"] and [r[0] for r in rows[1:]] == ["0.001", "0.002"]
+
+
+def test_numpy_values_are_a_grid_and_arrays_of_two_dimensions_are_not(tmp_path):
+    scene = block(cc.Tresca(slip_bound=0.001))
+    rows = run_grid(scene, {"contact.slip_bound": np.array([0.001, 0.002])}, tmp_path, scheduler="serial",
+                    progress=None)
+    assert [row["status"] for row in rows] == ["solved", "solved"]
+    assert abs(rows[0]["tangential_force"]) < abs(rows[1]["tangential_force"])  # a higher bound holds more shear
+    with pytest.raises(ValueError, match=r"^grid.contact.slip_bound: expected a list of values"):
+        run_grid(scene, {"contact.slip_bound": np.ones((2, 2))}, tmp_path / "b", scheduler="serial", progress=None)

@@ -265,3 +265,45 @@ def test_a_history_left_to_auto_runs_newton_cg_as_clarabel_would(monkeypatch):
     fallback = run(scene, "auto")
     assert fallback.status == "solved" and [step.solver for step in fallback.steps] == ["clarabel"] * 4
     assert fallback.steps[0].extra["solver_reason"].startswith("newton-cg max_iter after 1 Newton steps")
+
+
+def test_a_rigid_ground_among_pairs_moves_by_its_contact_index():
+    """Two unit blocks on rollers, the upper's top held, the ground under the lower raised by d_k through
+    ``contact[1].obstacle.depth``: both interfaces carry the uniaxial plane-strain pressure E d/(2(1 − ν²)) (the
+    blocks in series each take d/2), at every node and every step. (``obstacle.depth`` here moved nothing.)"""
+    material = cc.Material(1.0, 0.3)
+    parts = [cc.Part("upper", cc.Rectangle(1.0, 1.0, 3, 3, origin=(0.0, 1.0)), material),
+             cc.Part("lower", cc.Rectangle(1.0, 1.0, 4, 4), material)]
+    depths = [0.001, 0.002, 0.003]
+    scene = cc.bodies_scene(
+        parts, [cc.Pair("upper.bottom", master="lower.top"), cc.Contact("lower.bottom", cc.Obstacle("flat"))],
+        [cc.Dirichlet("upper.top", uy=0.0), cc.Dirichlet("upper.left", ux=0.0), cc.Dirichlet("lower.left", ux=0.0)],
+        history=History([1.0, 2.0, 3.0], {"contact[1].obstacle.depth": depths}))
+    result = run(scene)
+    assert result.status == "solved"
+    for step, depth in zip(result.steps, depths):
+        np.testing.assert_allclose(step.contact.pressure, depth / (2 * (1 - 0.3**2)), rtol=1e-8)
+
+
+def test_the_steps_of_a_history_share_one_stiffness():
+    """Each step's model is K's, not a copy of it (a copy per step was 42 of the 57 kB a step held): the
+    frictional block's slip offset no longer rebuilds K."""
+    result = run(sliding_block([0.0, 0.002, 0.004]))
+    assert result.status == "solved"
+    assert all(step.fem.K is result.steps[0].fem.K for step in result.steps[1:])
+
+
+@pytest.mark.parametrize("small, status", [(1e-6, "solved"), (1e-9, "inaccurate"), (1e-12, "inaccurate")])
+def test_a_step_far_below_the_history_scale_is_judged_on_its_own(small, status):
+    """The pressure patch loaded with ``small``, then 1: the units are the second step's, on which the first step's
+    certificate passed while its contact force was 13 % off (10⁻⁹) or 0 (10⁻¹²). On its own scale it is
+    "inaccurate", and says why; at 10⁻⁶ it is solved and its force is the load to round-off."""
+    scene = dataclasses.replace(cc.library.pressure_patch(nx=3), history=History(
+        [1.0, 2.0], {"traction[top].pressure": [small, 1.0]}))
+    result = run(scene)
+    first = result.steps[0]
+    assert first.status == status and result.steps[1].status == "solved"
+    if status == "solved":
+        assert first.normal_force == pytest.approx(small, rel=1e-12)
+    else:
+        assert "on its own" in first.message and result.status == "inaccurate" and "step 1" in result.message

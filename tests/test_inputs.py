@@ -127,3 +127,30 @@ def test_linear_elements_warn_of_locking_when_nearly_incompressible():
     quadratic = dataclasses.replace(locking, body=cc.Body(cc.Rectangle(nx=2, ny=2), "P2"))
     assert cc.solve(quadratic).summary()["warnings"] == []
     assert cc.solve(pressure_patch(nx=2)).summary()["warnings"] == []
+
+
+def test_a_gmsh_file_with_geometry_points_is_read_without_them(tmp_path):
+    """gmsh writes the points of its geometry (here an arc centre outside the body, as node 5) with vertex cells
+    naming them. The file is read: the unused node dropped, cells, boundary tags and subdomains renumbered,
+    and the result's warnings say so — the answer is the one on the same mesh without that node."""
+    mesh = fe.MeshTri.init_tensor(np.linspace(0, 1, 4), np.linspace(0, 1, 4)).with_defaults()
+    names = sorted(mesh.boundaries)
+    lines = np.vstack([mesh.facets[:, mesh.boundaries[n]].T for n in names])
+    line_tags = np.concatenate([np.full(len(mesh.boundaries[n]), k + 1) for k, n in enumerate(names)])
+    after = lambda nodes: np.where(nodes >= 5, nodes + 1, nodes)  # node 5 is the arc centre
+    points = np.insert(np.column_stack([mesh.p.T, np.zeros(mesh.p.shape[1])]), 5, [0.5, 2.0, 0.0], axis=0)
+    tags = [np.array([50, 51]), line_tags, np.full(mesh.t.shape[1], 100)]
+    field_data = {n: np.array([k + 1, 1]) for k, n in enumerate(names)}
+    field_data.update(block=np.array([100, 2]), centre=np.array([50, 0]), corner=np.array([51, 0]))
+    path = tmp_path / "arc.msh"
+    meshio.Mesh(points, [("vertex", np.array([[5], [0]])), ("line", after(lines)), ("triangle", after(mesh.t.T))],
+                cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags},
+                field_data=field_data).write(path, file_format="gmsh22", binary=False)
+    patch = pressure_patch(nx=3)
+    from_file = cc.solve(dataclasses.replace(patch, body=cc.Body(cc.MeshFile(path)),
+                                             materials={"block": cc.Material(1.0, 0.3)}))
+    same_mesh = cc.solve(dataclasses.replace(patch, body=cc.Body(mesh)))
+    warning, = from_file.summary()["warnings"]
+    assert "1 of 17 nodes belong to no cell" in warning and "node 5 at [0.5, 2.0, 0.0]" in warning
+    assert from_file.status == "solved" and np.allclose(from_file.contact.pressure, 0.1, rtol=1e-9)
+    assert np.abs(from_file.displacement - same_mesh.displacement).max() < 1e-12

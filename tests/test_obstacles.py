@@ -127,3 +127,26 @@ def test_toml_names_the_new_obstacle_keys(tmp_path):
     punch_file.write_text(text.replace('radius = 1.0', 'radius = 1.0\nnormal = "obstacle"'))
     with pytest.raises(cc.SceneError, match="obstacle.normal: the parabolic obstacle has no closest point"):
         load_scene(punch_file)
+
+
+def test_a_closest_point_cylinder_indented_nearly_to_its_centre_is_still_the_distance():
+    """depth = 0.9 R keeps the centre in front of Γ_C (0.9 R ≥ R is refused): the gap is still |c − x| − R and the
+    normals point to the centre, at nodes far beyond the radius too — finite, and solved."""
+    R, d = 0.5, 0.45
+    result = cc.solve(punch(cc.Obstacle("cylinder", radius=R, depth=d, normal="obstacle"), nx=16))
+    trace, scaling = result.fem.contact, result.fem.scaling
+    to_centre = np.array([0.0, R - d]) - trace.coords * scaling.length
+    distance = np.linalg.norm(to_centre, axis=1)
+    assert np.allclose(trace.gap * scaling.displacement, distance - R, rtol=0, atol=1e-14)
+    assert np.allclose(trace.normals, to_centre / distance[:, None], rtol=0, atol=1e-14)
+    assert result.status == "solved" and result.certificate.passes(1e-10)
+
+
+@pytest.mark.parametrize("normal", ["body", "obstacle"])
+def test_a_huge_cylinder_is_the_parabola_it_tends_to(normal):
+    """R − sqrt(R² − r²) lost every digit for R ≫ r (and R² overflowed beyond 1e154): written without the
+    cancellation, the gap of a cylinder of radius 1e10 is r²/2R to round-off, along either normal."""
+    R = 1e10
+    obstacles = (cc.Obstacle("cylinder", radius=R, depth=0.0, normal=normal), cc.Obstacle("parabolic", radius=R))
+    gaps = [cc.prepare(punch(obstacle, nx=8)).fem.contact.gap for obstacle in obstacles]
+    assert np.allclose(gaps[0], gaps[1], rtol=1e-12, atol=0) and gaps[1].max() > 0  # the old form gave 0

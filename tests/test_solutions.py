@@ -108,9 +108,14 @@ def test_products_of_solution_sets_are_found():
 
 def test_beyond_the_exhaustive_size_the_search_finds_a_second_solution_and_says_it_is_not_complete():
     """Eleven triangles (beyond 10 nodes), one with three solutions: the search finds separation and stick
-    there (left slip repels every Picard iteration) and does not claim completeness."""
-    found = all_solutions(side_by_side_triangles([(-1.0, -0.5)] + [(0.5, -1.0)] * 10, 2.5))
+    there (left slip repels every Picard iteration) and does not claim completeness; its 17 Picard runs and
+    each solution's slope are reported as they end."""
+    reports = []
+    found = all_solutions(side_by_side_triangles([(-1.0, -0.5)] + [(0.5, -1.0)] * 10, 2.5),
+                          progress=lambda *report: reports.append(report))
     assert not found.complete and "not proven complete" in found.statement and found.examined > 2
+    assert [r[0] for r in reports[:17]] == list(range(1, 18)) and reports[17:] == [
+        (k, len(found), "Picard slope") for k in range(1, len(found) + 1)]  # every run and slope reported
     first = {s.states[0] for s in found.solutions}
     assert {"open", "stick"} <= first and all(s.result.status == "solved" for s in found.solutions)
 

@@ -17,16 +17,19 @@ updating q and b and starting from the previous answer (Clarabel's polish, OSQP'
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .. import solvers
 from ..fem.assembly import FEModel, assemble, viscous_stiffness
+from ..fem.mesh import available_memory
 from ..results.result import ContactResult
 from ..scene.history import History
-from ..scene.model import Coulomb, Scene, SceneError
-from .model import Model, ProgramSession, condensed, formulate, timed
+from ..scene.model import Coulomb, Scene, SceneError, of_type
+from .estimates import duration, footprint, reachable
+from .model import CERTIFIED, Model, ProgramSession, check_formulation_name, condensed, formulate, timed
 
 
 @dataclass
@@ -117,7 +120,8 @@ class Process:
             fem, self.key = viscous_step(fem, self.viscous, dt, self.u), dt
         self.absolute = fem.contact
         if self.slip is not None:
-            fem = replace(fem, contact=replace(fem.contact, tangent_offset=fem.contact.tangent_offset - self.slip))
+            fem = keeping_K(replace(fem, contact=replace(fem.contact, tangent_offset=fem.contact.tangent_offset -
+                                                         self.slip)), fem)
         if self.model.formulation == "dual" and self.key not in self.condensations:
             self.condensations[self.key] = condensed(fem, timings)
         condensation = self.condensations.get(self.key)
@@ -136,40 +140,111 @@ class Process:
         self.slip = contact.T @ u[fem.free] + contact.tangent_offset - coupling
 
 
+def keeping_K(copy: FEModel, fem: FEModel) -> FEModel:
+    """``copy`` (of ``fem`` with another contact trace) with ``fem``'s K, not its own: each step held a K of its own
+    (42 kB of a 306-DOF block's 57 kB a step)."""
+    copy.__dict__.update({"K": fem.__dict__["K"]} if "K" in fem.__dict__ else {})
+    return copy
+
+
 def viscous_step(fem: FEModel, viscous, dt: float, u_previous: np.ndarray) -> FEModel:
     """Backward Euler for Kelvin–Voigt: K + K_A/Δt and f + K_A u^{k−1}/Δt (full DOF vectors)."""
     step = replace(fem, K_full=(fem.K_full + viscous / dt).tocsr(), f_full=fem.f_full + viscous @ u_previous / dt)
     return step
 
 
-def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progress=None,
+def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progress=None, confirm: bool = False,
         **options) -> HistoryResult:
     """Solve ``scene``'s history step by step; ``progress(step, count, result)`` after each step.
 
     A step that fails ends the history there (later steps start from its state): the result
-    holds the steps solved so far, and its status and message name the failing step.
+    holds the steps solved so far, and its status and message name the failing step. Every step's
+    result is kept. After :data:`MEASURED_STEPS` steps the rest is estimated from the last one (time, and the
+    memory its result holds): beyond the memory available it is refused, beyond :data:`LONG_RUN` seconds it
+    needs ``confirm=True`` (``convexcontact run --confirm``).
     """
+    of_type(scene, Scene, "scene", "build cc.Scene(...) or cc.bodies_scene(...) with history=cc.History(...)")
     if scene.history is None:
         raise SceneError("history", "the scene has no history", "give history = {times = [...], ...} or solve it statically")
-    solvers.check_name(solver)
+    solvers.check_options({**options, "progress": progress}, solvers.check_name(solver))
+    check_formulation_name(formulation, what=" for a history")
+    of_type(confirm, bool, "confirm", "give confirm=True to run a history estimated to take long, else leave it out")
     scene.history.check(scene)
     timings: dict = {}
     process = Process(scene, formulation, timings)
     stepper = Stepper(solver, options)
-    results = []
-    for k in range(len(scene.history)):
+    results, count = [], len(scene.history)
+    for k in range(count):
         step_timings: dict = {}
+        start = time.perf_counter()
         with timed(timings, "steps"):
             model = process.step_model(k, step_timings)
             result = stepper.solve(model, process.key, step_timings)
         result.extra["time"] = scene.history.times[k]
+        judge_on_its_own_scale(result, process.fem)
         results.append(result)
         if progress is not None:
-            progress(k + 1, len(scene.history), result)
+            progress(k + 1, count, result)
         if not result.solved:
             break
         process.advance(result)
+        if k + 1 == MEASURED_STEPS and count > MEASURED_STEPS:
+            check_cost(count, results, time.perf_counter() - start, confirm)
     return HistoryResult(scene, scene.history, results, timings)
+
+
+def judge_on_its_own_scale(result: ContactResult, envelope: FEModel) -> None:
+    """Mark "inaccurate" a step certified only on the history's scale. The units are the largest step's, and the
+    certificate measures residuals against at least one unit, so a step loaded with 10⁻⁹ of the largest load passed
+    with its contact force 13 % off (10⁻¹²: reported 0). Divided by the step's own scale — its loads, prescribed
+    motion and obstacle motion against the largest ones (:func:`drive`), or its own pressures (a state locked in by
+    friction), at most one unit — its certificate must pass as well."""
+    if result.status != "solved":
+        return
+    scaling, worst = result.fem.scaling, result.certificate.worst
+    pressure = np.abs(result.contact.pressure).max(initial=0.0) / scaling.pressure
+    scale = min(1.0, max([pressure, *(a / b for a, b in zip(drive(result.fem), drive(envelope)) if b > 0)]))
+    own = worst / scale if scale > 0 else (0.0 if worst == 0 else np.inf)
+    if own > CERTIFIED:
+        result.status = "inaccurate"
+        result.message = (f"its loads, motion and pressures are {scale:.2g} of the history's largest: its certificate "
+                          f"{worst:.2g} passes on the history's scale, but is {own:.2g} on its own (over {CERTIFIED:g}); "
+                          "run the small steps as a history of their own, or give a smaller tol")
+
+
+def drive(fem: FEModel) -> tuple[float, ...]:
+    """What drives a step, in magnitudes: its load vector, its prescribed displacements, and its rigid obstacles'
+    depths, gaps and forces."""
+    contact = fem.scene.contact
+    obstacles = [c.obstacle for c in getattr(contact, "pairs", (contact,)) if not hasattr(c, "master")]
+    motion = [max((abs(getattr(obstacle, name) or 0.0) for obstacle in obstacles), default=0.0)
+              for name in ("depth", "force", "tangential_force", "gap")]
+    return (np.abs(fem.f_full).max(initial=0.0), np.abs(fem.prescribed).max(initial=0.0), *motion)
+
+
+MEASURED_STEPS = 2
+"""Steps solved before the rest of a history is estimated: the first sets up the solver session, the second
+starts from the first's answer, as every later step does."""
+LONG_RUN = 3600.0
+"""Seconds a history may be estimated to take without ``confirm=True``: a 10⁶-step history of a small scene would
+have run about 4 hours, every step kept in memory, without a word."""
+
+
+def check_cost(count: int, steps: list[ContactResult], seconds: float, confirm: bool) -> None:
+    """Refuse the rest of a history whose steps, estimated from the last one, would not fit in memory, or would take
+    more than :data:`LONG_RUN` unless ``confirm``."""
+    done, remaining = len(steps), count - len(steps)
+    held = footprint(steps[-1], reachable(steps[:-1]))
+    measured = f"measured on step {done}: {seconds:.3g} s and {held / 1e3:.3g} kB held"
+    need, have = remaining * held, available_memory()
+    if need > have:
+        raise SceneError("history.times", f"{count} steps would hold about {need / 2**30:.3g} GiB (every step's "
+                         f"result is kept; {measured}), and this machine has {have / 2**30:.3g} GiB available",
+                         f"give fewer steps (about {done + int(have // held)} fit), or a coarser mesh")
+    if remaining * seconds > LONG_RUN and not confirm:
+        raise SceneError("history.times", f"{count} steps would take about {duration(remaining * seconds)} more "
+                         f"({measured}; {need / 2**30:.3g} GiB held in all)",
+                         "give fewer steps, or confirm=True (convexcontact run --confirm) to run them all")
 
 
 class Stepper:

@@ -36,6 +36,7 @@ from ..scene.model import (
     has_friction,
     of_type,
 )
+from .scales import check_force, check_gap_scale, check_law_scales
 
 LAW_DRIVERS: dict[type, Callable] = {}
 """Drivers of the laws that are no single convex program, registered by their modules (:mod:`.picard`
@@ -56,6 +57,20 @@ def field_at_points(value, name: str, fem: FEModel, friction: FrictionPoints) ->
         nodal = field_at_nodes(value, name, fem.contact.coords * fem.scaling.length, getattr(fem.contact, "pieces", ()))
         return friction.interpolation @ nodal
     return evaluate_field(value, name, friction.coords * fem.scaling.length)  # x, y[, z] columns
+
+
+def law_fields(law, fem: FEModel, friction: FrictionPoints | None, slip_bound) -> dict[str, np.ndarray]:
+    """The friction law's fields at the friction points for :func:`check_law_scales`: Tresca's slip bound and
+    Coulomb's initial pressure over the pressure scale, Coulomb's coefficient as it is."""
+    if isinstance(law, Tresca):
+        return {"slip_bound": slip_bound}
+    if not isinstance(law, Coulomb):
+        return {}
+    fields = {"friction": field_at_points(law.friction, "contact.friction", fem, friction)}
+    if law.initial_pressure is not None:
+        fields["initial_pressure"] = field_at_points(law.initial_pressure, "contact.initial_pressure", fem,
+                                                     friction) / fem.scaling.pressure
+    return fields
 
 
 def frictional_rows(law, contact) -> np.ndarray | None:
@@ -107,6 +122,10 @@ class Model:
 
     def cvxpy(self) -> solvers.cvxpy_model.CvxpyModel:
         """The cvxpy Problem of this model, to inspect or extend before :meth:`solve`."""
+        if solvers.matrix_free(self.program):
+            raise SceneError("formulation", f"{MATRIX_FREE!r} applies W = B K⁻¹ Bᵀ through K's factorization and never "
+                             "forms it, and a cvxpy model needs the matrix",
+                             "prepare(scene, 'dual') (W formed) or prepare(scene, 'primal') for the cvxpy model")
         return solvers.cvxpy_model.model(self.program)
 
     def solve(self, solver: str = "auto", progress: Callable | None = None, **options) -> ContactResult:
@@ -386,9 +405,38 @@ class ProgramSession:
 def matrix_free_applies(fem: FEModel, law) -> bool:
     """Whether the matrix-free dual is in bound form (newton-cg's programs): no equality (force control) and
     exact friction."""
-    contact = fem.contact
-    return (contact.obstacle_coupling is None and contact.tangential_coupling is None
-            and getattr(law, "regularization", None) is None)
+    return matrix_free_obstruction(fem.scene.contact.obstacle, law) is None
+
+
+def matrix_free_obstruction(obstacle, law) -> str | None:
+    """What keeps the dual of a scene out of newton-cg's bound form (None: nothing)."""
+    if compliance_of(law) is not None:
+        return "normal compliance is posed in the primal only"
+    if obstacle.force_controlled:
+        return "a force-controlled obstacle (obstacle.force) adds an equality row"
+    if obstacle.tangential_force is not None:
+        return "a tangential obstacle force (obstacle.tangential_force) adds an equality row"
+    if getattr(law, "regularization", None) is not None:
+        return "the ε-regularized friction (contact.regularization) has no bound form"
+    return None
+
+
+def check_formulation(scene: Scene, formulation: str, solver: str = "auto") -> None:
+    """Refuse, before any assembly, a formulation the scene (or the ``solver``) cannot have, naming the ones it can."""
+    check_formulation_name(formulation)
+    if formulation == MATRIX_FREE and solver.partition(":")[0] not in ("auto", "newton-cg"):
+        raise SceneError("formulation", f"{MATRIX_FREE!r} applies W as an operator, which only newton-cg solves, "
+                         f"and solver = {solver!r} needs it as a matrix",
+                         f"use formulation='dual', 'primal' or 'auto' with {solver}, or solver='newton-cg'")
+    law = scene.contact.law
+    if formulation == "dual" and compliance_of(law) is not None:
+        raise SceneError("formulation", "'dual': normal compliance is posed in the primal only",
+                         "use formulation='primal' or 'auto'")
+    obstruction = matrix_free_obstruction(scene.contact.obstacle, law) if formulation == MATRIX_FREE else None
+    if obstruction is not None:
+        usable = "'primal' or 'auto'" if compliance_of(law) is not None else "'dual', 'primal' or 'auto'"
+        raise SceneError("formulation", f"{MATRIX_FREE!r} takes the dual in newton-cg's bound form, and {obstruction}",
+                         f"use formulation={usable}")
 
 
 def contact_columns(fem: FEModel) -> np.ndarray:
@@ -406,13 +454,20 @@ def prepare(scene: Scene, formulation: str = "auto") -> Model:
     picks one from the problem's shape and records why in ``Model.reason``.
     """
     of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
-    if formulation not in (*FORMULATIONS, MATRIX_FREE, "auto"):
-        raise SceneError("formulation", f"unknown {formulation!r}",
-                         f"use one of {sorted(FORMULATIONS)}, {MATRIX_FREE!r} or 'auto'")
+    check_formulation(scene, formulation)
     timings: dict = {}
     with timed(timings, "assembly"):
         fem = assemble(scene)
     return formulate(fem, formulation, timings)
+
+
+def check_formulation_name(formulation, allowed=(*FORMULATIONS, MATRIX_FREE, "auto"), what: str = "") -> str:
+    """Return ``formulation`` if it is one of ``allowed``, else a SceneError naming them (``what``: for which use)."""
+    if not isinstance(formulation, str) or formulation not in allowed:
+        known = isinstance(formulation, str) and formulation in (*FORMULATIONS, MATRIX_FREE, "auto")
+        raise SceneError("formulation", f"{'' if known else 'unknown '}{formulation!r:.60}{what}",
+                         f"use one of {', '.join(map(repr, allowed))}")
+    return formulation
 
 
 CHOSEN = "chosen by the user"
@@ -421,6 +476,8 @@ CHOSEN = "chosen by the user"
 
 def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, reason: str = CHOSEN):
     """The Model of an assembled scene (``condensation``: K's, when already built)."""
+    if reason == CHOSEN:  # the user's choice, whichever driver passes it on (a history's too)
+        check_formulation(fem.scene, formulation)
     with timed(timings, "formulation"):
         law = fem.scene.contact.law
         C = contact_weights(fem.contact, law.non_penetration)
@@ -437,6 +494,9 @@ def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, 
         if compliance_of(law) is not None:
             c_N, p = compliance_of(law).stiffness, compliance_of(law).exponent
             compliance = (c_N * fem.scaling.displacement**p / fem.scaling.pressure, p)
+        check_force(fem)
+        check_gap_scale(fem)
+        check_law_scales(fem, law, law_fields(law, fem, friction, slip_bound), compliance)
     if formulation == "auto":
         unknowns = fem.contact.m + (friction.R.shape[0] if friction is not None else 0)
         formulation, reason = choose_formulation(fem, law, unknowns)

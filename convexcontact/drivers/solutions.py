@@ -15,7 +15,9 @@ when its inequalities hold. Enumerating the 4^m choices (vectorized, one batched
 chunk) is exhaustive: every solution is found, and a choice whose system is singular yet
 consistent is a continuum, reported with its dimension and its end points. Beyond
 ``EXHAUSTIVE_LIMIT`` nodes the Picard map is started from diverse pressures instead; what it finds
-is reported as found, not as complete.
+is reported as found, not as complete. The dense W and the search grow fast with the contact nodes m
+(8·(2m)² bytes a copy; a Picard run as m³): both are estimated from m before W is formed, and refused
+beyond the memory available, or beyond an hour unless ``confirm=True``; ``progress`` hears of every run.
 
 Each solution carries its certificate and the slope of the Picard map at it (the spectral
 radius of the map's Jacobian, by finite differences of exact Tresca solves): below 1 the map
@@ -33,9 +35,12 @@ import scipy.optimize as opt
 
 from .. import solvers
 from ..conic import ConicSolution
+from ..fem.assembly import FEModel, assemble
+from ..fem.mesh import available_memory
 from ..results.result import ContactResult
-from ..scene.model import Coulomb, Scene, SceneError
-from .model import Model, field_at_points, prepare
+from ..scene.model import Coulomb, Scene, SceneError, of_type
+from .estimates import duration
+from .model import Model, check_formulation_name, field_at_points, formulate, timed
 
 EXHAUSTIVE_LIMIT = 10
 """Most contact nodes enumerated exhaustively: 4^10 ≈ 10⁶ linear systems of order 20 (seconds)."""
@@ -95,9 +100,10 @@ class SolutionSet:
 
     def save(self, directory) -> list:
         """summary.json, and each solution's outputs in solution_K/."""
+        from ..results.history_out import output_folder
         from ..results.output import begin
 
-        directory, paths = begin(self, directory)
+        directory, paths = begin(self, output_folder(directory))
         for k, solution in enumerate(self.solutions, start=1):
             paths += solution.result.save(directory / f"solution_{k}")
         return paths
@@ -108,38 +114,55 @@ class SolutionSet:
                 "solutions": [s.summary() for s in self.solutions]}
 
 
-def all_solutions(scene: Scene, solver: str = "clarabel", **options) -> SolutionSet:
-    """Every solution of the Coulomb ``scene`` (exhaustive up to ``EXHAUSTIVE_LIMIT`` nodes), else a search."""
-    law = scene.contact.law
+def all_solutions(scene: Scene, solver: str = "clarabel", formulation: str = "auto", confirm: bool = False,
+                  progress=None, **options) -> SolutionSet:
+    """Every solution of the Coulomb ``scene`` (exhaustive up to ``EXHAUSTIVE_LIMIT`` nodes), else a search.
+
+    ``formulation``: the condensed dual is enumerated ("auto" or "dual"). ``progress(done, count, what)`` is called
+    after each Picard run of a search and each Picard slope. ``confirm=True`` runs a search estimated beyond
+    :data:`LONG_SEARCH` seconds.
+    """
+    law = of_type(scene, Scene, "scene", "build cc.Scene(...) with a cc.Coulomb law").contact.law
     if not isinstance(law, Coulomb):
         raise SceneError("contact.law", "several solutions are a Coulomb question: Signorini and Tresca problems "
                          "are convex, their answer is unique", "use a Coulomb law")
-    model = prepare(scene, "dual")
-    supported(model)
+    check_formulation_name(formulation, ("auto", "dual"), " for solutions='all', which lists the states of the "
+                      "condensed contact unknowns")
+    of_type(confirm, bool, "confirm", "give confirm=True to run a search estimated to take long, else leave it out")
+    solvers.check_options({**options, "progress": progress}, solvers.check_name(solver))
+    timings: dict = {}
+    with timed(timings, "assembly"):
+        fem = assemble(scene)
+    supported(fem, law)
+    check_size(fem.contact.m, confirm)  # before W is formed
+    model = formulate(fem, "dual", timings)
+    if model.friction.count != fem.contact.m:
+        raise SceneError("contact.law", "not supported when listing every solution", "give every contact Coulomb's "
+                         "law (friction = 0 where frictionless): each node's unknowns are paired")
     start = time.perf_counter()
     carries = np.flatnonzero(np.diag(model.program.P.toarray())[: model.fem.contact.m] > 0)
     if carries.size <= EXHAUSTIVE_LIMIT:
         found, examined = enumerate_pieces(model, carries)
         method, complete = f"exhaustive enumeration of the 4^{carries.size} contact states", True
     else:
-        found, examined = search(model, solver, options)
+        found, examined = search(model, solver, options, Progress(progress, confirm))
         method, complete = "Picard map from diverse starting pressures", False
-    timings = {"search": time.perf_counter() - start}
+    timings["search"] = time.perf_counter() - start
     solutions = [certified(model, r, states, continuum) for r, states, continuum in found]
-    for solution in solutions:
+    for k, solution in enumerate(solutions, start=1):
         solution.picard_slope = picard_slope(model, solution.result, solver, options)
+        if progress is not None:
+            progress(k, len(solutions), "Picard slope")
     timings["total"] = time.perf_counter() - start
     return SolutionSet(solutions, complete, method, examined, timings)
 
 
-def supported(model: Model) -> None:
+def supported(fem: FEModel, law: Coulomb) -> None:
     """The exhaustive law is the local 2-D nodal one with the obstacle's position given."""
-    law, contact = model.law, model.fem.contact
+    contact = fem.contact
     checks = [
-        (model.fem.dim == 2, "contact", "the enumeration covers 2-D contact (the 3-D cone is not polyhedral)"),
+        (fem.dim == 2, "contact", "the enumeration covers 2-D contact (the 3-D cone is not polyhedral)"),
         (law.quadrature == "nodal", "contact.quadrature", "use quadrature = 'nodal'"),
-        (model.friction.count == contact.m, "contact.law",
-         "give every contact Coulomb's law (friction = 0 where frictionless): each node's unknowns are paired"),
         (law.smoothing_radius == 0, "contact.smoothing_radius", "the nonlocal law is not enumerated: use 0"),
         (law.regularization is None, "contact.regularization", "the regularized law is smooth: drop it"),
         (law.compliance is None, "contact.compliance", "use non-penetration (Signorini) as the normal law"),
@@ -149,6 +172,55 @@ def supported(model: Model) -> None:
     for ok, name, fix in checks:
         if not ok:
             raise SceneError(name, "not supported when listing every solution", fix)
+
+
+DENSE_COPIES = 3
+"""Dense (2m)² matrices a search holds at once: the Schur complement of K on the contact columns, W, and the copy
+whose diagonal says which nodes carry a force. One W of 20,001 nodes is 11.9 GiB."""
+SEARCH_RUNS = 17
+"""Picard runs of a search (:func:`search`): from the frictionless start, then 8 starts × 2 relaxations."""
+PICARD_RUN = (30.0, 200)
+"""(seconds, contact nodes): one Picard run measured on a 2-D block (Clarabel, 6 iterations; 0.55 s at 51 nodes,
+2.2 s at 101), growing as m³ (the dense solves) — an estimate, refined by the first run's time."""
+LONG_SEARCH = 3600.0
+"""Seconds a search may be estimated to take without ``confirm=True`` (1,001 nodes ran for hours, silently)."""
+
+
+def check_size(m: int, confirm: bool) -> None:
+    """Refuse, from the contact nodes alone, a search whose dense W would not fit in memory, or that would take
+    more than :data:`LONG_SEARCH` unless ``confirm``."""
+    need, have = DENSE_COPIES * 8.0 * (2 * m) ** 2, available_memory()
+    if need > have:
+        fit = int((have / (DENSE_COPIES * 32.0)) ** 0.5)
+        raise SceneError("solutions", f"{m} contact nodes make a dense W of {2 * m} unknowns: about "
+                         f"{need / 2**30:.3g} GiB with its copies, and this machine has {have / 2**30:.3g} GiB available",
+                         f"give fewer contact nodes (about {fit} fit: a coarser mesh or a shorter contact boundary), or "
+                         "solve it once with solutions='one'")
+    if m <= EXHAUSTIVE_LIMIT:
+        return
+    seconds = SEARCH_RUNS * PICARD_RUN[0] * (m / PICARD_RUN[1]) ** 3
+    if seconds > LONG_SEARCH and not confirm:
+        raise SceneError("solutions", f"a search for every solution over {m} contact nodes would take about "
+                         f"{duration(seconds)} ({SEARCH_RUNS} Picard runs of about {duration(seconds / SEARCH_RUNS)} "
+                         f"each, estimated from the size)", "give fewer contact nodes (a coarser mesh), or "
+                         "confirm=True (convexcontact run --solutions all --confirm) to run it")
+
+
+class Progress:
+    """Reports each Picard run of a search and, after the first, refuses the rest estimated from it beyond
+    :data:`LONG_SEARCH` unless confirmed."""
+
+    def __init__(self, report, confirm: bool):
+        self.report, self.confirm, self.start = report, confirm, time.perf_counter()
+
+    def __call__(self, done: int, count: int, result: ContactResult):
+        if self.report is not None:
+            self.report(done, count, f"Picard run: {result.status}")
+        seconds = (count - done) * (time.perf_counter() - self.start)
+        if done == 1 and seconds > LONG_SEARCH and not self.confirm:
+            raise SceneError("solutions", f"the other {count - done} Picard runs of the search would take about "
+                             f"{duration(seconds)} (measured on the first)", "give fewer contact nodes (a coarser "
+                             "mesh), or confirm=True (convexcontact run --solutions all --confirm) to run it")
 
 
 def coefficients(model: Model) -> np.ndarray:
@@ -308,11 +380,12 @@ def picard_slope(model: Model, result: ContactResult, solver: str, options: dict
     return float(np.abs(np.linalg.eigvals(jacobian)).max(initial=0.0))
 
 
-def search(model: Model, solver: str, options: dict):
+def search(model: Model, solver: str, options: dict, progress: Progress):
     """Picard from the frictionless pressure and from scaled and random pressures, with two relaxations:
     the distinct certified answers, and how many runs there were (one assembly and condensation for all)."""
     law: Coulomb = model.law
     first = model.solve(solver, **options)
+    progress(1, SEARCH_RUNS, first)
     if not first.solved:
         return [], 1
     pressure = first.contact.pressure
@@ -323,6 +396,7 @@ def search(model: Model, solver: str, options: dict):
     for start, relaxation in itertools.product(starts, (1.0, 0.5)):
         trial = replace(law, initial_pressure=np.asarray(start), relaxation=relaxation)
         results.append(model.with_law(trial).solve(solver, **options))
+        progress(len(results), SEARCH_RUNS, results[-1])
     found = []
     for result in results:
         if result.status != "solved":

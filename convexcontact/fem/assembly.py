@@ -14,7 +14,7 @@ from skfem.models.elasticity import lame_parameters
 from ..scene.bodies import Bodies, Pair, Pairs
 from ..scene.model import Contact, Dirichlet, Material, Scene, SceneError, check_plane
 from .contact import ContactTrace, contact_trace
-from .mesh import build_mesh, check_boundary, scaled, vector_basis
+from .mesh import build_mesh, check_boundary, mesh_warnings, scaled, vector_basis
 from .mortar import PairTrace, pair_trace, pairs_trace
 from .scaling import Scaling
 from .stiffness import stiffness
@@ -258,4 +258,4 @@ def assemble(scene: Scene) -> FEModel:
     contact = unscaled.in_displacement_units(scaling.displacement)
     pair_warnings = contact.warnings if isinstance(contact, PairTrace) else ()
     return FEModel(scene, scaling, mesh, basis, lame, K_full, f_full, free, prescribed, contact,
-                   locking_warnings(scene, mesh.dim()) + pair_warnings)
+                   mesh_warnings(user_mesh) + locking_warnings(scene, mesh.dim()) + pair_warnings)

@@ -8,7 +8,7 @@ import numpy as np
 import scipy.sparse as sp
 import skfem as fe
 
-from ..scene.model import COVERED, Contact, SceneError
+from ..scene.model import COVERED, Contact, SceneError, check_order
 from .mesh import check_boundary
 from .scaling import Scaling
 
@@ -251,8 +251,24 @@ def obstacle_gap(obstacle, user_coords: np.ndarray, user_coordinate: np.ndarray,
     the obstacle's normals there (None: the body's)."""
     offset = axis_offset(obstacle, user_coords, user_coordinate, mean_normal, mean_tangent)
     if obstacle.normal == "obstacle":
-        return obstacle.closest_point(offset, mean_normal)
-    return obstacle.shape_gap(user_coords, axis_distance(offset, mean_tangent)) - (obstacle.depth or 0.0), None
+        gap, normals = obstacle.closest_point(offset, mean_normal)
+    else:
+        gap = obstacle.shape_gap(user_coords, axis_distance(offset, mean_tangent)) - (obstacle.depth or 0.0)
+        normals = None
+    if not np.isfinite(gap).all():  # r²/2R with a radius of 1e-300
+        point = np.flatnonzero(~np.isfinite(gap))[0]
+        far = np.abs(axis_distance(offset, mean_tangent)).max() > 1e6 * np.ptp(user_coords, axis=0).max()
+        raise SceneError(gap_field(obstacle, far), f"the gap at {np.round(user_coords[point], 12).tolist()} on "
+                         f"Γ_C is {gap[point]}, beyond the floats",
+                         "give a radius, centre, gap and depth on the body's scale")
+    return gap, normals
+
+
+def gap_field(obstacle, far: bool = False) -> str:
+    """The obstacle's field that sets its gap: its gap, its formula, or a punch's radius (``far``: its centre, far
+    from Γ_C)."""
+    return {"flat": "obstacle.gap", "expression": "obstacle.expression"}.get(
+        obstacle.shape, "obstacle.center" if far else "obstacle.radius")
 
 
 def under_punch(contact: Contact, facets: np.ndarray, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling):
@@ -288,6 +304,9 @@ def contact_trace(
     normals = normals if obstacle_normals is None else obstacle_normals
     points = None
     if getattr(contact.law, "non_penetration", None) == "gauss":
+        if contact.law.order is not None:  # before the rule is built: its size grows with the order
+            element = type(basis.elem.elem).__name__.removeprefix("Element")
+            check_order(contact.law.order, basis.elem.elem.maxdeg, f"a {dim}-D {element} body")
         G, weights_q, coords_q = gauss_interpolation(mesh, basis, facets, dofs, contact.law.order)
         gap_q, _ = obstacle_gap(obstacle, coords_q * scaling.length, coords_q @ mean_tangent * scaling.length,
                                 mean_normal, mean_tangent)

@@ -99,19 +99,65 @@ def box(geometry: Box, hexes: bool) -> fe.Mesh:
 
 
 def load_mesh(geometry: MeshFile) -> fe.Mesh:
-    """Read a mesh file with meshio (through scikit-fem); physical groups become names."""
+    """Read a mesh file with meshio (through scikit-fem); physical groups become names. Nodes that no cell of
+    the body uses (gmsh's geometry points, arc centres) are dropped, and said in :func:`mesh_warnings`."""
     import meshio
+    from skfem.io.meshio import from_meshio
 
     try:
         raw = meshio.read(geometry.path)
-        mesh = fe.Mesh.load(str(geometry.path))
-    except Exception as error:  # meshio raises many types; the user needs the file and the cause
-        raise SceneError("body.mesh", f"could not read {geometry.path}: {error}") from error
-    if mesh.dim() == 2 and raw.points.shape[1] == 3 and np.ptp(raw.points[:, 2]) > 0:
-        raise SceneError("body.mesh", f"{geometry.path}: 2-D cells with z from {raw.points[:, 2].min():g} to "
-                         f"{raw.points[:, 2].max():g}: the body would be flattened without a word",
+        kept, note = without_unused_nodes(raw, geometry.path)
+        mesh = from_meshio(kept)
+    except SceneError:
+        raise
+    except (Exception, SystemExit) as error:  # meshio raises many types (and exits on a bad VTK header)
+        raise SceneError("body.mesh", f"could not read {geometry.path}: {error or type(error).__name__}",
+                         "give a mesh file meshio reads (gmsh .msh, .vtk, .vtu, .xdmf, …) with the body's cells") \
+            from error
+    if mesh.dim() == 2 and raw.points.shape[1] == 3 and np.ptp(kept.points[:, 2]) > 0:
+        raise SceneError("body.mesh", f"{geometry.path}: 2-D cells with z from {kept.points[:, 2].min():g} to "
+                         f"{kept.points[:, 2].max():g}: the body would be flattened without a word",
                          "put the 2-D mesh in a plane z = const, or mesh the body in 3-D (tetrahedra, hexahedra)")
+    if note:
+        mesh.convexcontact_warnings = (note,)  # read by the assembly into the result's warnings
     return mesh
+
+
+def mesh_warnings(mesh: fe.Mesh) -> tuple[str, ...]:
+    """What reading the mesh changed (:func:`load_mesh`), for the result's warnings."""
+    return getattr(mesh, "convexcontact_warnings", ())
+
+
+def without_unused_nodes(raw, source) -> tuple:
+    """The meshio mesh ``raw`` without the points that no cell of the body (the cells of the highest dimension)
+    uses, and a sentence saying what went, or None. The cells that name such points (gmsh's vertex cells of
+    geometry points) go with them; cells, their data and sets, and point data are renumbered consistently."""
+    import meshio
+
+    top = max(block.dim for block in raw.cells)
+    used = np.zeros(len(raw.points), bool)
+    for block in raw.cells:
+        if block.dim == top:
+            used[block.data.ravel()] = True
+    if used.all():
+        return raw, None
+    number = np.cumsum(used) - 1  # the new index of each kept point
+    kept_cells = [used[block.data].reshape(len(block.data), -1).all(axis=1) for block in raw.cells]
+    blocks = [index for index, keep in enumerate(kept_cells) if keep.any()]
+    cells = [meshio.CellBlock(raw.cells[i].type, number[raw.cells[i].data[kept_cells[i]]]) for i in blocks]
+    cell_data = {name: [np.asarray(data[i])[kept_cells[i]] for i in blocks] for name, data in raw.cell_data.items()}
+    renumbered = [np.cumsum(keep) - 1 for keep in kept_cells]
+    members = {name: [np.asarray(indices, dtype=int) for indices in of] for name, of in raw.cell_sets.items()}
+    cell_sets = {name: [renumbered[i][of[i][kept_cells[i][of[i]]]] for i in blocks] for name, of in members.items()}
+    kept = meshio.Mesh(raw.points[used], cells, point_data={name: data[used] for name, data in raw.point_data.items()},
+                       cell_data=cell_data, field_data=raw.field_data, cell_sets=cell_sets)
+    unused = np.flatnonzero(~used)
+    dropped = sum(len(keep) - keep.sum() for keep in kept_cells)
+    note = (f"body.mesh: {source}: {unused.size} of {used.size} nodes belong to no cell of the body (the first: "
+            f"node {unused[0]} at {np.round(raw.points[unused[0]], 12).tolist()}; gmsh writes its geometry points "
+            f"so): dropped{f', with the {dropped} lower-dimensional cells that name them' if dropped else ''}, and "
+            "the nodes renumbered")
+    return kept, note
 
 
 BYTES_PER_DOF = {2: 5.5e3, 3: 6.1e3}
@@ -211,6 +257,13 @@ def check_mesh(mesh: fe.Mesh, source: str) -> fe.Mesh:
     return mesh
 
 
+def not_a_body(mesh: fe.Mesh):
+    """Cells of one dimension (lines): a wire, not a body of plane or 3-D elasticity."""
+    if mesh.dim() not in (2, 3):
+        return (f"its cells are {mesh.dim()}-D ({type(mesh).__name__})",
+                "mesh the body with triangles or quadrilaterals (2-D), tetrahedra or hexahedra (3-D)")
+
+
 def out_of_plane(mesh: fe.Mesh):
     """Nodes with more coordinates than the cells have dimensions (triangles in 3-D space)."""
     if mesh.p.shape[0] != mesh.dim():
@@ -289,7 +342,7 @@ def folded_facets(mesh: fe.Mesh) -> np.ndarray:
     return interior[side[0] * side[1] > 0]
 
 
-MESH_CHECKS = (out_of_plane, orphan_nodes, coincident_nodes, degenerate_cells, inverted_cells)
+MESH_CHECKS = (not_a_body, out_of_plane, orphan_nodes, coincident_nodes, degenerate_cells, inverted_cells)
 
 
 def cell_measures(mesh: fe.Mesh) -> np.ndarray:

@@ -323,8 +323,9 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
     transfer, masters, ok = transfer_matrix(pair, slave, master, local, weights, normals, coords)
     if not ok.any():
         raise SceneError("contact.master", f"no facet of {pair.master!r} faces {pair.boundary!r} (they lie side by "
-                         "side or back to back)", "pair boundaries that face each other: the slave's outward normal "
-                         "must point at the master")
+                         "side, back to back, or beside each other along the interface: no slave facet's normal meets "
+                         "the master)", "pair boundaries that face each other: the slave's outward normal must point "
+                         "at the master, across from it")
     left_out = (f"{np.count_nonzero(~ok)} of {ok.size} nodes of {pair.boundary!r} have no master facet under their "
                 "whole support: they are left out of the contact (make the larger boundary the master)")
     transfer, normals, weights, coords = sp.coo_matrix(transfer[ok]), normals[ok], weights[ok], coords[ok]
@@ -369,5 +370,16 @@ def obstacle_piece(contact: Contact, mesh: fe.Mesh, basis: fe.Basis, scaling: Sc
 
 def pairs_trace(pairs: Pairs, *arguments) -> PairTrace:
     """The trace of several contacts: pairs (:func:`pair_trace`) and rigid obstacles (:func:`obstacle_piece`)."""
-    return stack([pair_trace(pair, *arguments) if isinstance(pair, Pair) else obstacle_piece(pair, *arguments)
-                  for pair in pairs.pairs])
+    return stack([numbered(index, pair_trace if isinstance(pair, Pair) else obstacle_piece, pair, *arguments)
+                  for index, pair in enumerate(pairs.pairs)])
+
+
+def numbered(index: int, build, pair: Contact, *arguments) -> PairTrace:
+    """``build(pair, …)``, its errors about ``contact.X`` named ``contact[index].X``: which pair of several."""
+    try:
+        return build(pair, *arguments)
+    except SceneError as error:
+        if not error.field.startswith("contact."):
+            raise
+        raise SceneError(f"contact[{index}].{error.field.removeprefix('contact.')}",
+                         str(error)[len(error.field) + 2:]) from None

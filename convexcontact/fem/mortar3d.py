@@ -159,8 +159,8 @@ def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
     area = np.where(fan + 1 < count[:, None], cross2(vertices[:, :, 1] - vertices[:, :, 0],
                                                      vertices[:, :, 2] - vertices[:, :, 0]) / 2, 0.0)
     points, fractions = DUNAVANT
-    at = np.einsum("qk,nfkc->nfqc", points, vertices).reshape(len(e), -1, 2)
-    weight = (area[:, :, None] * fractions).reshape(len(e), -1)
+    at = np.einsum("qk,nfkc->nfqc", points, vertices).reshape(len(e), fan.size * len(fractions), 2)
+    weight = (area[:, :, None] * fractions).reshape(len(e), fan.size * len(fractions))  # sizes given: e may be empty
     dual = shapes(flat, at)[1]
     shape = shapes(projected, at)[0]
     entries = [(e, np.full_like(e, a), f, np.full_like(f, b), (weight * dual[..., a] * shape[..., b]).sum(axis=1))

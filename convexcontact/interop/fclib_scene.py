@@ -34,23 +34,37 @@ import scipy.sparse as sp
 
 from ..drivers.model import Model, field_at_points, prepare
 from ..results.result import ContactResult
-from ..scene.model import Coulomb, Scene, SceneError
+from ..scene.model import Coulomb, Scene, SceneError, compliance_of
 from .fclib import GlobalProblem, LocalProblem, Solution, write
 
 
-def check_exportable(model: Model) -> None:
-    """Refuse, naming the field, a model whose problem is not FClib's local Coulomb problem."""
-    law = model.law
+def check_law(law) -> None:
+    """Refuse, naming the field and a fix in the scene file's terms, a law that is not FClib's local Coulomb law
+    (judged on the scene, before any assembly: ``prepare`` would send the user elsewhere, e.g. to a formulation
+    export does not take)."""
     checks = [
-        (isinstance(law, Coulomb), "contact.law", "FClib stores Coulomb problems (W, q, μ)", "use a Coulomb law"),
-        (model.formulation == "dual", "formulation", "the FClib problem is the condensed dual",
-         "prepare the scene with formulation='dual'"),
+        (isinstance(law, Coulomb), "contact.law", "FClib stores Coulomb problems (W, q, μ)", "use law = 'coulomb'"),
+        (compliance_of(law) is None, "contact.stiffness",
+         "FClib's law is non-penetration, not normal compliance",
+         "remove stiffness (and exponent) from [contact] (cc.Coulomb(compliance=None) in Python)"),
         (getattr(law, "quadrature", "nodal") == "nodal", "contact.quadrature",
          "FClib's contacts carry the friction law themselves", "use quadrature = 'nodal'"),
         (getattr(law, "smoothing_radius", 0.0) == 0, "contact.smoothing_radius",
          "the nonlocal law is not FClib's local Coulomb law", "use smoothing_radius = 0"),
-        (model.epsilon is None, "contact.regularization", "FClib's law is exact", "drop the regularization"),
-        (model.compliance is None, "contact.compliance", "FClib's law is non-penetration", "drop the compliance"),
+        (getattr(law, "regularization", None) is None, "contact.regularization", "FClib's law is exact",
+         "remove regularization from [contact]"),
+    ]
+    for ok, name, why, fix in checks:
+        if not ok:
+            raise SceneError(name, f"cannot be exported to FClib: {why}", fix)
+
+
+def check_exportable(model: Model) -> None:
+    """Refuse, naming the field, a model whose problem is not FClib's local Coulomb problem."""
+    check_law(model.law)
+    checks = [
+        (model.formulation == "dual", "formulation", "the FClib problem is the condensed dual",
+         "prepare the scene with formulation='dual'"),
         (model.friction is None or model.friction.count == model.fem.contact.m, "contact.law",
          "each FClib contact carries friction", "give every contact Coulomb's law (friction = 0 where frictionless)"),
     ]
@@ -149,12 +163,10 @@ def export(scene: Scene, path, kind: str = "local", solver: str = "clarabel", **
     Coulomb answer as ``/solution`` when the solve succeeds. Returns (problem, solution or None, result)."""
     if kind not in ("local", "global"):
         raise ValueError(f"kind: {kind!r}; use 'local' (W, q, μ) or 'global' (M, H, f, w, μ)")
-    if not isinstance(scene.contact.law, Coulomb):
-        raise SceneError("contact.law", "cannot be exported to FClib: FClib stores Coulomb problems",
-                         "use a Coulomb law")
+    check_law(scene.contact.law)
     if scene.history is not None:
         raise SceneError("history", "cannot be exported to FClib: a file holds one static problem",
-                         "export one step (the scene without its history, under that step's data)")
+                         "export one step: remove the [history] table and put that step's values in the scene")
     model = prepare(scene, "dual")
     problem, order = (local_problem if kind == "local" else global_problem)(model)
     result = model.solve(solver, **options)

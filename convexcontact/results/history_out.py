@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
-from .output import FORMATS, begin, write_vtk
+from ..scene.checks import of_type
+from .output import FORMATS, begin, check_folder_target, write_vtk
 
 
 def write_pvd(times, files, path: Path):
@@ -21,9 +23,16 @@ def write_pvd(times, files, path: Path):
     ET.ElementTree(root).write(path, xml_declaration=True, encoding="utf-8")
 
 
+def output_folder(directory) -> Path:
+    """``directory`` as a folder's path that is not a file (a history's or a solution set's outputs)."""
+    of_type(directory, (str, os.PathLike), "directory", "give a folder's path, e.g. 'out'")
+    check_folder_target(Path(directory), "directory")
+    return Path(directory)
+
+
 def save_history(history, directory, formats=FORMATS) -> list[Path]:
     """Write the chosen outputs of a :class:`~convexcontact.drivers.history.HistoryResult`; return the paths."""
-    directory, paths = begin(history, directory, formats)
+    directory, paths = begin(history, output_folder(directory), formats)
     solved = [(t, s) for t, s in zip(history.times, history.steps) if s.solved]
     if "vtk" in formats and solved:
         files = []

@@ -205,6 +205,8 @@ def contact_nodes(
     """Contact-node fields in user units; open where the pressure is negligible."""
     contact, scaling = fem.contact, fem.scaling
     pressure = contact.nodal_pressure(C, fields.pressure) * scaling.pressure
+    held_normal, held_tangential = held_at_points(contact, fem.scene.contact.law)
+    pressure[held_normal] = 0.0
     closed = pressure > CLOSED_PRESSURE * max(pressure.max(initial=0.0), scaling.pressure)
     u_N = contact.N @ fields.u + contact.normal_offset
     gap = u_N - normal_gap(contact, fields)
@@ -217,6 +219,7 @@ def contact_nodes(
         tangential = friction.components(contact.T @ (friction.R.T @ fields.friction))
         forces = forces + sum(tangential[:, [j]] * t for j, t in enumerate(contact.frame))
         traction = friction.nodal_traction(contact, fields.friction) * scaling.pressure
+        traction[held_tangential] = 0.0
         size = np.linalg.norm(slip, axis=1)
         moving = size > SLIP * max(np.abs(fields.u).max(initial=0.0), abs(fields.obstacle_shift), 1.0)
         sliding = np.where(slip[:, 0] > 0, "slip+", "slip-") if friction.dim == 1 else "slip"
@@ -257,9 +260,9 @@ def not_unique(fem: FEModel, fields: ContactFields, friction: FrictionPoints | N
     from ..scene.model import Coulomb, compliance_of
 
     contact, reasons = fem.contact, {}
-    held = np.diff(sp.csr_matrix(contact.N).indptr) == 0
-    if held.any():
-        reasons["pressure"] = (f"{held.sum()} contact nodes have a prescribed normal displacement: their contact "
+    normal = held(contact.N)
+    if normal.any():
+        reasons["pressure"] = (f"{normal.sum()} contact nodes have a prescribed normal displacement: their contact "
                                "force is the support's reaction, reported as 0")
     signorini_points = getattr(law, "non_penetration", None) == "gauss" and compliance_of(law) is None
     if contact.points is not None and signorini_points:  # a penalty's point multipliers c e^p are unique
@@ -273,10 +276,12 @@ def not_unique(fem: FEModel, fields: ContactFields, friction: FrictionPoints | N
                                              "nodal force per contact weight) is unique and is what is reported")
     if friction is None:
         return reasons
-    held = (np.diff(sp.csr_matrix(friction.R).indptr) == 0).reshape(friction.dim, -1).all(axis=0)
-    if held.any():
-        reasons["friction"] = (f"{held.sum()} friction points have a prescribed tangential displacement: their "
-                               "friction force is the support's reaction, reported as 0")
+    gauss = getattr(law, "quadrature", None) == "gauss"
+    tangential = held_at_points(contact, law)[1] if gauss else held(friction.R, friction.dim)
+    if tangential.any():
+        reasons["friction"] = (f"{tangential.sum()} {'contact nodes' if gauss else 'friction points'} have a "
+                               "prescribed tangential displacement: their friction force is the support's reaction, "
+                               "reported as 0")
     if friction.count > contact.m:  # Gauss points
         slip = np.linalg.norm(friction.components(friction.slip(fields.u)), axis=1) / friction.weights
         sticking = slip <= SLIP * max(np.abs(fields.u).max(initial=0.0), 1.0)
@@ -289,6 +294,23 @@ def not_unique(fem: FEModel, fields: ContactFields, friction: FrictionPoints | N
         reasons["solution"] = ("Coulomb friction: this is one fixed point of the Picard map; the discrete problem is "
                                "unique only for small enough F (Hild), which is not checked here")
     return reasons
+
+
+def held(rows: sp.spmatrix, components: int = 1) -> np.ndarray:
+    """The contact nodes whose displacement along ``rows`` (N, or T's ``components`` blocks) is prescribed: rows
+    without a nonzero entry (their stored entries may be zeros, a roller's)."""
+    return (np.asarray(abs(rows).sum(axis=1)).ravel() == 0).reshape(components, -1).all(axis=0)
+
+
+def held_at_points(contact, law) -> tuple[np.ndarray, np.ndarray]:
+    """The contact nodes whose normal, and whose tangential, displacement is prescribed where non-penetration,
+    and friction, act at Gauss points (none otherwise). The points beside such a node act on it, but its force
+    goes into the support: the node's share of the point multipliers is not fixed where they touch or stick (a
+    friction traction differed in sign between two solvers). It is reported as 0 and said in :func:`not_unique`,
+    as at the nodes, where such a node's row is empty."""
+    none = np.zeros(contact.m, bool)
+    return (held(contact.N) if contact.points is not None else none,
+            held(contact.T, contact.dim - 1) if getattr(law, "quadrature", None) == "gauss" else none)
 
 
 def radius_from_axis(fem: FEModel) -> np.ndarray:

@@ -20,7 +20,6 @@ from ..fem.mesh import build_mesh
 from .checks import SceneError, finite_vector, of_type, sequence_of
 from .history import History
 from .model import (
-    ELEMENTS,
     Body,
     Box,
     Contact,
@@ -75,16 +74,32 @@ class Part:
             raise SceneError(field_name, str(error)[len(error.field) + 2:]) from None
 
     def mesh(self) -> fe.Mesh:
-        """The part's mesh in user units, checked, straight-sided (:func:`straight_sided`) and placed."""
+        """The part's mesh in user units, checked, straight-sided (:func:`straight_sided`) and placed where its
+        cells stay above round-off (:data:`PLACEMENT`)."""
+        if isinstance(self.geometry, fe.Mesh) and not np.isfinite(self.geometry.p).all():
+            raise SceneError(f"parts[{self.name}].geometry", "the mesh has NaN or infinite node coordinates",
+                             "give every node finite coordinates")
         with self.named():
             mesh = straight_sided(build_mesh(Body(self.geometry, self.element, self.plane)))
         if self.offset is None:
-            return mesh
-        if len(self.offset) != mesh.dim():
+            placed = mesh
+        elif len(self.offset) != mesh.dim():
             raise SceneError(f"parts[{self.name}].offset", f"{len(self.offset)} numbers for a {mesh.dim()}-D body",
                              f"give {mesh.dim()} numbers")
-        return mesh.translated(self.offset)
+        else:
+            placed = mesh.translated(self.offset)
+        size, reach = np.ptp(mesh.p, axis=1).max(), np.abs(placed.p).max()
+        if reach > PLACEMENT * size:
+            field_name = f"parts[{self.name}]." + ("geometry" if self.offset is None else "offset")
+            raise SceneError(field_name, f"the body lies {reach:.3g} from the origin, {reach / size:.2g} times its size: "
+                             "its cells are lost in round-off there (and lengths squared overflow)",
+                             "place the bodies near the origin (Rectangle origin, Part offset)")
+        return placed
 
+
+PLACEMENT = 1e8
+"""How far from the origin, in the body's sizes, a part may lie: coordinates of that magnitude hold a cell of 10⁻⁴
+the body's size only to 2·10⁻⁴ of itself; 10³⁰⁰ made NaN normals and overflows before the pair was refused."""
 
 LINEAR = {fe.MeshTri2: (fe.MeshTri1, fe.ElementTriP2), fe.MeshQuad2: (fe.MeshQuad1, fe.ElementQuad2),
           fe.MeshTet2: (fe.MeshTet1, fe.ElementTetP2), fe.MeshHex2: (fe.MeshHex1, fe.ElementHex2)}
@@ -255,6 +270,16 @@ def body_of(boundary: str, names: list[str], field_name: str) -> str:
     return part
 
 
+def check_named(mesh: fe.Mesh, boundary: str, names: list[str], field_name: str) -> None:
+    """Refuse ``"<part>.<boundary>"`` where the part has no such boundary, listing the ones it has."""
+    part = body_of(boundary, names, field_name)
+    if boundary not in (mesh.boundaries or {}):
+        own = sorted(name for name in mesh.boundaries or {} if name.startswith(f"{part}."))
+        raise SceneError(field_name, f"body {part!r} has no boundary {boundary.split('.', 1)[1]!r}",
+                         f"use one of {own}" if own else f"body {part!r} has no named boundary: name its facets in "
+                         "the mesh file")
+
+
 def concatenate(parts: tuple[Part, ...], meshes: list[fe.Mesh]) -> fe.Mesh:
     """One mesh of all parts, node sets disjoint, boundaries and subdomains prefixed by the part's name."""
     shifts = np.cumsum([0] + [m.p.shape[1] for m in meshes[:-1]])
@@ -294,14 +319,18 @@ def bodies_scene(
     ``history`` names the bodies' boundaries as the scene does, e.g. ``dirichlet[punch.top].ux``."""
     parts = sequence_of(parts, Part, "parts", "give a list of cc.Part(name, geometry, material)")
     names = [part.name for part in parts]
-    if not parts or len(set(names)) != len(names):
-        raise SceneError("parts", f"expected distinct names, got {names}", "give each body its own name")
+    if not parts:
+        raise SceneError("parts", "no body", "give a list of cc.Part(name, geometry, material), one per body")
+    if len(set(names)) != len(names):
+        twice = next(name for name in names if names.count(name) > 1)
+        raise SceneError("parts", f"two bodies named {twice!r} (the names are {names})", "give each body its own name")
     for field_name in ("element", "plane"):
         kinds = {getattr(part, field_name) for part in parts}
         if len(kinds) > 1:
             used = ", ".join(f"{part.name}: {getattr(part, field_name)}" for part in parts)
             raise SceneError(f"parts.{field_name}", f"mixed {field_name}s ({used})",
-                             f"give every body the same {field_name}, e.g. {ELEMENTS[0]} with {ELEMENTS[0]}")
+                             f"give every body the same {field_name}, e.g. {field_name} = "
+                             f"{getattr(parts[0], field_name)!r} for all")
     meshes = [part.mesh() for part in parts]
     if len({m.dim() for m in meshes}) > 1:
         raise SceneError("parts.geometry", "2-D and 3-D bodies mixed", "give every body the same dimension")
@@ -313,24 +342,36 @@ def bodies_scene(
     dirichlet = sequence_of(dirichlet, Dirichlet, "dirichlet", "give a list of cc.Dirichlet(boundary, ux=…, uy=…)")
     tractions = sequence_of(tractions, Traction, "tractions", "give a list of cc.Traction(boundary, pressure=…)")
     if isinstance(contact, (list, tuple)):
+        if not contact:
+            pair = f"a pair, e.g. cc.Pair('{names[0]}.bottom', master='{names[1]}.top'), or " if len(names) > 1 else ""
+            raise SceneError("contact", "an empty list: the bodies touch nowhere", f"add {pair}a rigid obstacle, "
+                             f"e.g. cc.Contact('{names[0]}.bottom', cc.Obstacle('flat'))")
         contact = several(sequence_of(contact, Contact, "contact", "give a list of cc.Pair(slave, master=…, law=…) "
                                       "and cc.Contact(boundary, obstacle, law)"))
     of_type(contact, Contact, "contact", "give cc.Pair(slave, master=…, law=…), a list of them, or "
             "cc.Contact(boundary, obstacle)")
+    merged = concatenate(parts, meshes)
+    named = [(d.boundary, f"dirichlet[{d.boundary}].boundary") for d in dirichlet]
+    named += [(traction.boundary, f"traction[{traction.boundary}].boundary") for traction in tractions]
+    several_contacts = isinstance(contact, Pairs)
+    for index, pair in enumerate(contact.pairs if several_contacts else (contact,)):
+        field_name = f"contact[{index}]" if several_contacts else "contact"
+        named.append((pair.boundary, f"{field_name}.boundary"))
+        slave = body_of(pair.boundary, names, f"{field_name}.boundary")
+        if isinstance(pair, Pair):
+            named.append((pair.master, f"{field_name}.master"))
+            if body_of(pair.master, names, f"{field_name}.master") == slave:
+                raise SceneError(f"{field_name}.master", f"{pair.master!r} and {pair.boundary!r} are boundaries of "
+                                 "one body", "pair a boundary of one body with a boundary of another (self-contact is "
+                                 "not built)")
+    for boundary, field_name in named:
+        check_named(merged, boundary, names, field_name)
     supported = {body_of(d.boundary, names, f"dirichlet[{d.boundary}].boundary") for d in dirichlet}
-    for traction in tractions:
-        body_of(traction.boundary, names, f"traction[{traction.boundary}].boundary")
-    for pair in contact.pairs if isinstance(contact, Pairs) else (contact,):
-        slave = body_of(pair.boundary, names, "contact.boundary")
-        if isinstance(pair, Pair) and body_of(pair.master, names, "contact.master") == slave:
-            raise SceneError("contact.master", f"{pair.master!r} and {pair.boundary!r} are boundaries of one body",
-                             "pair a boundary of one body with a boundary of another (self-contact is not built)")
     floating = [name for name in names if name not in supported]
     if floating:
         raise SceneError("dirichlet", f"body {floating[0]!r} has no Dirichlet boundary: it can move rigidly "
                          "(contact alone does not hold a body)",
                          f"fix at least a component on one of its boundaries, e.g. boundary = '{floating[0]}.top', ux = 0")
-    merged = concatenate(parts, meshes)
     return Scene(
         body=Bodies(merged, parts[0].element, parts[0].plane, parts=parts),
         materials={part.name: part.material for part in parts},

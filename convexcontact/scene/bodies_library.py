@@ -5,10 +5,46 @@ from __future__ import annotations
 import numpy as np
 import skfem as fe
 
-from ..fem.mesh import build_mesh
+from ..fem.mesh import build_mesh, check_memory
 from .bodies import Pair, Part, bodies_scene, facet_index
+from .checks import SceneError, finite, positive_integer
 from .library import punch_mesh
 from .model import Body, Box, Dirichlet, Material, Rectangle, Scene, Signorini, Traction
+
+FINE, ROWS = 0.15, 10
+"""The cylinder meshes' zone of cells of size h: |x| < FINE, ROWS rows deep (:func:`punch_mesh`)."""
+
+
+def positive(value, field_name: str, fix: str) -> float:
+    number = finite(value, field_name, fix)
+    if number <= 0:
+        raise SceneError(field_name, f"must be positive, got {number:g}", fix)
+    return number
+
+
+def check_cylinders(h: float, radii, width: float, height: float, master_h: float | None) -> None:
+    """Arguments :func:`cylinder_mesh` can build on, checked before any mesh is: cells that fit the fine zone and the
+    body (else numpy's "Geometric sequence cannot include zero"), faces that are graphs over the width (else NaN
+    nodes), and a size that fits in memory (h = 1e-7 was killed for want of it)."""
+    width, height = positive(width, "width", "give the bodies' width"), positive(height, "height", "give their height")
+    if width <= 2 * FINE:
+        raise SceneError("width", f"{width:g} leaves no room beside the fine zone |x| < {FINE}", f"give width > {2 * FINE}")
+    for name, step in (("h", h), ("master_h", master_h)):
+        if step is None:
+            continue
+        step = positive(step, name, f"give a cell size below {FINE}, e.g. 0.01")
+        if step > FINE or ROWS * step >= height:
+            raise SceneError(name, f"{step:g} does not fit the fine zone (|x| < {FINE}, {ROWS} rows deep in a body "
+                             f"{height:g} high)", f"give a cell size of at most {min(FINE, height / (ROWS + 1)):.3g}")
+        check_memory(2 * (2 * FINE / step + 50) * (ROWS + 32), 2, name, f"cells of {step:g} across |x| < {FINE}",
+                     "use larger cells")
+    if np.ndim(radii) != 1 or len(radii) != 2:
+        raise SceneError("radii", f"expected two radii (R₁ above, R₂ below), got {radii!r:.60}", "e.g. radii=(1.0, 1.0)")
+    for k, radius in enumerate(radii):
+        radius = finite(radius, f"radii[{k}]", "give a radius, or inf for a flat face") if radius != np.inf else radius
+        if radius <= width / 2:
+            raise SceneError(f"radii[{k}]", f"{radius:g} does not span the face of width {width:g} (the circle's arc "
+                             "must cover it)", f"give a radius above {width / 2:g}, or a narrower width")
 
 
 def patch_pair(slave_cells: int = 5, master_cells: int = 7, method: str = "mortar", element: str = "P1",
@@ -16,6 +52,9 @@ def patch_pair(slave_cells: int = 5, master_cells: int = 7, method: str = "morta
     """The contact patch test (Taylor–Papadopoulos): a unit block on another, ``slave_cells`` against
     ``master_cells`` across the interface, a uniform ``pressure`` on top; rollers on the left sides and
     under the lower block. The exact interface pressure is ``pressure`` everywhere."""
+    positive_integer(slave_cells, "slave_cells", "give the upper block's cells across, e.g. 5")
+    positive_integer(master_cells, "master_cells", "give the lower block's cells across, e.g. 7")
+    finite(pressure, "pressure", "give the pressure on top, e.g. 0.01")
     material = Material(E=1.0, nu=0.3)
     parts = [Part("upper", Rectangle(1.0, 1.0, slave_cells, slave_cells, origin=(0.0, 1.0)), material, element),
              Part("lower", Rectangle(1.0, 1.0, master_cells, master_cells), material, element)]
@@ -52,6 +91,9 @@ def two_cylinders(h: float = 0.01, radii=(1.0, 1.0), moduli=(1.0, 1.0), nu=(0.3,
     ``approach``: the back of each is moved by half of it towards the other, with its x fixed (plane strain
     Hertz, docs/bodies.md). ``master_h``: the lower body's cell size (default ``h``: non-matching all the same,
     the faces differ). ``shift``: the upper back's x displacement (Cattaneo–Mindlin)."""
+    check_cylinders(h, radii, width, height, master_h)
+    finite(approach, "approach", "give the approach of the two backs, e.g. 0.01")
+    finite(shift, "shift", "give the upper back's x displacement, e.g. 0.0")
     quads = element in ("Q1", "Q2")
     parts = [Part("upper", cylinder_mesh(h, radii[0], width, height, True, quads=quads),
                   Material(E=moduli[0], nu=nu[0]), element),
@@ -91,6 +133,16 @@ def two_spheres(cells: int = 12, radii=(2.0, 2.0), moduli=(1.0, 1.0), nu=(0.3, 0
                 law=None, master_cells: int | None = None) -> Scene:
     """A quarter of two spheres' caps (R₁ above, the slave; R₂ below) pressed together by ``approach`` (3-D
     Hertz), symmetry rollers on x = 0 (``left``) and y = 0 (``front``), the backs moved by half the approach."""
+    for name, value in (("cells", cells), ("master_cells", master_cells)):
+        if value is not None:
+            positive_integer(value, name, "give the cells along each side, e.g. 12")
+    if np.ndim(radii) != 1 or len(radii) != 2:
+        raise SceneError("radii", f"expected two radii (R₁ above, R₂ below), got {radii!r:.60}", "e.g. radii=(2.0, 2.0)")
+    for k, radius in enumerate(radii):
+        if finite(radius, f"radii[{k}]") <= np.sqrt(2):
+            raise SceneError(f"radii[{k}]", f"{radius:g} does not span the unit quarter (its corner lies √2 from the "
+                             "axis)", "give a radius above 1.42")
+    finite(approach, "approach", "give the approach of the two backs, e.g. 0.012")
     parts = [Part("upper", sphere_cap_mesh(cells, radii[0], True), Material(E=moduli[0], nu=nu[0])),
              Part("lower", sphere_cap_mesh(master_cells or cells, radii[1], False), Material(E=moduli[1], nu=nu[1]))]
     rollers = [Dirichlet(f"{part}.{side}", **{axis: 0.0}) for part in ("upper", "lower")

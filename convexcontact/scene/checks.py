@@ -23,6 +23,7 @@ class SceneError(ValueError):
 def finite(value, field_name: str, fix: str = "") -> float:
     """Return ``value`` as a float, refusing NaN, infinity, integers beyond the floats and non-numbers
     (strings, booleans)."""
+    fix = fix or "give a finite number"
     if isinstance(value, (str, bool, np.bool_)):
         raise SceneError(field_name, f"expected a number, got {value!r:.60}", fix)
     try:
@@ -33,7 +34,7 @@ def finite(value, field_name: str, fix: str = "") -> float:
     except (TypeError, ValueError):
         raise SceneError(field_name, f"expected a number, got {value!r:.60}", fix) from None
     if not math.isfinite(number):
-        raise SceneError(field_name, f"got {value!r}", fix or "give a finite number")
+        raise SceneError(field_name, f"got {value!r}", fix)
     return number
 
 
@@ -42,14 +43,16 @@ def finite_vector(value, field_name: str, length: int | tuple[int, ...] = 2) -> 
     lengths = (length,) if isinstance(length, int) else length
     if np.ndim(value) != 1 or len(value) not in lengths:
         expected = " or ".join(str(n) for n in lengths)
-        raise SceneError(field_name, f"expected {expected} numbers, got {value!r}")
+        raise SceneError(field_name, f"expected {expected} numbers, got {value!r:.60}",
+                         f"give a list of {expected} finite numbers, e.g. {[0.0] * lengths[0]}")
     return tuple(finite(v, f"{field_name}[{i}]") for i, v in enumerate(value))
 
 
 def positive_integer(value, field_name: str, fix: str = "") -> int:
     """Return ``value`` if it is an integer ≥ 1 (booleans refused)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise SceneError(field_name, f"expected a positive integer, got {value!r:.60}", fix)
+        raise SceneError(field_name, f"expected a positive integer, got {value!r:.60}",
+                         fix or "give a whole number ≥ 1")
     return int(value)
 
 
@@ -59,7 +62,8 @@ def of_type(value, kinds: type | tuple[type, ...], field_name: str, fix: str = "
     if not isinstance(value, kinds) or (isinstance(value, (bool, np.bool_)) and bool not in kinds):
         expected = " or ".join(kind.__name__ for kind in kinds)
         shown = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
-        raise SceneError(field_name, f"expected {expected}, got {type(value).__name__} {shown}", fix)
+        raise SceneError(field_name, f"expected {expected}, got {type(value).__name__} {shown}",
+                         fix or f"give a {expected}")
     return value
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import skfem as fe
 
 from ..fem.mesh import tensor_mesh
+from .checks import SceneError, finite, positive_integer
 from .model import Body, Box, Contact, Dirichlet, Material, Obstacle, Rectangle, Scene, Signorini, Traction
 
 HERTZ_FORCE = 0.0086307
@@ -23,16 +24,24 @@ def hertz_punch(nx: int = 80, element: str = "P1", force: float = HERTZ_FORCE, l
     Force control: the punch carries ``force`` per unit thickness (DESIGN.md case 2).
     The mesh is graded 10:1 towards the punch axis and the top surface.
     """
+    rows = half(nx)
     return Scene(
         name="hertz",
         body=Body(
-            Rectangle(width=4.0, height=2.0, nx=nx, ny=nx // 2, origin=(-2.0, -2.0), grading=(10.0, 10.0), refine_x=0.0),
+            Rectangle(width=4.0, height=2.0, nx=nx, ny=rows, origin=(-2.0, -2.0), grading=(10.0, 10.0), refine_x=0.0),
             element=element,
         ),
         materials=Material(E=1.0, nu=0.3),
         dirichlet=(Dirichlet("bottom", ux=0.0, uy=0.0),),
         contact=Contact("top", Obstacle("parabolic", radius=1.0, force=force), law or Signorini()),
     )
+
+
+def half(nx) -> int:
+    """The rows of a block ``nx`` cells wide and half as high: ``nx`` an integer ≥ 2."""
+    if positive_integer(nx, "nx", "give the cells across, e.g. 40") < 2:
+        raise SceneError("nx", f"the block is nx cells wide and nx // 2 high, so nx ≥ 2, got {nx}", "give e.g. 40")
+    return nx // 2
 
 
 def pressure_patch(nx: int = 8, element: str = "P1", pressure: float = 0.1, law=None) -> Scene:
@@ -60,6 +69,8 @@ def punch_mesh(
     the mirror symmetry about x = 0 that the one-diagonal triangles break.
     """
 
+    check_punch_mesh(h, fine, rows, width, depth)
+
     def growing(length: float, cells: int) -> np.ndarray:
         sizes = np.geomspace(1.0, (length / h) ** ((cells - 1) / cells), cells)
         return np.cumsum(sizes) * length / sizes.sum()
@@ -69,6 +80,22 @@ def punch_mesh(
     x = np.concatenate([-x_out[::-1], x_fine, x_out])
     y = -np.concatenate([np.arange(rows + 1) * h, rows * h + growing(depth - rows * h, 30)])[::-1]
     return tensor_mesh(x, y, quads=quads)
+
+
+def check_punch_mesh(h, fine, rows, width, depth) -> None:
+    """The sizes of :func:`punch_mesh`: ``h`` fits the fine zone (``fine`` ≤ width/2, ``rows`` h < depth) and the
+    mesh fits in memory (h = 1e-9 asked for 92 GiB)."""
+    from ..fem.mesh import check_memory
+
+    for name, value in (("h", h), ("fine", fine), ("width", width), ("depth", depth)):
+        if finite(value, name) <= 0:
+            raise SceneError(name, f"must be positive, got {value}", "give a length, e.g. h = 0.005")
+    positive_integer(rows, "rows", "give the rows of fine cells, e.g. 10")
+    if h > fine or fine >= width / 2 or rows * h >= depth:
+        raise SceneError("h", f"h = {h} must be at most fine = {fine} < width/2 = {width / 2}, with rows × h = "
+                         f"{rows * h:g} < depth = {depth}", "give a smaller h (the cells of the contact zone)")
+    nodes = (2 * fine / h + 50) * (rows + 32)
+    check_memory(2 * nodes, 2, "h", f"h = {h}", "give a larger h")
 
 
 def frictional_punch(h: float = 0.005, depth: float = 0.02, friction: float = 0.6, nu: float = 0.3,
@@ -147,6 +174,12 @@ def whole_face(dim: int = 2, nodes: int = 1001, dofs: float = 1e5, law=None, dep
     2-D: a strip of height 1 and ``nodes`` − 1 square P1 cells along the bottom; 3-D: a Q1 block of
     about ``nodes`` bottom nodes, square in plan; the rows up the height make about ``dofs`` DOFs.
     """
+    if dim not in (2, 3):
+        raise SceneError("dim", f"got {dim!r}", "give 2 or 3")
+    if positive_integer(nodes, "nodes", "give the contact nodes, e.g. 1001") < 3:
+        raise SceneError("nodes", f"at least 3 contact nodes (2 cells along the face), got {nodes}", "give e.g. 1001")
+    if finite(dofs, "dofs") <= 0:
+        raise SceneError("dofs", f"must be positive, got {dofs}", "give the DOFs wanted, e.g. 1e5")
     if dim == 2:
         nx = max(2, nodes - 1)
         ny = max(2, round(dofs / (2 * (nx + 1))) - 1)

@@ -34,10 +34,12 @@ class Material:
     viscosity: float = 0.0
 
     def __post_init__(self):
+        of_type(self.name, str, "material.name", "name the mesh subdomain it is for, e.g. 'steel'")
         E = finite(self.E, f"{self.name}.E")
         nu = finite(self.nu, f"{self.name}.nu")
         if E <= 0:
-            raise SceneError(f"{self.name}.E", f"Young's modulus must be positive, got {E}")
+            raise SceneError(f"{self.name}.E", f"Young's modulus must be positive, got {E}",
+                             "give E > 0 (a stress, in the units of the loads)")
         if not -1 < nu < 0.5:
             raise SceneError(
                 f"{self.name}.nu",
@@ -45,7 +47,8 @@ class Material:
                 "for near-incompressible bodies use e.g. 0.4999 with P2 or Q2",
             )
         if finite(self.viscosity, f"{self.name}.viscosity") < 0:
-            raise SceneError(f"{self.name}.viscosity", f"must be ≥ 0 (0 is elastic), got {self.viscosity}")
+            raise SceneError(f"{self.name}.viscosity", f"must be ≥ 0 (0 is elastic), got {self.viscosity}",
+                             "give η ≥ 0, a stress times a time")
         object.__setattr__(self, "E", E)
         object.__setattr__(self, "nu", nu)
         object.__setattr__(self, "viscosity", float(self.viscosity))
@@ -74,19 +77,24 @@ class Rectangle:
         for name in ("width", "height"):
             value = finite(getattr(self, name), f"body.{name}")
             if value <= 0:
-                raise SceneError(f"body.{name}", "must be positive")
+                raise SceneError(f"body.{name}", f"must be positive, got {value}", "give the side's length")
             object.__setattr__(self, name, value)
         for name in ("nx", "ny"):
             positive_integer(getattr(self, name), f"body.{name}")
         object.__setattr__(self, "origin", finite_vector(self.origin, "body.origin"))
         grading = finite_vector(self.grading, "body.grading")
         if min(grading) < 1:
-            raise SceneError("body.grading", f"ratios must be ≥ 1, got {grading}")
+            raise SceneError("body.grading", f"ratios must be ≥ 1, got {grading}", "give 1 for uniform cells")
         object.__setattr__(self, "grading", grading)
         refine_x = self.origin[0] + self.width / 2 if self.refine_x is None else finite(self.refine_x, "body.refine_x")
         object.__setattr__(self, "refine_x", refine_x)
         if self.refine_y not in ("top", "bottom"):
-            raise SceneError("body.refine_y", f"expected 'top' or 'bottom', got {self.refine_y!r}")
+            raise SceneError("body.refine_y", f"got {self.refine_y!r}",
+                             "use 'top' or 'bottom' (the side graded finest)")
+
+
+SIZES = (1e-100, 1e100)
+"""The sides a 3-D box may have, in any unit: the scales' products (E L², E u² L) stay floats."""
 
 
 @dataclass(frozen=True)
@@ -108,14 +116,19 @@ class Box:
     def __post_init__(self):
         size = finite_vector(self.size, "body.size", 3)
         if min(size) <= 0:
-            raise SceneError("body.size", f"side lengths must be positive, got {size}")
+            raise SceneError("body.size", f"side lengths must be positive, got {size}", "give [Lx, Ly, Lz] > 0")
+        if not SIZES[0] <= min(size) <= max(size) <= SIZES[1]:
+            raise SceneError("body.size", f"{size} leaves the floats in a 3-D body's scales (forces ∝ L², energies "
+                             "∝ L³; sides of 1e200 overflowed)", f"give sides within {SIZES[0]:g} to {SIZES[1]:g}: "
+                             "change the length unit")
         if np.ndim(self.cells) != 1 or len(self.cells) != 3:
-            raise SceneError("body.cells", f"expected 3 integers [nx, ny, nz], got {self.cells!r}")
+            raise SceneError("body.cells", f"expected 3 integers [nx, ny, nz], got {self.cells!r:.60}",
+                             "give e.g. [8, 8, 8]")
         cells = tuple(positive_integer(n, f"body.cells[{i}]") for i, n in enumerate(self.cells))
         origin = finite_vector(self.origin, "body.origin", 3)
         grading = finite_vector(self.grading, "body.grading", 3)
         if min(grading) < 1:
-            raise SceneError("body.grading", f"ratios must be ≥ 1, got {grading}")
+            raise SceneError("body.grading", f"ratios must be ≥ 1, got {grading}", "give 1 for uniform cells")
         top_middle = (origin[0] + size[0] / 2, origin[1] + size[1] / 2, origin[2] + size[2])
         refine = top_middle if self.refine is None else finite_vector(self.refine, "body.refine", 3)
         for name, value in (("size", size), ("cells", cells), ("origin", origin), ("grading", grading),
@@ -201,7 +214,8 @@ class Traction:
         of_type(self.boundary, str, "traction.boundary", "name a boundary of the mesh, e.g. 'top'")
         where = f"traction[{self.boundary}]"
         if (self.pressure is None) == (self.vector is None):
-            raise SceneError(where, "give exactly one of pressure or vector")
+            raise SceneError(where, "pressure and vector both given, or neither",
+                             "give exactly one: pressure = p (pushing inward) or vector = (tx, ty[, tz])")
         if self.pressure is not None:
             object.__setattr__(self, "pressure", finite(self.pressure, f"{where}.pressure"))
         else:
@@ -214,6 +228,30 @@ GapFunction = Callable[..., np.ndarray]
 COVERED = 1e-12
 """Relative round-off by which a node may lie beyond a cylinder's or sphere's radius (a radius equal to
 the half-width of Γ_C: the gap there is R, along a vertical tangent)."""
+
+
+MOTION = ("depth", "force", "tangential_force", "normal")
+SHAPE_FIELDS = {"flat": ("gap", *MOTION), "expression": ("expression", *MOTION),
+                **dict.fromkeys(("parabolic", "cylinder", "sphere", "flat_punch"), ("radius", "center", *MOTION))}
+"""The fields each obstacle shape reads (besides ``shape``); another one given is refused, not ignored."""
+
+
+def check_shape_fields(shape: str, given) -> None:
+    """Refuse the obstacle fields in ``given`` that a ``shape`` does not read (a gap given to a punch was
+    ignored): the one check of the Python API and of the TOML reader, which passes the keys of [obstacle]."""
+    if shape not in Obstacle.SHAPES:
+        raise SceneError("obstacle.shape", f"unknown shape {shape!r}", f"use one of {Obstacle.SHAPES}")
+    for name in given:
+        if name != "shape" and name not in SHAPE_FIELDS[shape]:
+            takers = [other for other, names in SHAPE_FIELDS.items() if name in names]
+            raise SceneError(f"obstacle.{name}", f"a {shape} obstacle has no {name} (shape = {shape!r} reads "
+                             f"{', '.join(SHAPE_FIELDS[shape])})",
+                             f"drop {name}, or use a shape that reads it: {', '.join(takers)}")
+
+
+def _same(value, default) -> bool:
+    """Whether a field holds its default (a point given as a tuple or an array is never the default 0)."""
+    return np.ndim(value) == 0 and np.ndim(default) == 0 and (value is default or value == default)
 
 
 @dataclass(frozen=True)
@@ -244,6 +282,9 @@ class Obstacle:
     obstacle or an expression uses ``depth`` = 0 unless told otherwise.
     ``tangential_force`` Q (friction laws, 2-D only) pulls the obstacle along the mean
     tangent of Γ_C; its tangential translation becomes an unknown.
+    A field the shape does not read (:data:`SHAPE_FIELDS`: a gap given to a punch) is refused, as in a
+    scene file; with ``normal = "obstacle"`` a cylinder or sphere needs ``depth`` < ``radius`` (its centre
+    in front of Γ_C, where its normal is defined).
     """
 
     shape: str = "flat"
@@ -262,9 +303,11 @@ class Obstacle:
     """The shapes whose closest point is known (``normal = "obstacle"``)."""
 
     def __post_init__(self):
-        if self.shape not in self.SHAPES:
-            raise SceneError("obstacle.shape", f"unknown shape {self.shape!r}", f"use one of {self.SHAPES}")
-        for name in ("gap", "radius", "depth", "force", "tangential_force"):
+        defaults = {name: spec.default for name, spec in self.__dataclass_fields__.items()}
+        check_shape_fields(self.shape, [name for name in ("gap", "radius", "center", "expression")
+                                        if not _same(getattr(self, name), defaults[name])])
+        object.__setattr__(self, "gap", finite(self.gap, "obstacle.gap", "give the gap as a number (0: touching)"))
+        for name in ("radius", "depth", "force", "tangential_force"):
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, finite(value, f"obstacle.{name}"))
@@ -272,12 +315,18 @@ class Obstacle:
             finite_vector(self.center, "obstacle.center", 3)
         object.__setattr__(self, "center", center)
         if self.shape in ("parabolic", "cylinder", "sphere", "flat_punch") and (self.radius is None or self.radius <= 0):
-            raise SceneError("obstacle.radius", "a punch needs a positive radius")
+            raise SceneError("obstacle.radius", f"a {self.shape} obstacle needs a positive radius, got {self.radius}",
+                             "give radius = R > 0 (a length)")
         if self.normal not in self.NORMALS:
             raise SceneError("obstacle.normal", f"got {self.normal!r}", f"use one of {self.NORMALS}")
         if self.normal == "obstacle" and self.shape not in self.CLOSEST_POINT:
             raise SceneError("obstacle.normal", f"the {self.shape} obstacle has no closest point to measure along",
                              f"use normal = 'body', or a shape among {self.CLOSEST_POINT}")
+        if self.normal == "obstacle" and self.shape in ("cylinder", "sphere") and (self.depth or 0.0) >= self.radius:
+            raise SceneError("obstacle.depth", f"{self.depth} ≥ the radius {self.radius}: the {self.shape}'s centre "
+                             "lies on or behind the contact boundary's mean plane, so its normal is undefined at the "
+                             "point on the axis (obstacle.center) and points away from the body at every other node",
+                             "give a depth below the radius, or normal = 'body' (the gap along Γ_C's own normal)")
         if self.shape == "expression":
             if self.expression is None:
                 raise SceneError("obstacle.expression", "missing", "give a formula in x and y, e.g. 'x**2/2 - 0.01'")
@@ -286,9 +335,11 @@ class Obstacle:
             if isinstance(self.expression, str):
                 compile_expression(self.expression, "obstacle.expression")
         if self.depth is not None and self.force is not None:
-            raise SceneError("obstacle", "both depth and force given", "give depth (displacement control) or force")
+            raise SceneError("obstacle", "both depth and force given",
+                             "give depth (displacement control) or force (force control), not both")
         if self.force is not None and self.force < 0:
-            raise SceneError("obstacle.force", "must be ≥ 0 (it presses the obstacle on the body)")
+            raise SceneError("obstacle.force", f"must be ≥ 0 (it presses the obstacle on the body), got {self.force}",
+                             "give P ≥ 0, or depth to pull the obstacle back")
 
     @property
     def force_controlled(self) -> bool:
@@ -318,7 +369,8 @@ class Obstacle:
         if dim == 3 and self.shape == "cylinder":
             raise SceneError("obstacle.shape", "a cylinder is a 2-D punch", "use 'sphere' or 'parabolic' in 3-D")
         if self.shape == "parabolic":
-            return r**2 / (2.0 * self.radius)
+            with np.errstate(over="ignore"):  # a gap past the floats is refused by name (drivers/scales.py)
+                return r**2 / (2.0 * self.radius)
         outside = np.abs(r) > self.radius * (1.0 + COVERED)
         if outside.any():
             raise SceneError(
@@ -327,7 +379,9 @@ class Obstacle:
                 "use a larger radius, normal = 'obstacle' (the distance to the obstacle, defined everywhere), "
                 "the parabolic shape, or a smaller contact boundary",
             )
-        return self.radius - np.sqrt(np.maximum(self.radius**2 - r**2, 0.0))
+        # R − sqrt(R² − r²) written without its cancellation (R ≫ r lost every digit) or R² (overflow)
+        ratio = r / self.radius
+        return r * ratio / (1.0 + np.sqrt(np.maximum(1.0 - ratio**2, 0.0)))
 
     def closest_point(self, offset: np.ndarray, mean_normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(gap, unit normals) along the obstacle's normal (``normal = "obstacle"``), in user units, the
@@ -341,9 +395,12 @@ class Obstacle:
         depth = self.depth or 0.0
         if self.shape in ("flat", "flat_punch"):
             return self.shape_gap(offset, np.zeros(len(offset))) - depth, np.tile(mean_normal, (len(offset), 1))
-        to_centre = (self.radius - depth) * mean_normal - offset
-        distance = np.linalg.norm(to_centre, axis=1)
-        return distance - self.radius, to_centre / distance[:, None]
+        # the offsets lie in the mean plane: ‖c_i‖ = hypot(R − d, ‖o_i‖), and ‖c_i‖ − R = (‖o_i‖² − d(2R − d)) /
+        # (‖c_i‖ + R) in factors that neither cancel (R ≫ ‖o_i‖) nor overflow (R², ‖o_i‖²); R > d (__post_init__)
+        height, across = self.radius - depth, np.linalg.norm(offset, axis=1)
+        distance = np.hypot(height, across)
+        gap = across * (across / (distance + self.radius)) - depth * ((self.radius + height) / (distance + self.radius))
+        return gap, (height * mean_normal - offset) / distance[:, None]
 
 
 @dataclass(frozen=True)
@@ -364,6 +421,30 @@ class Signorini:
         _check_points(self, ("nodal", "weak", "gauss"))
 
 
+ORDER_PER_DEGREE = 4
+"""The highest Gauss rule on Γ_C that means something is of order 4 × the element's degree (scikit-fem's
+``maxdeg``; its default rule is 2 ×): it integrates exactly a penalty energy (u_N − g)₊^(p+1), p ≤ 3, of a gap
+in the element's space. More points only sample a curved gap between nodes, which a finer mesh does properly
+(order 10⁶ asked for 1.8 TiB)."""
+
+ELEMENT_DEGREES = {"P1": (1, 1), "P2": (2, 2), "Q1": (2, 3), "Q2": (4, 6)}
+"""scikit-fem's ``maxdeg`` of each element in 2-D and 3-D."""
+
+
+def check_order(order, degree: int | None = None, body: str = "") -> int:
+    """A Gauss rule's ``order`` in 1 … :data:`ORDER_PER_DEGREE` × ``degree`` (the element's ``maxdeg``; None:
+    the largest of any element, before the body is known); ``body`` says which element in the message."""
+    order = positive_integer(order, "contact.order", "give the degree the rule integrates exactly, e.g. 2")
+    limit = ORDER_PER_DEGREE * (degree or max(max(pair) for pair in ELEMENT_DEGREES.values()))
+    if order > limit:
+        ranges = ", ".join(f"{name} 1 to {ORDER_PER_DEGREE * pair[0]} (3-D: to {ORDER_PER_DEGREE * pair[1]})"
+                           for name, pair in ELEMENT_DEGREES.items())
+        raise SceneError("contact.order", f"{order} is beyond the Gauss rules that mean anything on "
+                         f"{body or 'any element'}: 1 to {limit} ({ORDER_PER_DEGREE} × the element's degree; "
+                         f"{ranges})", "give an order in that range, or refine the mesh where the obstacle curves")
+    return order
+
+
 def _check_points(law, allowed: tuple[str, ...]) -> None:
     """The ``non_penetration`` of a frictionless law, and the Gauss rule's ``order`` that goes with "gauss"."""
     if law.non_penetration not in allowed:
@@ -372,7 +453,7 @@ def _check_points(law, allowed: tuple[str, ...]) -> None:
         if law.non_penetration != "gauss":
             raise SceneError("contact.order", "a Gauss rule's order is for non_penetration = 'gauss'",
                              "drop order, or set non_penetration = 'gauss'")
-        object.__setattr__(law, "order", positive_integer(law.order, "contact.order"))
+        object.__setattr__(law, "order", check_order(law.order))
 
 
 @dataclass(frozen=True)
@@ -397,9 +478,10 @@ class NormalCompliance:
     def __post_init__(self):
         _check_points(self, ("nodal", "gauss"))
         if finite(self.stiffness, "contact.stiffness") <= 0:
-            raise SceneError("contact.stiffness", f"c_N must be positive, got {self.stiffness}")
+            raise SceneError("contact.stiffness", f"c_N must be positive, got {self.stiffness}",
+                             "give c_N > 0 (a pressure per length^p), or Signorini() for no penetration")
         if finite(self.exponent, "contact.exponent") < 1:
-            raise SceneError("contact.exponent", f"p must be ≥ 1, got {self.exponent}")
+            raise SceneError("contact.exponent", f"p must be ≥ 1, got {self.exponent}", "give 1 (a QP) or more")
         object.__setattr__(self, "stiffness", float(self.stiffness))
         object.__setattr__(self, "exponent", float(self.exponent))
 
@@ -451,7 +533,7 @@ def check_field(value, field_name: str, minimum: float = 0.0):
     if np.ndim(value) == 0:
         number = finite(value, field_name)
         if number < minimum:
-            raise SceneError(field_name, f"must be ≥ {minimum}, got {number}")
+            raise SceneError(field_name, f"must be ≥ {minimum}, got {number}", f"give a value ≥ {minimum}")
         return number
     try:
         array = np.array(value, dtype=float)  # a copy: the user's array is never changed
@@ -459,7 +541,8 @@ def check_field(value, field_name: str, minimum: float = 0.0):
         raise SceneError(field_name, f"expected numbers, got {value!r:.60}",
                          "give a number, a formula, a function or one number per contact node") from None
     if array.ndim != 1 or not np.isfinite(array).all() or (array < minimum).any():
-        raise SceneError(field_name, f"nodal values must be a 1-D array of finite numbers ≥ {minimum}")
+        raise SceneError(field_name, f"nodal values must be a 1-D array of finite numbers ≥ {minimum}",
+                         "give one number per contact node, ordered as result.contact.coords")
     return array
 
 
@@ -484,7 +567,8 @@ def evaluate_field(value, field_name: str, points: np.ndarray, minimum: float = 
         values = np.array(value)
     if not np.isfinite(values).all() or (values < minimum).any():
         raise SceneError(field_name, f"values must be finite and ≥ {minimum}" if minimum > -np.inf
-                         else "the function returned NaN or infinity")
+                         else "the function returned NaN or infinity",
+                         "give a formula or function finite (and within bounds) at every point of Γ_C")
     return values
 
 
@@ -551,16 +635,20 @@ class Coulomb:
         object.__setattr__(self, "friction", check_field(self.friction, "contact.friction"))
         _check_options(self)
         if finite(self.smoothing_radius, "contact.smoothing_radius") < 0:
-            raise SceneError("contact.smoothing_radius", "must be ≥ 0 (0 is the local law)")
+            raise SceneError("contact.smoothing_radius", f"must be ≥ 0, got {self.smoothing_radius}",
+                             "give 0 (the local law) or a roughness length ρ > 0")
         if not 0 < finite(self.relaxation, "contact.relaxation") <= 1:
-            raise SceneError("contact.relaxation", f"ω must lie in (0, 1], got {self.relaxation}")
-        if finite(self.tol, "contact.tol") <= 0:
-            raise SceneError("contact.tol", "must be positive")
+            raise SceneError("contact.relaxation", f"ω must lie in (0, 1], got {self.relaxation}",
+                             "give 1 (the plain map) or less to damp it, e.g. 0.5")
+        if not 0 < finite(self.tol, "contact.tol") < 1:
+            raise SceneError("contact.tol", f"a relative change of the slip bounds, in (0, 1), got {self.tol}",
+                             "give e.g. 1e-8")
         positive_integer(self.max_iterations, "contact.max_iterations")
-        if self.acceleration != 0:
+        if not (isinstance(self.acceleration, (int, np.integer)) and self.acceleration == 0):
             positive_integer(self.acceleration, "contact.acceleration", "give 0 (the plain map) or a depth such as 5")
         if not isinstance(self.newton, bool):
-            raise SceneError("contact.newton", f"expected true or false, got {self.newton!r}")
+            raise SceneError("contact.newton", f"expected true or false, got {self.newton!r}",
+                             "give True (Newton's method first) or False (the Picard map alone)")
         if self.initial_pressure is not None:
             object.__setattr__(
                 self, "initial_pressure", check_field(self.initial_pressure, "contact.initial_pressure")
@@ -569,7 +657,8 @@ class Coulomb:
 
 def _check_options(law):
     if law.compliance is not None and not isinstance(law.compliance, NormalCompliance):
-        raise SceneError("contact.compliance", "expected NormalCompliance(stiffness, exponent)")
+        raise SceneError("contact.compliance", f"expected NormalCompliance, got {law.compliance!r:.40}",
+                         "give cc.NormalCompliance(stiffness, exponent)")
     if law.compliance is not None and law.compliance.non_penetration != "nodal":
         raise SceneError("contact.compliance", "a friction law's compliance is lumped node-wise",
                          "give NormalCompliance(stiffness, exponent) without non_penetration")
@@ -584,7 +673,8 @@ def _check_options(law):
         raise SceneError("contact.quadrature", "Gauss points go with nodal non-penetration",
                          "the weak form already integrates the friction term with the boundary mass M")
     if law.regularization is not None and finite(law.regularization, "contact.regularization") <= 0:
-        raise SceneError("contact.regularization", "ε must be positive (omit it for the exact law)")
+        raise SceneError("contact.regularization", f"ε must be positive, got {law.regularization}",
+                         "give ε > 0 (a length), or omit it for the exact law")
 
 
 ContactLaw = Signorini | NormalCompliance | Tresca | Coulomb

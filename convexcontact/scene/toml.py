@@ -8,6 +8,7 @@ described in docs/scenes.md.
 from __future__ import annotations
 
 import difflib
+import os
 import re
 from pathlib import Path
 
@@ -34,6 +35,8 @@ from .model import (
     Signorini,
     Traction,
     Tresca,
+    check_shape_fields,
+    of_type,
 )
 
 NUMBER, INTEGER, TEXT, PAIR = "a number", "an integer", "a string", "two numbers [a, b]"
@@ -62,16 +65,9 @@ MATERIAL = {"E": NUMBER, "nu": NUMBER, "viscosity": NUMBER}
 DIRICHLET = {"boundary": TEXT, "ux": NUMBER, "uy": NUMBER, "uz": NUMBER}
 TRACTION = {"boundary": TEXT, "pressure": NUMBER, "vector": VECTOR}
 CONTACT = {"boundary": TEXT, "law": TEXT}
-MOTION = {"depth": NUMBER, "force": NUMBER, "tangential_force": NUMBER}
-PUNCH = {"shape": TEXT, "radius": NUMBER, "center": POINT, **MOTION, "normal": TEXT}
-OBSTACLES = {
-    "flat": {"shape": TEXT, "gap": NUMBER, **MOTION, "normal": TEXT},
-    "parabolic": PUNCH,
-    "cylinder": PUNCH,
-    "sphere": PUNCH,
-    "flat_punch": PUNCH,
-    "expression": {"shape": TEXT, "expression": TEXT, **MOTION, "normal": TEXT},
-}
+OBSTACLE = {"shape": TEXT, "gap": NUMBER, "radius": NUMBER, "center": POINT, "expression": TEXT, "depth": NUMBER,
+            "force": NUMBER, "tangential_force": NUMBER, "normal": TEXT}
+"""The keys of [obstacle]; which of them a shape reads is the model's check (:func:`check_shape_fields`)."""
 
 COMPLIANCE = {"stiffness": NUMBER, "exponent": NUMBER}
 FRICTION_OPTIONS = {"non_penetration": TEXT, "quadrature": TEXT, "regularization": NUMBER, **COMPLIANCE}
@@ -104,7 +100,7 @@ EXAMPLES = {
 
 def load_scene(path) -> Scene:
     """Read the TOML scene file at ``path``; mesh paths are relative to its folder."""
-    path = Path(path)
+    path = Path(of_type(path, (str, os.PathLike), "path", "give the scene file's path, e.g. load_scene('scene.toml')"))
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as error:
@@ -190,11 +186,13 @@ def _pair(table, index: int) -> Contact:
     """One ``[[contact]]`` table of several: a pair (``master``) or a rigid obstacle (``obstacle = {shape = …}``)."""
     table = dict(_table(table, f"contact[{index}]", None))  # a copy: the user's table keeps its obstacle
     obstacle = table.pop("obstacle", None)
-    if obstacle is None and not isinstance(table.get("master"), str):
+    if "master" in table:
+        _check_type(table["master"], TEXT, f"contact[{index}].master")
+    if obstacle is None and "master" not in table:
         raise SceneError(f"contact[{index}].master", "missing: each [[contact]] table of several is a pair of bodies "
                          "or a rigid obstacle", "name the master boundary, e.g. master = 'foundation.top', or give "
                          "obstacle = { shape = 'flat', gap = 0.0 }")
-    return _contact(table, obstacle or {}, PAIR_KEYS)
+    return _contact(table, obstacle or {}, PAIR_KEYS, f"contact[{index}]")
 
 
 def _body(table, base_dir: Path, path: str = "body", extra: dict | None = None) -> Body:
@@ -212,18 +210,18 @@ def _body(table, base_dir: Path, path: str = "body", extra: dict | None = None) 
     return Body(geometry, **options)
 
 
-def _contact(table, obstacle, pair: dict | None = None) -> Contact:
-    """``[contact]`` and ``[obstacle]``; with ``pair`` (several bodies) a ``master`` makes it a :class:`Pair`."""
-    law_name = _table(table, "contact", None).get("law", "signorini")
-    _check_type(law_name, TEXT, "contact.law")
+def _contact(table, obstacle, pair: dict | None = None, path: str = "contact") -> Contact:
+    """``[contact]`` and ``[obstacle]``; with ``pair`` (several bodies) a ``master`` makes it a :class:`Pair`.
+    ``path``: the table's name in errors (``contact[1]`` of several)."""
+    law_name = _table(table, path, None).get("law", "signorini")
+    _check_type(law_name, TEXT, f"{path}.law")
     if law_name not in LAWS:
-        raise SceneError("contact.law", f"unknown law {law_name!r}", f"available laws: {', '.join(LAWS)}")
+        raise SceneError(f"{path}.law", f"unknown law {law_name!r}", f"available laws: {', '.join(LAWS)}")
     law, law_keys = LAWS[law_name]
-    keys = _table(table, "contact", CONTACT | law_keys | (pair or {}), required=("boundary",))
-    shape = _table(obstacle, "obstacle", None).get("shape", "flat")
-    _check_type(shape, TEXT, "obstacle.shape")
-    if shape not in OBSTACLES:
-        Obstacle(shape=shape)  # raises, listing the shapes
+    keys = _table(table, path, CONTACT | law_keys | (pair or {}), required=("boundary",))
+    obstacle = _table(obstacle, "obstacle", OBSTACLE)
+    _check_type(obstacle.get("shape", "flat"), TEXT, "obstacle.shape")
+    check_shape_fields(obstacle.get("shape", "flat"), obstacle)
     options = {key: keys[key] for key in law_keys if key in keys}
     if law is NormalCompliance and "stiffness" not in options:
         raise SceneError("contact.stiffness", "missing: law = 'normal_compliance' needs its stiffness c_N",
@@ -239,7 +237,7 @@ def _contact(table, obstacle, pair: dict | None = None) -> Contact:
                     **{key: keys[key] for key in PAIR_KEYS if key in keys})
     return Contact(
         boundary=keys["boundary"],
-        obstacle=Obstacle(**_table(obstacle, "obstacle", OBSTACLES[shape], context=f" with shape = {shape!r}")),
+        obstacle=Obstacle(**obstacle),
         law=law(**options),
     )
 

@@ -65,11 +65,10 @@ class Fields:
         Closed where the pressure exceeds ``CLOSED_PRESSURE`` × its maximum, as for our own
         results; the stick zone is then unknown and not compared.
         """
-        self.pressure = np.asarray(self.pressure, dtype=float)
-        if self.displacement is not None:
-            self.displacement = np.asarray(self.displacement, dtype=float)
-        if self.friction is not None:
-            self.friction = np.asarray(self.friction, dtype=float)
+        for name in ("pressure", "displacement", "friction"):
+            values = getattr(self, name)
+            if values is not None:
+                setattr(self, name, numbers(values, name))
         if self.status is None:
             largest = self.pressure.max(initial=0.0)
             self.status = np.where((largest > 0) & (self.pressure > CLOSED_PRESSURE * largest), "closed", "open")
@@ -109,6 +108,14 @@ class Fields:
         return self.friction is not None and not np.any(self.status == "closed")
 
 
+def numbers(values, name: str) -> np.ndarray:
+    """``values`` as an array of floats, or a ValueError naming the argument."""
+    try:
+        return np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name}: expected an array of numbers ({error})") from None
+
+
 def check(reference: ContactResult, fields: Fields, prefix: str) -> None:
     """Lengths and values of ``fields`` against the reference's DOFs and contact nodes."""
     ndofs, m = reference.fem.basis.N, reference.fem.contact.m
@@ -123,7 +130,8 @@ def check(reference: ContactResult, fields: Fields, prefix: str) -> None:
         if values.shape != (size,):
             raise ValueError(f"{prefix}{name}: {values.size} values, the reference has {size} — {fix}")
         if name != "status" and not np.isfinite(values).all():
-            raise ValueError(f"{prefix}{name}: contains NaN or infinity")
+            raise ValueError(f"{prefix}{name}: contains NaN or infinity ({np.sum(~np.isfinite(values))} of {size} "
+                             "values) — give the finite values of a solve that converged")
     unknown = set(fields.status.tolist()) - set(STATUSES)
     if unknown:
         raise ValueError(f"{prefix}status: unknown values {sorted(unknown)}; use {STATUSES}")
@@ -198,8 +206,9 @@ def node_weights(nodes: dict, path: Path) -> np.ndarray:
     repeats along rows of nodes, so spacing weights would be wrong (they weighted 20 of 121 nodes)."""
     if "weight" in nodes:
         return np.asarray(nodes["weight"], float)
-    if "z" in nodes:
-        raise ValueError(f"{path}: a 3-D summary without contact weights; write it again with this version")
+    if "z" in nodes or "s" not in nodes:
+        raise ValueError(f"{path}: contact_nodes: no weight (the contact weights w_i); write the summary again "
+                         "with this version")
     return spacing_weights(np.asarray(nodes["s"], float))
 
 
@@ -213,11 +222,63 @@ def spacing_weights(s: np.ndarray) -> np.ndarray:
     return weights
 
 
-def read_summary(path: Path) -> tuple[dict, dict]:
-    data = json.loads(Path(path).read_text())
-    if "contact_nodes" not in data:
-        raise ValueError(f"{path}: no contact_nodes (status {data.get('status')!r}): only a solved result can be compared")
-    return data, data["contact_nodes"]
+SUMMARY_FIX = ("give the summary.json a run writes (convexcontact run SCENE --out DIR); to compare a scene with "
+               "another code's output file, give the scene's .toml first")
+NODE_NUMBERS = ("x", "y", "z", "s", "lambda_N", "lambda_T", "weight")
+
+
+def read_summary(path) -> tuple[dict, dict]:
+    """A summary.json's data and its ``contact_nodes``, checked: a ValueError starting with the path otherwise."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as error:
+        raise ValueError(f"{path}: cannot read it ({error.strerror or error}); check the path") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a summary.json (not UTF-8 text); {SUMMARY_FIX}") from None
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not a summary.json (no JSON: {error.msg} at line {error.lineno}, column "
+                         f"{error.colno}); {SUMMARY_FIX}") from None
+    if not isinstance(data, dict) or "contact_nodes" not in data:
+        problem = (f"no contact_nodes (status {data.get('status')!r}): only a solved result can be compared"
+                   if isinstance(data, dict) else f"not a summary.json (a JSON {type(data).__name__}, not an object)")
+        raise ValueError(f"{path}: {problem}; {SUMMARY_FIX}")
+    return data, check_nodes(data, path)
+
+
+def check_nodes(data: dict, path: Path) -> dict:
+    """``contact_nodes`` as arrays of one length: finite coordinates, pressures, frictions, weights; known statuses;
+    a certificate of numbers and a not_unique of reasons, where given."""
+    nodes = data["contact_nodes"]
+    missing = [name for name in ("x", "y", "lambda_N", "status") if not isinstance(nodes, dict) or name not in nodes]
+    if missing:
+        raise ValueError(f"{path}: contact_nodes: no {', '.join(missing)}; {SUMMARY_FIX}")
+    checked, count = {}, np.size(nodes["x"]) if isinstance(nodes["x"], list) else -1
+    for name in (*NODE_NUMBERS, "status"):
+        if name not in nodes:
+            continue
+        values = nodes[name]
+        try:
+            array = np.asarray(values, dtype=str if name == "status" else float)
+        except (TypeError, ValueError):
+            array = None
+        if not isinstance(values, list) or array is None or array.shape != (count,) or count < 1:
+            raise ValueError(f"{path}: contact_nodes.{name}: expected a list of {max(count, 1)} "
+                             f"{'statuses' if name == 'status' else 'numbers'} (one per node, as contact_nodes.x), "
+                             f"got {str(values)[:60]}; {SUMMARY_FIX}")
+        if name != "status" and not np.isfinite(array).all():
+            raise ValueError(f"{path}: contact_nodes.{name}: NaN or infinite at {np.sum(~np.isfinite(array))} of "
+                             f"{count} nodes; a solved result's fields are finite: write the summary again")
+        checked[name] = array
+    unknown = sorted(set(checked["status"].tolist()) - set(STATUSES))
+    if unknown:
+        raise ValueError(f"{path}: contact_nodes.status: unknown values {unknown[:5]}; expected {STATUSES}")
+    for name, kind in (("certificate", (int, float)), ("not_unique", str)):
+        entries = data.get(name, {})
+        if not isinstance(entries, dict) or not all(isinstance(v, kind) for v in entries.values()):
+            raise ValueError(f"{path}: {name}: expected an object of {'reasons' if kind is str else 'numbers'}, got "
+                             f"{str(entries)[:60]}; {SUMMARY_FIX}")
+    return checked
 
 
 def compare_files(a: Path, b: Path) -> dict:
@@ -231,8 +292,9 @@ def compare_files(a: Path, b: Path) -> dict:
     xy_a, xy_b = (np.column_stack([n[axis] for axis in "xyz" if axis in n]) for n in (nodes_a, nodes_b))
     extent = np.ptp(xy_a, axis=0).max(initial=0.0)
     if xy_a.shape != xy_b.shape or not np.allclose(xy_a, xy_b, rtol=0, atol=1e-9 * extent):
+        dims = f", {xy_b.shape[1]}-D against {xy_a.shape[1]}-D" if xy_a.shape[1] != xy_b.shape[1] else ""
         raise ValueError(
-            f"{b}: its {len(xy_b)} contact nodes are not those of {a} ({len(xy_a)} nodes) — "
+            f"{b}: its {len(xy_b)} contact nodes are not those of {a} ({len(xy_a)} nodes{dims}) — "
             "compare_files needs two solutions on the same mesh and contact boundary"
         )
 
