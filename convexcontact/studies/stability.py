@@ -527,7 +527,8 @@ CASES: dict[str, Callable[[bool], tuple[cc.Scene, Check]]] = {
     "full separation": separation,
     "gap 1e-12": small_gap,
     "penetration 1e-12, no load": tiny_penetration,
-    "load 1e-10": functools.partial(scaled_load, load=1e-10),
+    "load 1e-8": functools.partial(scaled_load, load=1e-8),
+    "load 1e-10 (force below the resolved strain)": functools.partial(scaled_load, load=1e-10),
     "load 1e10": functools.partial(scaled_load, load=1e10),
 }
 """The registry: case name → function(quick) returning (scene, check)."""
