@@ -9,9 +9,10 @@ from pathlib import Path
 
 from . import solvers
 from .drivers.solve import solve
-from .results.output import check_file_target, check_folder_target, staged, write_text
+from .results.output import check_new_file, check_new_files, staged, write_text
 from .scene.library import hertz_punch
 from .scene.model import SceneError
+from .studies import arguments
 
 
 def table(result) -> str:
@@ -110,15 +111,9 @@ def check_outputs(out: Path | None, json_file: Path | None, overwrite: bool, out
     """Refuse, before any work, outputs that would fail or replace a file without --overwrite (``outputs``: the
     names the command writes into --out)."""
     if out is not None:
-        check_folder_target(out, "--out")
-        ours = sorted({path.name for pattern in outputs for path in out.glob(pattern)}) if out.is_dir() else []
-        if ours and not overwrite:
-            raise ValueError(f"--out: {out} already holds {', '.join(ours[:5])}{' …' if len(ours) > 5 else ''}; "
-                             "give another folder, or --overwrite to replace them (nothing else there is touched)")
+        check_new_files(out, outputs, "--out", overwrite)
     if json_file is not None:
-        check_file_target(json_file, "--json")
-        if json_file.exists() and not overwrite:
-            raise ValueError(f"--json: {json_file} exists; choose another name, or --overwrite to replace it")
+        check_new_file(json_file, "--json", overwrite)
 
 
 def report(result, out: Path | None, json_file: Path | None) -> int:
@@ -173,6 +168,17 @@ def compare_summaries(args) -> dict:
     return compare_files(args.reference, args.other)
 
 
+ANSWERED = ("solved", "inaccurate")
+"""Statuses of a study's case that gave an answer."""
+
+
+def failed_all(found) -> bool:
+    """Whether a study (its rows, or a sweep holding them) ran cases and none gave an answer; rows without a
+    status (``study uniqueness``: counts of solutions) are answers, a run with nothing left to do failed nothing."""
+    rows = list(getattr(found, "rows", found) or [])
+    return bool(rows) and not any(row.get("status", "solved") in ANSWERED for row in rows)
+
+
 def main(argv=None) -> int:
     """The ``convexcontact`` command; Ctrl-C ends it quietly with code 130 (outputs are written whole or not
     at all: see :func:`~convexcontact.results.output.staged`)."""
@@ -201,13 +207,15 @@ def commands(argv=None) -> int:
             command.add_argument("--max-dofs", type=int, help="with --adapt: no mesh beyond this many DOFs "
                                  "(default 200000)")
         else:
-            command.add_argument("--nx", type=int, default=80, help="elements across the block (default 80)")
+            command.add_argument("--nx", type=arguments.integer(2, 80), default=80,
+                                 help="elements across the block (default 80)")
         command.add_argument("--solver", default="auto", help="auto (newton-cg on a matrix-free dual, else clarabel) "
                              "| clarabel | osqp | cvxpy[:NAME] | newton-cg")
         command.add_argument("--formulation", default="auto",
                              help="auto (default: chosen from the problem's shape) | primal | dual (condensed on Γ_C) "
                              "| dual-matrix-free (W through K's factors, never formed)")
-        command.add_argument("--tol", type=float, default=None, help="solver tolerance (default: the adapter's)")
+        command.add_argument("--tol", type=arguments.number("1e-8"), default=None,
+                             help="solver tolerance (default: the adapter's)")
         command.add_argument("--out", type=Path, default=Path("out") if name == "demo" else None,
                              help="folder for summary.json, solution.vtu, PNG plots")
         command.add_argument("--json", type=Path, default=None, help="also write the JSON summary here")
@@ -244,7 +252,8 @@ def commands(argv=None) -> int:
     if argv[:1] == ["bench"]:  # its options (--dim …) belong to its own parser
         from .studies import bench, history_bench
 
-        rows = (history_bench if "--history" in argv else bench).main(argv[1:])
+        history = any(word == "--history" or word.startswith("--history=") for word in argv)
+        rows = (history_bench if history else bench).main(argv[1:])  # bad input: argparse's exit 2
         return 0 if rows else 1  # every case failed (each said why)
     args = parser.parse_args(argv)
     if args.command == "study":
@@ -253,11 +262,14 @@ def commands(argv=None) -> int:
         studies = {"work-precision": work_precision, "sweep": sweeps, "stability": stability, "uniqueness": uniqueness,
                    "grid": grid, "sfepy": sfepy_peer}
         try:
-            studies[args.kind].main(args.arguments)
-        except (SceneError, ValueError) as error:
+            found = studies[args.kind].main(args.arguments)
+        except (SceneError, ValueError) as error:  # bad input, named by the study before any work
             print(f"error: {error}", file=sys.stderr)
             return 2
-        return 0
+        except RuntimeError as error:  # a reference the study needs could not be solved: no answer
+            print(f"error: {error}", file=sys.stderr)
+            return 1
+        return 1 if failed_all(found) else 0  # every case failed (each said why)
     if args.command == "compare":
         from .studies.compare import format_report
 
@@ -334,7 +346,11 @@ def run_command(args) -> int:
         check_outputs(args.out, args.json, args.overwrite)
         solvers.check_name(args.solver)
         if args.command == "demo":
+            from .fem.mesh import check_size
+
             scene = hertz_punch(nx=args.nx)
+            with arguments.named("--nx"):
+                check_size(scene.body)
         else:
             from .scene.toml import load_scene
 

@@ -438,7 +438,7 @@ def command(tmp_path, text: str, *arguments) -> tuple[int, str]:
     (COULOMB, ["--solutions", "all", "--formulation", "primal"], "--formulation: 'primal' for solutions='all'"),
     (PATCH_TOML + HISTORY, ["--solver", "bogus"], "--solver: unknown 'bogus'"),
     (PATCH_TOML + HISTORY, ["--tol", "nan"], "--tol: expected a positive finite number"),
-    (PATCH_TOML + HISTORY, ["--tol", "ten"], "--tol: invalid float value"),
+    (PATCH_TOML + HISTORY, ["--tol", "ten"], "--tol: expected a positive finite number, e.g. 1e-8; got 'ten'"),
     (PATCH_TOML + HISTORY, ["--out", "SCENE"], "--out: SCENE is a file"),
     (PATCH_TOML + HISTORY, ["--json", "FOLDER"], "--json: FOLDER is a folder"),
     (PATCH_TOML + HISTORY.replace("0.1, 0.2, 0.3", "0.1, [0.2], 0.3"), [], "history.traction[top].pressure[1]"),

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import meshio
 import numpy as np
+import pytest
 
 from convexcontact.cli import main
 
@@ -76,3 +77,16 @@ def test_study_commands(tmp_path, capsys):
     assert list((tmp_path / "wp").glob("*.png"))
     assert main(["study", "stability", "--quick", "--cases", "zero load", "--out", str(tmp_path / "s.md")]) == 0
     assert "zero load" in (tmp_path / "s.md").read_text()
+
+
+@pytest.mark.parametrize("arguments, command", [
+    (["bench"], "convexcontact bench"), (["bench", "--history", "2"], "convexcontact bench --history"),
+    *((["study", kind], f"convexcontact study {kind}") for kind in ("work-precision", "sweep", "stability",
+                                                                    "uniqueness", "sfepy")),
+])
+def test_every_study_and_bench_names_its_command_in_its_help(capsys, arguments, command):
+    """Each parser is built in its module's main; --help shows the command as typed and the main's docstring."""
+    with pytest.raises(SystemExit) as exit_:
+        main([*arguments, "--help"])
+    shown = capsys.readouterr().out
+    assert exit_.value.code == 0 and shown.startswith(f"usage: {command} ") and f"``{command}" in shown

@@ -54,7 +54,7 @@ def commands() -> dict[str, str]:
         if command in ("study", "fclib"):
             found |= {f"{command} {sub}": help_text(command, sub) for sub in choices(help_text(command))}
         else:
-            found[command] = help_text(command) + (help_text(command, "--history", "1") if command == "bench" else "")
+            found[command] = help_text(command) + (help_text(command, "--history", "2") if command == "bench" else "")
     return {f"convexcontact {name}": text for name, text in found.items()}
 
 

@@ -94,6 +94,23 @@ def check_file_target(path: Path, option: str, example: str = "summary.json") ->
         raise ValueError(f"{option}: the folder {path.parent} does not exist; create it or choose another")
 
 
+def check_new_file(path: Path, option: str, overwrite: bool, example: str = "summary.json") -> None:
+    """:func:`check_file_target`, and refuse an existing file unless ``overwrite`` (the command's --overwrite)."""
+    check_file_target(path, option, example)
+    if path.exists() and not overwrite:
+        raise ValueError(f"{option}: {path} exists; choose another name, or --overwrite to replace it")
+
+
+def check_new_files(folder: Path, patterns, option: str, overwrite: bool) -> None:
+    """:func:`check_folder_target`, and refuse a folder holding files a run writes (``patterns``, globs) unless
+    ``overwrite``: nothing else in the folder is touched either way."""
+    check_folder_target(folder, option)
+    ours = sorted({path.name for pattern in patterns for path in folder.glob(pattern)}) if folder.is_dir() else []
+    if ours and not overwrite:
+        raise ValueError(f"{option}: {folder} already holds {', '.join(ours[:5])}{' …' if len(ours) > 5 else ''}; "
+                         "give another folder, or --overwrite to replace them (nothing else there is touched)")
+
+
 def staged(directory, write: Callable[[Path], list]) -> list[Path]:
     """``write(folder)`` into a fresh folder beside ``directory``, its files moved in only once all are written:
     a run interrupted or failing on the way leaves ``directory`` as it was. Returns the paths in ``directory``."""

@@ -9,6 +9,7 @@ the mechanics recovered from the solution does not depend on the solver used.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, replace
 
 import cvxpy as cp
@@ -129,7 +130,9 @@ def solve(
         if name == cp.CLARABEL:
             options.update(tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, tol_ktratio=tol)
         try:
-            m.problem.solve(solver=name, verbose=verbose, **options)
+            with warnings.catch_warnings():  # cvxpy's "optimal_inaccurate" is the result's status, its word kept
+                warnings.filterwarnings("ignore", "Solution may be inaccurate", UserWarning)
+                m.problem.solve(solver=name, verbose=verbose, **options)
             word = str(m.problem.status)
             break
         except TypeError as error:  # cvxpy's words for a setting the solver does not take

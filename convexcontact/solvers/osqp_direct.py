@@ -140,7 +140,7 @@ class Session:
             return failed(self.program, self._setup_error)
         try:
             with silenced(not self._verbose):
-                result = self._solver.solve()
+                result = self._solver.solve(raise_error=False)  # a failure is a status, read below
         except osqp.OSQPException as error:
             return failed(self.program, f"OSQPException: {_error_name(error)}")
         word = str(result.info.status)

@@ -28,7 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..results.output import check_folder_target
+from ..results.output import check_folder_target, check_new_files
+from .arguments import SECONDS_PER_DOF, check_duration, integer, named, number
 
 LAWS = ("signorini", "tresca", "coulomb")
 SIZES = {2: (1e4, 1e5, 1e6), 3: (1e4, 1e5, 3e5)}
@@ -247,24 +248,42 @@ def plot(rows: list, path) -> Path:
 
 
 def check_arguments(args) -> None:
-    """The solver, formulation, output folder and sizes, before any case runs."""
+    """The solver, formulation, output folder, sizes and the estimated run time, before any case runs."""
     from .. import solvers
-    from ..fem.mesh import check_size
-    from ..scene.model import Box, Rectangle
+    from ..fem.mesh import check_memory, check_size
 
     solvers.check_name(args.solver)
     if args.formulation not in ("auto", "primal", "dual", "dual-matrix-free"):
         raise ValueError(f"--formulation: unknown {args.formulation!r}; use auto, primal, dual or dual-matrix-free")
+    if args.sizes is not None and min(args.sizes) < 100:
+        raise ValueError(f"--sizes: {min(args.sizes):g} DOFs; give sizes of at least 100 free DOFs, "
+                         "e.g. --sizes 1e4 1e5")
     if args.nodes is not None and (args.scenario != "whole-face" or min(args.nodes) < 2):
         raise ValueError("--nodes: give at least 2 contact nodes, with --scenario whole-face")
     if args.scenario == "two-body" and args.dim != 2:
         raise ValueError("--scenario two-body: the bench's two-body scene is 2-D; drop --dim 3")
-    check_folder_target(Path(args.out), "--out")
-    for dofs in args.sizes or SIZES[args.dim]:
+    if args.sweep:
+        check_folder_target(args.out, "--out")
+    else:
+        check_new_files(args.out, (f"{csv_name(args)}.csv", f"{csv_name(args)}.png"), "--out", args.overwrite)
+    sizes = args.sizes or SIZES[args.dim]
+    for dofs in sizes:
+        if args.scenario == "two-body":  # its meshes are built with the scene: estimated from the target DOFs
+            with named("--sizes"):
+                check_memory(dofs, 2, "--sizes", f"--sizes {dofs:g}", "give fewer DOFs")
+            continue
         for nodes in nodes_of(args):
-            body = scene_of(args.scenario, args.dim, "signorini", dofs, nodes).body
-            if isinstance(body.geometry, (Box, Rectangle)):  # a mesh already built (two bodies) was checked then
-                check_size(body)
+            with named("--sizes" if nodes is None else "--sizes/--nodes"):
+                check_size(scene_of(args.scenario, args.dim, "signorini", dofs, nodes).body)
+    cases = 2 * args.sweep if args.sweep else len(sizes) * len(args.laws) * len(nodes_of(args))
+    mean = sizes[0] if args.sweep else sum(sizes) / len(sizes)
+    check_duration("--sweep" if args.sweep else "--sizes", cases, SECONDS_PER_DOF * mean, "contact solves",
+                   "give fewer or smaller sizes" + (", or a smaller COUNT" if args.sweep else ", or fewer --laws"))
+
+
+def csv_name(args) -> str:
+    """The name of the bench's CSV and PNG in --out."""
+    return f"bench_{args.dim}d" + ("" if args.scenario == "punch" else f"_{args.scenario}")
 
 
 def nodes_of(args) -> tuple:
@@ -278,19 +297,20 @@ def main(argv=None) -> list:
     """``convexcontact bench [--dim 2|3] [--sizes N …]``: contact against linear solve, per size."""
     parser = argparse.ArgumentParser(prog="convexcontact bench", description=main.__doc__)
     parser.add_argument("--dim", type=int, choices=(2, 3), default=2)
-    parser.add_argument("--sizes", type=float, nargs="+", default=None, help="target free DOFs (default: 1e4 … 1e6 "
-                        "in 2-D, 1e4 … 3e5 in 3-D)")
+    parser.add_argument("--sizes", type=number("1e4", positive=False), nargs="+", default=None,
+                        help="target free DOFs (default: 1e4 … 1e6 in 2-D, 1e4 … 3e5 in 3-D)")
     parser.add_argument("--laws", nargs="+", choices=LAWS, default=list(LAWS))
     parser.add_argument("--scenario", choices=SCENARIOS, default="punch",
                         help="punch (a small contact zone), whole-face (a block's whole bottom face in contact) "
                         "or two-body (a punch with its own mesh on an elastic foundation, mortar; 2-D)")
-    parser.add_argument("--nodes", type=float, nargs="+", default=None,
+    parser.add_argument("--nodes", type=number("1e3"), nargs="+", default=None,
                         help="whole-face: contact nodes (default: 1e3 4e3), each case at each of --sizes")
     parser.add_argument("--formulation", default="auto", help="auto | primal | dual | dual-matrix-free")
     parser.add_argument("--solver", default="auto", help="auto (the one that takes the program) | clarabel | "
                         "osqp | cvxpy[:NAME] | newton-cg")
-    parser.add_argument("--out", default="out/bench", help="folder for bench_<dim>d.csv and .png")
-    parser.add_argument("--sweep", type=int, default=0, metavar="COUNT",
+    parser.add_argument("--out", type=Path, default=Path("out/bench"), help="folder for bench_<dim>d.csv and .png")
+    parser.add_argument("--overwrite", action="store_true", help="replace the CSV and PNG of an earlier bench in --out")
+    parser.add_argument("--sweep", type=integer(1, 10), default=0, metavar="COUNT",
                         help="instead: COUNT Coulomb coefficients in [0.1, 0.5] at the first size, independent "
                         "solves against one reused model")
     parser.add_argument("--case", help=argparse.SUPPRESS)  # internal: one case, in this process
@@ -298,13 +318,9 @@ def main(argv=None) -> list:
     if args.case:
         print(json.dumps(measure(*json.loads(args.case))))
         return []
-    if args.sizes is not None and min(args.sizes) < 100:
-        parser.error(f"--sizes: {min(args.sizes):g} DOFs; give sizes of at least 100 free DOFs, e.g. --sizes 1e4 1e5")
-    if args.sweep < 0:
-        parser.error("--sweep: give a positive count of friction coefficients")
     try:
         check_arguments(args)
-    except ValueError as error:  # SceneError too: a size too large for the memory
+    except ValueError as error:  # SceneError too: argparse's exit 2, usage and "error: --OPTION: …"
         parser.error(str(error))
     if args.sweep:
         return [friction_sweep(args.dim, (args.sizes or SIZES[args.dim])[0], np.linspace(0.1, 0.5, args.sweep),
@@ -312,8 +328,8 @@ def main(argv=None) -> list:
     rows = run(args.dim, args.sizes or SIZES[args.dim], args.laws, args.formulation, args.solver,
                scenario=args.scenario, nodes=nodes_of(args))
     if rows:
-        name = f"bench_{args.dim}d" + ("" if args.scenario == "punch" else f"_{args.scenario}")
-        print("wrote", write_csv(rows, Path(args.out) / f"{name}.csv"), plot(rows, Path(args.out) / f"{name}.png"))
+        name = csv_name(args)
+        print("wrote", write_csv(rows, args.out / f"{name}.csv"), plot(rows, args.out / f"{name}.png"))
     return rows
 
 

@@ -20,6 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..results.output import check_new_files
+from .arguments import SECONDS_PER_DOF, check_duration, integer, named, number
+
+CSV = "history_bench.csv"
 COLUMNS = ("dofs", "contact_nodes", "steps", "law", "formulation", "status", "linear", "history", "static",
            "history_per_linear", "history_per_static", "certificate")
 
@@ -73,17 +77,36 @@ def case(dofs: float, steps: int, law: str) -> dict:
             "certificate": max(s.certificate.worst for s in history.steps if s.certificate)}
 
 
+def check_arguments(args) -> None:
+    """Sizes, memory, the estimated run time and the output folder, before any case runs."""
+    from ..fem.mesh import check_size
+
+    if min(args.sizes) < 100:
+        raise ValueError(f"--sizes: {min(args.sizes):g} DOFs; give at least 100 DOFs each, e.g. --sizes 1e4 1e5")
+    for dofs in args.sizes:
+        with named("--sizes"):
+            check_size(sliding_block(dofs, 2, args.law).body)
+    check_duration("--history", 2 * args.history * len(args.sizes), SECONDS_PER_DOF * max(args.sizes),
+                   "contact solves (the history's steps, then as many static solves)",
+                   "give fewer steps or smaller --sizes")
+    check_new_files(args.out, (CSV,), "--out", args.overwrite)
+
+
 def main(argv=None) -> list[dict]:
-    """Time a history against N static solves and one linear solve, per size; print a table, write CSV."""
-    parser = argparse.ArgumentParser(prog="convexcontact bench --history",
-                                     description=__doc__.split("\n\n")[0])
-    parser.add_argument("--history", type=int, required=True, metavar="N", help="steps of the history")
-    parser.add_argument("--sizes", type=float, nargs="+", default=[1e4, 1e5], help="approximate DOFs")
+    """``convexcontact bench --history N [--sizes N …]``: a history against N static solves and one linear solve,
+    per size; a table, and history_bench.csv in --out."""
+    parser = argparse.ArgumentParser(prog="convexcontact bench --history", description=main.__doc__)
+    parser.add_argument("--history", type=integer(2, 20), required=True, metavar="N", help="steps of the history")
+    parser.add_argument("--sizes", type=number("1e4", positive=False), nargs="+", default=[1e4, 1e5],
+                        help="approximate DOFs")
     parser.add_argument("--law", choices=["tresca", "coulomb"], default="tresca")
     parser.add_argument("--out", type=Path, default=Path("out/bench"), help="folder for history_bench.csv")
+    parser.add_argument("--overwrite", action="store_true", help="replace the history_bench.csv of an earlier bench")
     args = parser.parse_args(argv)
-    if args.history < 2 or min(args.sizes) < 100:
-        parser.error("--history needs at least 2 steps and --sizes at least 100 DOFs each")
+    try:
+        check_arguments(args)
+    except ValueError as error:  # SceneError too: argparse's exit 2, usage and "error: --OPTION: …"
+        parser.error(str(error))
     rows = []
     for dofs in args.sizes:
         rows.append(case(dofs, args.history, args.law))
@@ -93,9 +116,9 @@ def main(argv=None) -> list[dict]:
               f"{row['history_per_static']:.2f} × the {row['steps']} static solves ({row['static']:.2f} s); "
               f"{row['status']}, certificate ≤ {row['certificate']:.1e}", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    with open(args.out / "history_bench.csv", "w", newline="") as handle:
+    with open(args.out / CSV, "w", newline="") as handle:
         writer = csv.DictWriter(handle, COLUMNS)
         writer.writeheader()
         writer.writerows(rows)
-    print(json.dumps({"csv": str(args.out / "history_bench.csv")}))
+    print(json.dumps({"csv": str(args.out / CSV)}))
     return rows

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..drivers.model import prepare
 from ..fem.mesh import BOUNDARY_NAMES
+from ..results.output import check_new_files
 from ..scene.library import quarter_box
 from ..scene.model import Box, Material, NormalCompliance, Obstacle, Scene, Signorini
 from .peer import compare_peer
@@ -161,7 +162,11 @@ def penalty_study(scene: Scene, stiffness: Sequence[float], folder, solver: str 
     return Sweep("k", "energy error of sfepy's penalty answer", -1.0, rows)
 
 
-def sphere_scene(cells: int = 8, radius: float = 0.8, depth: float = 0.05, non_penetration: str = "gauss") -> Scene:
+RADIUS = 0.8
+"""The sphere's radius in :func:`sphere_scene`, sfepy's example's."""
+
+
+def sphere_scene(cells: int = 8, radius: float = RADIUS, depth: float = 0.05, non_penetration: str = "gauss") -> Scene:
     """sfepy's sphere indentation (its example elastic_contact_sphere.py) as a quarter model: a unit box,
     E = 1, ν = 0.3, a sphere of radius 0.8 pressed ``depth`` into the middle of its top face, the cells
     graded 8:1 towards the contact (a ≈ sqrt(R d) = 0.2 spans a few cells). Non-penetration at the Gauss
@@ -171,18 +176,37 @@ def sphere_scene(cells: int = 8, radius: float = 0.8, depth: float = 0.05, non_p
     return quarter_box(cells, "Q1", 8.0, obstacle, Signorini(non_penetration), "sfepy_sphere")
 
 
+OUTPUTS = ("mesh.vtk", "sfepy_k*.vtk", "sfepy_penalty.png")
+"""What the study writes into --out: the names it would replace."""
+
+
 def main(argv=None) -> Sweep:
-    parser = argparse.ArgumentParser(prog="convexcontact study sfepy", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cells", type=int, default=8, help="cells per edge of the quarter box (default 8)")
-    parser.add_argument("--depth", type=float, default=0.05, help="the sphere's indentation (default 0.05)")
+    """``convexcontact study sfepy [--cells N] [--stiffness K …]``: sfepy's penalty sphere at each k against the
+    exact answer; sfepy's files and sfepy_penalty.png in --out."""
+    from ..fem.mesh import check_size
+    from .arguments import SECONDS_PER_DOF, check_duration, integer, named, number
+
+    parser = argparse.ArgumentParser(prog="convexcontact study sfepy", description=main.__doc__)
+    parser.add_argument("--cells", type=integer(1, 8), default=8, help="cells per edge of the quarter box (default 8)")
+    parser.add_argument("--depth", type=number("0.05"), default=0.05,
+                        help="the sphere's indentation, below its radius 0.8 (default 0.05)")
     parser.add_argument("--non-penetration", choices=["gauss", "nodal"], default="gauss",
                         help="the exact law compared with: at the Gauss points (sfepy's limit, default) or nodes")
-    parser.add_argument("--stiffness", type=float, nargs="+", default=[1e0, 1e1, 1e2, 1e3, 1e4],
+    parser.add_argument("--stiffness", type=number("1e3"), nargs="+", default=[1e0, 1e1, 1e2, 1e3, 1e4],
                         help="sfepy's penalty stiffnesses k")
     parser.add_argument("--out", type=Path, default=Path("out/sfepy"), help="folder for sfepy's files and the plot")
+    parser.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     args = parser.parse_args(argv)
-    sweep = penalty_study(sphere_scene(args.cells, depth=args.depth, non_penetration=args.non_penetration),
-                          args.stiffness, args.out)
+    if args.depth >= RADIUS:
+        raise ValueError(f"--depth: {args.depth:g} sinks the whole sphere (radius {RADIUS:g}); give a depth below "
+                         "it, e.g. 0.05")
+    scene = sphere_scene(args.cells, depth=args.depth, non_penetration=args.non_penetration)
+    with named("--cells"):
+        check_size(scene.body)
+    check_duration("--cells/--stiffness", 2 * len(args.stiffness) + 1, SECONDS_PER_DOF * 3 * (args.cells + 1) ** 3,
+                   "solves (sfepy's and ours at each k)", "give fewer --cells or --stiffness values")
+    check_new_files(args.out, OUTPUTS, "--out", args.overwrite)
+    sweep = penalty_study(scene, args.stiffness, args.out)
     print(table(sweep))
     print("against our solve of the same penalty at the same Gauss points (energy error): " +
           ", ".join(f"k = {row['parameter']:g}: {row['same_penalty_error']:.2e}" for row in sweep.rows))

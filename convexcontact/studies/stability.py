@@ -34,7 +34,7 @@ from scipy.optimize import brentq
 import convexcontact as cc
 from convexcontact.analytic import hertz_plane_strain, hild_one_triangle_solutions
 from convexcontact.fem.mesh import graded, tensor_mesh
-from convexcontact.results.output import check_file_target
+from convexcontact.results.output import check_new_file
 from convexcontact.scene.library import HERTZ_FORCE, frictional_punch, punch_mesh
 from convexcontact.scene.model import Coulomb, SceneError
 
@@ -527,7 +527,8 @@ CASES: dict[str, Callable[[bool], tuple[cc.Scene, Check]]] = {
     "full separation": separation,
     "gap 1e-12": small_gap,
     "penetration 1e-12, no load": tiny_penetration,
-    "load 1e-10": functools.partial(scaled_load, load=1e-10),
+    "load 1e-8": functools.partial(scaled_load, load=1e-8),
+    "load 1e-10 (force below the resolved strain)": functools.partial(scaled_load, load=1e-10),
     "load 1e10": functools.partial(scaled_load, load=1e10),
 }
 """The registry: case name → function(quick) returning (scene, check)."""
@@ -656,25 +657,24 @@ def table(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> list[dict]:
-    """``convexcontact study stability [--quick] [--cases ...] [--out FILE]``: the suite's table."""
+    """``convexcontact study stability [--quick] [--cases NAME …] [--out FILE]``: the suite's table."""
     import argparse
 
     parser = argparse.ArgumentParser(prog="convexcontact study stability", description=main.__doc__)
     parser.add_argument("--quick", action="store_true", help="coarse meshes (about 10 s)")
     parser.add_argument("--cases", nargs="+", default=None, help="case names as in docs/stability.md")
-    parser.add_argument("--out", default=None, help="also write the markdown table here")
+    parser.add_argument("--out", type=Path, default=None, help="also write the markdown table here")
+    parser.add_argument("--overwrite", action="store_true", help="replace the --out file of an earlier run")
     args = parser.parse_args(argv)
     unknown = sorted(set(args.cases or ()) - set(CASES))
     if unknown:
-        parser.error(f"--cases: no case named {', '.join(map(repr, unknown))}; the cases are {', '.join(map(repr, CASES))}")
+        raise ValueError(f"--cases: no case named {', '.join(map(repr, unknown))}; the cases are "
+                         f"{', '.join(map(repr, CASES))}")
     if args.out:
-        try:
-            check_file_target(Path(args.out), "--out", "stability.md")
-        except ValueError as error:
-            parser.error(str(error))
+        check_new_file(args.out, "--out", args.overwrite, "stability.md")
     rows = run(cases=args.cases, quick=args.quick)
     text = table(rows)
     print(text)
     if args.out:
-        Path(args.out).write_text(text + "\n")
+        args.out.write_text(text + "\n")
     return rows

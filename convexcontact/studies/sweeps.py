@@ -134,25 +134,48 @@ def table(sweep: Sweep) -> str:
     return "\n".join(lines)
 
 
+PLOT = Path("out/sweep.png")
+"""Where ``convexcontact study sweep`` draws its plot unless told (--out)."""
+
+
 def main(argv=None) -> Sweep:
-    """``convexcontact study sweep penalty|regularization``: errors, fitted slope, plot."""
+    """``convexcontact study sweep penalty|regularization [--nx N] [--values V …]``: errors against the exact
+    answer, the fitted slope, a plot."""
     import argparse
 
+    from .. import solvers
+    from ..fem.mesh import check_size
+    from ..results.output import check_folder_target, check_new_file
     from ..scene.library import hertz_punch, tresca_punch
+    from .arguments import SECONDS_PER_DOF, check_duration, integer, named, number
 
     parser = argparse.ArgumentParser(prog="convexcontact study sweep", description=main.__doc__)
     parser.add_argument("kind", choices=["penalty", "regularization"])
-    parser.add_argument("--nx", type=int, default=16, help="elements across the block")
-    parser.add_argument("--values", type=float, nargs="+", default=None, help="c_N or ε values (default: logspace)")
-    parser.add_argument("--solver", default=None)
-    parser.add_argument("--out", default="out/sweep.png")
+    parser.add_argument("--nx", type=integer(2, 16), default=16, help="elements across the block (default 16)")
+    parser.add_argument("--values", type=number("1e4"), nargs="+", default=None,
+                        help="c_N (penalty) or ε (regularization) values, user units (default: logspace)")
+    parser.add_argument("--solver", default=None, help="default: osqp (penalty), clarabel (regularization)")
+    parser.add_argument("--out", type=Path, default=None, help="the plot (PNG; default out/sweep.png)")
+    parser.add_argument("--overwrite", action="store_true", help="replace the plot of an earlier sweep")
     args = parser.parse_args(argv)
+    if args.solver is not None:
+        solvers.check_name(args.solver)
+    scene = hertz_punch(nx=args.nx) if args.kind == "penalty" else tresca_punch(nx=args.nx)
+    with named("--nx"):
+        check_size(scene.body)
+    values = args.values or (np.logspace(3, 6, 4) if args.kind == "penalty" else np.logspace(-5, -7, 3))
+    dofs = 2 * (args.nx + 1) * (args.nx // 2 + 1)
+    check_duration("--nx/--values", len(values) + 1, SECONDS_PER_DOF * dofs, "contact solves",
+                   "give a smaller --nx or fewer --values")
+    if args.out is None:  # the default's folder is made for it
+        check_folder_target(PLOT.parent, "--out")
+        PLOT.parent.mkdir(parents=True, exist_ok=True)
+    out = args.out or PLOT
+    check_new_file(out, "--out", args.overwrite, PLOT.name)
     if args.kind == "penalty":
-        values = args.values or np.logspace(3, 6, 4)
-        sweep = penalty_sweep(hertz_punch(nx=args.nx), values, args.solver or "osqp")
+        sweep = penalty_sweep(scene, values, args.solver or "osqp")
     else:
-        values = args.values or np.logspace(-5, -7, 3)
-        sweep = regularization_sweep(tresca_punch(nx=args.nx), values, args.solver or "clarabel")
+        sweep = regularization_sweep(scene, values, args.solver or "clarabel")
     print(table(sweep))
-    print("wrote", plot_sweep(sweep, args.out, expected_slope=sweep.expected_slope))
+    print("wrote", plot_sweep(sweep, out, expected_slope=sweep.expected_slope))
     return sweep

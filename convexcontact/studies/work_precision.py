@@ -46,6 +46,7 @@ from ..drivers.model import prepare
 from ..results.result import ContactResult
 from ..scene.model import Coulomb, Material, NormalCompliance, Scene, SceneError, Signorini, has_friction
 from ..solvers import ConeNotSupported
+from .arguments import SECONDS_PER_DOF, check_duration, number
 
 FORMULATIONS = ("primal", "dual")
 SOLVERS = ("clarabel", "osqp", "cvxpy")
@@ -326,6 +327,9 @@ def plot(rows: Sequence[dict], path, title: str | None = None) -> Path:
 # --- command line -----------------------------------------------------------------------------
 
 SCENES = ("hertz", "punch")
+PUNCH_H = 0.2
+"""The punch mesh's h must leave room for its 10 fine rows in the block's depth 2
+(:func:`~convexcontact.scene.library.punch_mesh`)."""
 
 
 def library_scene(name: str, size: float | None = None) -> Scene:
@@ -340,19 +344,62 @@ def library_scene(name: str, size: float | None = None) -> Scene:
     raise ValueError(f"scene: unknown {name!r}; use one of {SCENES}")
 
 
+def library_dofs(name: str, size: float | None, option: str) -> float:
+    """The DOFs of :func:`library_scene` (about, for the punch), refusing a size that makes no mesh or one too
+    large for this machine's memory, before anything is built."""
+    from ..fem.mesh import check_memory
+
+    if name == "hertz":
+        nx = 40 if size is None else size
+        if nx != int(nx) or nx < 2:
+            raise ValueError(f"{option}: hertz's size is nx, an integer ≥ 2 (elements across the block); got {nx:g}")
+        dofs = 2.0 * (nx + 1) * (nx // 2 + 1)
+    else:
+        h = 0.02 if size is None else size
+        if h >= PUNCH_H:
+            raise ValueError(f"{option}: punch's size is the cell size h at the contact, below {PUNCH_H:g} (the "
+                             f"mesh's 10 fine rows must fit in its depth 2), e.g. 0.02; got {h:g}")
+        dofs = 2.0 * (2 * 0.15 / h + 50) * 41  # 0.3/h fine columns and 48 growing ones, 41 rows of nodes
+    check_memory(dofs, 2, option, f"{name} at size {size:g}" if size else name, "give a coarser size")
+    return dofs
+
+
 def main(argv=None) -> list[dict]:
+    """``convexcontact study work-precision hertz|punch [--size S …]``: error against wall time of every
+    formulation × solver × tolerance × method; NAME.csv, NAME.png and NAME.txt in --out."""
     import argparse
 
-    parser = argparse.ArgumentParser(description="Work-precision study: error against wall time.")
+    from .. import solvers as solver_paths
+    from ..results.output import check_new_files
+
+    parser = argparse.ArgumentParser(prog="convexcontact study work-precision", description=main.__doc__)
     parser.add_argument("scene", choices=SCENES)
-    parser.add_argument("--size", type=float, nargs="+", default=[None],
+    parser.add_argument("--size", type=number("40"), nargs="+", default=[None],
                         help="mesh sizes, one study each against one reference — hertz: nx (40); punch: h (0.02)")
-    parser.add_argument("--reference-size", type=float, default=None, help="finer mesh for the overkill reference")
-    parser.add_argument("--tol", type=float, nargs="+", default=[1e-4, 1e-6, 1e-8, 1e-10])
-    parser.add_argument("--solvers", nargs="+", default=list(SOLVERS))
-    parser.add_argument("--formulations", nargs="+", default=list(FORMULATIONS))
-    parser.add_argument("--out", default="out/work_precision", help="writes NAME.csv, NAME.png, NAME.txt here")
+    parser.add_argument("--reference-size", type=number("80"), default=None,
+                        help="finer mesh for the overkill reference")
+    parser.add_argument("--tol", type=number("1e-8"), nargs="+", default=[1e-4, 1e-6, 1e-8, 1e-10])
+    parser.add_argument("--solvers", nargs="+", default=list(SOLVERS), help=f"default: {' '.join(SOLVERS)}")
+    parser.add_argument("--formulations", nargs="+", choices=("primal", "dual", "dual-matrix-free"),
+                        default=list(FORMULATIONS))
+    parser.add_argument("--out", type=Path, default=Path("out/work_precision"),
+                        help="writes NAME.csv, NAME.png, NAME.txt here")
+    parser.add_argument("--overwrite", action="store_true", help="replace the files of an earlier study in --out")
     args = parser.parse_args(argv)
+    for solver in args.solvers:
+        try:
+            solver_paths.check_name(solver)
+        except ValueError as error:
+            raise ValueError(f"--solvers: {str(error).removeprefix('solver: ')}") from None
+    dofs = sum(library_dofs(args.scene, size, "--size") for size in args.size)
+    if args.reference_size is not None:
+        library_dofs(args.scene, args.reference_size, "--reference-size")
+    combinations = len(args.formulations) * len(args.solvers) * len(args.tol) * (1 + len(EPSILON_FACTORS)
+                                                                                  + len(STIFFNESS_FACTORS))
+    check_duration("--size", combinations * len(args.size), SECONDS_PER_DOF * dofs / len(args.size),
+                   "contact solves", "give fewer or coarser --size, or fewer --tol, --solvers or --formulations")
+    extensions = ("csv", "png", "txt")
+    check_new_files(args.out, [f"{args.scene}.{extension}" for extension in extensions], "--out", args.overwrite)
     scenes = [library_scene(args.scene, size) for size in args.size]
     finest = library_scene(args.scene, args.reference_size) if args.reference_size is not None else scenes[-1]
     reference, label = (None, CLOSED_FORM) if has_closed_form(finest) else overkill(finest, finest.contact.law)
@@ -360,11 +407,10 @@ def main(argv=None) -> list[dict]:
     for scene in scenes:  # the mesh axis: every combination on every mesh, against the one reference
         found = run(scene, None, args.tol, print, reference, formulations=args.formulations, solvers=args.solvers)
         rows += [{**row, "reference": label} for row in found]
-    out = Path(args.out)
-    write_csv(rows, out / f"{args.scene}.csv")
-    plot(rows, out / f"{args.scene}.png")
+    write_csv(rows, args.out / f"{args.scene}.csv")
+    plot(rows, args.out / f"{args.scene}.png")
     text = table(rows)
-    (out / f"{args.scene}.txt").write_text(text + "\n")
+    (args.out / f"{args.scene}.txt").write_text(text + "\n")
     print(text)
     return rows
 
