@@ -233,7 +233,7 @@ def gauss_interpolation(mesh: fe.Mesh, basis: fe.Basis, facets: np.ndarray, dofs
     nfacets, nqp = scalar.dx.shape
     rows = np.arange(nfacets * nqp).reshape(nfacets, nqp)
     entries = [
-        (scalar.basis[j][0].value.ravel(), rows.ravel(), np.repeat(node_of_dof[scalar.element_dofs[j]], nqp))
+        (np.asarray(scalar.basis[j][0]).ravel(), rows.ravel(), np.repeat(node_of_dof[scalar.element_dofs[j]], nqp))
         for j in range(scalar.Nbfun)
     ]
     values, i, k = (np.concatenate(parts) for parts in zip(*entries))
@@ -241,7 +241,7 @@ def gauss_interpolation(mesh: fe.Mesh, basis: fe.Basis, facets: np.ndarray, dofs
     assert np.allclose(values[~on_facet], 0.0)
     values, i, k = values[on_facet], i[on_facet], k[on_facet]
     G = sp.csr_matrix((values, (i, k)), shape=(nfacets * nqp, m))  # duplicates are summed
-    coords = scalar.global_coordinates().value.reshape(dim, -1).T
+    coords = np.asarray(scalar.global_coordinates()).reshape(dim, -1).T
     return G, scalar.dx.ravel(), coords
 
 
