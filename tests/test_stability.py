@@ -114,8 +114,16 @@ def test_locking_of_p1_is_detected():
     linear = cc.solve(scene, "clarabel")
     quadratic = cc.solve(stability.hertz(32, "P2", 0.4999), "clarabel")
     assert stability.locking_indicator(linear, quadratic) > 0.5
-    assert check(linear) > check.tol  # far from Hertz: a known limitation, to be flagged by the library
+    assert check(linear) > check.tol  # far from Hertz: a known limitation, flagged by the library
     assert stability.hertz_error(quadratic) < check.tol
+    assert stability.verdict("solved", "", check(linear), check, result=linear) == "pass (locking flagged)"
+    assert not stability.library_flags(cc.solve(stability.hertz(32, "P1", 0.3), "clarabel"), "locking")
+
+
+def test_the_suites_locking_rows_are_flagged(suite):
+    """The error estimate's warning names locking on every path that answers (issue 26: flagged by the estimate)."""
+    rows = [row for row in suite[0] if row["case"] == "ν = 0.4999, P1 (locking)" and row["status"] == "solved"]
+    assert rows and all(row["verdict"] == "pass (locking flagged)" for row in rows), stability.table(rows)
 
 
 def test_verdicts():

@@ -538,8 +538,9 @@ CASES: dict[str, Callable[[bool], tuple[cc.Scene, Check]]] = {
 
 
 def library_flags(result, word: str) -> bool:
-    """Whether the library's own output mentions ``word`` (message or a key of ``extra``)."""
-    return word in (result.message or "").lower() or any(word in str(key).lower() for key in result.extra)
+    """Whether the library's own output mentions ``word`` (message, warnings or a key of ``extra``)."""
+    said = [result.message or "", *getattr(result, "warnings", []), *map(str, result.extra)]
+    return any(word in text.lower() for text in said)
 
 
 def verdict(status: str, message: str, error: float, check: Check, certificate: float = math.nan,
