@@ -163,3 +163,19 @@ def test_the_tall_3d_block_applied_matrix_free_converges(scene, most_steps):
     result, dense = model.solve("newton-cg"), cc.prepare(scene, "dual").solve("clarabel")
     assert result.status == "solved" and result.iterations <= most_steps and result.certificate.worst <= 1e-10
     assert np.abs(result.contact.pressure - dense.contact.pressure).max() < 1e-8 * dense.max_pressure
+
+
+def test_a_session_starts_inside_the_sets_of_its_new_program():
+    """A re-solve starts from the last answer, which smaller radii (a Picard step's) leave outside the sets: it is
+    projected first (the argument needs a feasible start; from outside, κ > 0 and a zero step passed the test), and the
+    session reaches Clarabel's optimum of the new program."""
+    problem, _ = planted(5, 4, 6, 2, 1e2, operator=False)
+    session = solvers.session(problem, "newton-cg")
+    assert session.solve().status == "solved"
+    b = problem.b.copy()
+    radius_rows = np.flatnonzero(np.isin(np.arange(b.size), newton_cg.bound_form_of(problem).ball_radius_rows))
+    b[radius_rows] *= 0.5
+    session.update(b=b)
+    answer = session.solve()
+    reference = solvers.solve(ConicProgram(problem.P, problem.q, problem.A, b, problem.cones), "clarabel")
+    assert answer.status == "solved" and np.abs(answer.x - reference.x).max() < 1e-7

@@ -12,7 +12,8 @@ factorization and never formed. With bounds alone this is the primal-dual active
 (Hintermüller, Ito, Kunisch 2002). CG stops at a tolerance that follows ‖F‖ (inexact Newton):
 the first steps, which find the active set, are cheap.
 
-Convergence (a fixed f, radii that do not move; P symmetric positive semidefinite, f bounded below on the sets).
+Convergence (a fixed f, radii that do not move; P symmetric positive semidefinite, f bounded below on the sets;
+the start v₀ projected onto the sets).
 Let C = diag(c) (c is one number on each ball, so Π is also the projection in the metric C⁻¹), p(v) = Π(v − C∇f(v))
 the natural map's point and κ(v) = ∇f(v)ᵀ(p(v) − v), the projected gradient's first-order change of f; the
 projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻¹}. Each step either
@@ -233,6 +234,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         cache["precondition"] = approximation and _Preconditioner(approximation, sets.scale, sets.balls,
                                                                   SHIFT * max(curvature, 1e-300))
     v = np.zeros(program.n_variables) if start is None else (start - sets.shift) / sets.scale
+    if start is not None and sets.coupling is None:  # the last answer may be outside this program's sets (a Picard
+        v = _project(v, sets)  # step's smaller radii), and the convergence argument needs v₀ in them
     g = gradient(v)
     if start is None:
         v = _project(v - c * g, sets)
