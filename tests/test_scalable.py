@@ -225,7 +225,7 @@ def test_auto_seeds_the_dense_friction_dual_only():
 
 
 def test_a_failed_matrix_free_solve_that_auto_chose_gives_way_to_the_primal(monkeypatch):
-    """newton-cg has no convergence guarantee: when it fails on the dual auto chose, the sparse primal answers
+    """newton-cg converges but may stop at max_iter (a slow rate): when it fails on the dual auto chose, the sparse primal answers
     (the same answer as a direct primal solve) and the reason says so; a formulation the user named is kept."""
     from convexcontact.conic import ConicSolution
     from convexcontact.solvers import newton_cg

@@ -12,6 +12,29 @@ factorization and never formed. With bounds alone this is the primal-dual active
 (Hintermüller, Ito, Kunisch 2002). CG stops at a tolerance that follows ‖F‖ (inexact Newton):
 the first steps, which find the active set, are cheap.
 
+Convergence (a fixed f, radii that do not move; P symmetric positive semidefinite, f bounded below on the sets;
+the start v₀ projected onto the sets).
+Let C = diag(c) (c is one number on each ball, so Π is also the projection in the metric C⁻¹), p(v) = Π(v − C∇f(v))
+the natural map's point and κ(v) = ∇f(v)ᵀ(p(v) − v), the projected gradient's first-order change of f; the
+projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻¹}. Each step either
+
+(a) takes Newton's point where its natural residual is below ACCEPT × the least so far and f there is at most f(v₀):
+    at most log(r₀/tol) / log(1/ACCEPT) such steps before the residual is below tol; or
+(b) lowers f by at least σ|κ(v)|: Newton's point or a point towards it where one does with σ = ARMIJO, else the
+    least f on the segment [v, p(v)], which does with σ = min(½, 1/(2λ)), λ the largest eigenvalue of C^½ P̃ C^½
+    (the exact line search of a quadratic on a feasible segment; no bound of P is needed to take it).
+
+All points lie in {f ≤ f(v₀)}, so between two steps (a) the steps (b) with ‖p(v) − v‖_{C⁻¹} > ε number at most
+(f(v₀) − f*) / (σ ε²): the method stops for any tol > 0 after a bounded number of steps, and without a tol the
+least natural residual tends to 0 (p(v) = v is the convex program's optimality condition). This is the projected
+gradient's argument with Armijo's rule (Bertsekas, Nonlinear Programming, 2nd ed. 1999, §2.3; Calamai & Moré,
+Math. Program. 39, 1987, for steps that reach a fraction of the projected gradient's decrease, as Moré & Toraldo's
+GPCG, SIAM J. Optim. 1, 1991, takes its Newton-like steps); Newton's steps are its acceleration, and near the answer
+(a) takes them where f's changes are round-off. Plain Newton on the natural map has no such property: it cycles on
+3-variable SPD box programs (tests/test_global_convergence.py; Ben Gharbia & Gilbert, Math. Program. 134, 2012, for
+P-matrices), and did on a tall 3-D Tresca block and the two-body duals applied matrix-free (docs/performance.md).
+``info["steps"]`` counts the steps of each kind, ``info["descent"]`` holds (kind, f's change, κ) of each.
+
 An operator P may carry ``approximation`` with sparse ``G``, ``H`` (SPD) and ``factorize`` such that
 P ≈ G H⁻¹ Gᵀ (a Delassus operator of a thin slab of the body and coarse functions beyond it): each Newton
 system of a program with balls is then preconditioned by the exact inverse of the same system with P's
@@ -42,17 +65,26 @@ SHIFT = 1e-3
 """δ of the preconditioner relative to P's mean eigenvalue: 1e-1 left 49 CG iterations on a 2-D Tresca
 dual, 1e-2 34, 1e-3 and below 31, as the exact (δ = 0) slab operator."""
 ACCEPT = 0.5
-"""Newton's point is taken outright where its natural residual is below ACCEPT × the least so far."""
+"""Newton's point is taken outright where its natural residual is below ACCEPT × the least so far (and f there is at
+most its value at the start: see "Convergence")."""
 ARC = 6
 """Points Π(v + α(Newton's point − v)), α = 1, ½, …, tried before the least f on the segment to Π(Newton's point)
 where P is a matrix: a point of the arc holds its bounds exactly, one inside the segment does not. On the dense
 two-body Tresca dual (1434 unknowns) the segment alone left the residual wandering at 1e-2–1e-4 for 100 Newton steps;
 with the arc it converged in 42. On the matrix-free whole faces, where each point is also a solve with K, the arc
-took more Newton steps (Tresca, 10,001 nodes: 15 against 8) and is not used."""
+took more Newton steps (Tresca, 10,001 nodes: 15 against 8): there the least f on the segment to Newton's point is tried
+first, and the arc only where that gains too little (two-body Tresca dual applied matrix-free, 1.4·10⁴ DOFs: 68 Newton
+steps and 740 products so, 326 and 4016 without the arc, most of them projected-gradient steps, 36 and 410 with the arc
+first; but the 2-D whole face of 1001 nodes then took 16 steps and 70 products against 8 and 39)."""
 ARMIJO = 1e-4
-"""Fraction of the first-order decrease of f a point of the arc must reach."""
+"""Fraction of the projected gradient's first-order decrease of f (κ in "Convergence") a point towards Newton's must
+reach. Measured against the first-order decrease of its own direction instead (before), the point of the segment was
+taken however little it gained, and newton-cg failed after 100 steps on the tall 3-D block (289 bottom nodes, Tresca,
+matrix-free: certificate 0.4) where it now takes 10, and on the two-body Tresca dual applied matrix-free (1.4·10⁴
+DOFs) where it now takes 68."""
 STALL = 0.9
-"""A Newton segment that leaves the natural residual above STALL × its value is followed by a gradient one."""
+"""A step to the segment's or the projected gradient's point that leaves the natural residual above STALL × its value
+is followed by a projected-gradient one (f only falls further)."""
 CG_LIMIT = 5000
 """CG iterations per Newton step before it gives up (the step then still uses its last iterate)."""
 DIRECT_LIMIT = 10_000
@@ -202,36 +234,55 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         cache["precondition"] = approximation and _Preconditioner(approximation, sets.scale, sets.balls,
                                                                   SHIFT * max(curvature, 1e-300))
     v = np.zeros(program.n_variables) if start is None else (start - sets.shift) / sets.scale
+    if start is not None and sets.coupling is None:  # the last answer may be outside this program's sets (a Picard
+        v = _project(v, sets)  # step's smaller radii), and the convergence argument needs v₀ in them
     g = gradient(v)
     if start is None:
         v = _project(v - c * g, sets)
         g = gradient(v)
-    def segment(v, g, towards, residual=np.inf):
-        """Π(``towards``) if its natural residual is below ``residual``; else, where P is a matrix, the first point
-        Π(v + α(towards − v)), α = 1, ½, … (ARC of them), that lowers f by Armijo's rule; else the least f on
-        [v, Π(towards)] (feasible: both ends are); ∇f there, and whether the point is on the arc."""
-        end = _project(towards, sets)  # the points themselves are returned: v + (w − v) would leave bounds by round-off
-        d = end - v
+    def move(v, g, w):
+        """∇f at w, f(w) − f(v) (exact: f is quadratic) and P̃(w − v): one product."""
         products[0] += 1
+        d = w - v
         Pd = sets.scale * P.matvec(sets.scale * d)
-        if _natural(end, g + Pd, c, sets, program.q)[0] < residual:
-            return end, g + Pd, True
-        def armijo(e, Pe):
-            slope = g @ e
-            return slope < 0 and slope + 0.5 * (e @ Pe) <= ARMIJO * slope
+        return g + Pd, g @ d + 0.5 * (d @ Pd), Pd
 
-        if matrix is not None:
-            if armijo(d, Pd):
-                return end, g + Pd, True
-            for alpha in 0.5 ** np.arange(1, ARC):
-                w = _project(v + alpha * (towards - v), sets)
-                products[0] += 1
-                Pe = sets.scale * P.matvec(sets.scale * (w - v))
-                if armijo(w - v, Pe):
-                    return w, g + Pe, True
+    def least_on_segment(v, g, w, Pd):
+        """The least f on [v, w] (feasible: both ends are), ∇f there and f's change: exact, P̃(w − v) = ``Pd``."""
+        d = w - v
         slope, curve = g @ d, d @ Pd
         alpha = min(1.0, max(0.0, -slope / curve)) if curve > 0 else float(slope < 0)
-        return v + alpha * d, g + alpha * Pd, False
+        return v + alpha * d, g + alpha * Pd, alpha * slope + 0.5 * alpha**2 * curve
+
+    def descend(v, g, towards, residual, cauchy, risen):
+        """The step from v to Newton's point ``towards`` or towards it (see "Convergence" in the module's docstring):
+        Π(``towards``) where its natural residual is below ``residual`` and f there is at most f(v₀) (f − f(v₀) =
+        ``risen`` at v); else the first point that lowers f by ARMIJO × |``cauchy``|, the projected gradient's
+        first-order decrease, of: Π(``towards``) where P is a matrix, the least f on the segment to it where P is an
+        operator, the projection arc towards it (ARC), the least f on the segment; else the least f on the projected
+        gradient's segment. The point, ∇f there, f's change and which point it is."""
+        end = _project(towards, sets)  # the points themselves are returned: v + (w − v) would leave bounds by round-off
+        g_end, change, Pd = move(v, g, end)
+        if risen + change <= 0 and _natural(end, g_end, c, sets, program.q)[0] < residual:
+            return end, g_end, change, "residual"
+        if matrix is not None and change <= ARMIJO * cauchy:
+            return end, g_end, change, "newton"
+        on_segment = least_on_segment(v, g, end, Pd)
+        if matrix is None and on_segment[2] <= ARMIJO * cauchy:
+            return (*on_segment, "segment")
+        for alpha in 0.5 ** np.arange(1, ARC):
+            w = _project(v + alpha * (towards - v), sets)
+            gw, change, _ = move(v, g, w)
+            if change <= ARMIJO * cauchy:
+                return w, gw, change, "arc"
+        if on_segment[2] <= ARMIJO * cauchy:
+            return (*on_segment, "segment")
+        return (*gradient_step(v, g), "gradient")
+
+    def gradient_step(v, g):
+        """The least f on the segment from v to the natural map's point Π(v − c∇f), ∇f there and f's change."""
+        p = _project(v - c * g, sets)
+        return least_on_segment(v, g, p, move(v, g, p)[2])
 
     def backtrack(v, g, towards, residual):
         """Without an f (moving balls), the first of 1, ½, …, 1/16 of the way to ``towards`` (projected)
@@ -245,6 +296,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
 
     residual = first = None
     best, history = np.inf, []
+    risen, kinds, descent = 0.0, dict.fromkeys(("residual", "newton", "arc", "segment", "gradient"), 0), []
     steps = cg_total = 0
     status, word = "failed", "max_iter"
     for steps in range(max_iter + 1):
@@ -279,16 +331,20 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
                 word = "stalled"
                 break
             continue
-        # Newton's point, projected, is taken where it halves the least natural residual so far (so those steps
-        # cannot cycle; near the answer f's changes are round-off, and the segment alone stalled a 3-D Tresca
-        # dual at 2e-10). Elsewhere, where P is a matrix, the first point of the projection arc towards it that lowers
-        # f by Armijo's rule (see ARC), else the least f on the segment (full steps cycled on a Tresca dual) and,
-        # where that gains too little, a projected-gradient segment: f never rises between accepted points
-        v, g, on_arc = segment(v, g, newton, ACCEPT * best)
-        if not on_arc and _natural(v, g, c, sets, program.q)[0] > STALL * residual:
-            v, g, _ = segment(v, g, v - c * g)
+        # Newton's point, projected, where it halves the least natural residual so far (so those steps cannot cycle;
+        # near the answer f's changes are round-off, and the segment alone stalled a 3-D Tresca dual at 2e-10), else a
+        # point that lowers f at least as a fraction of the projected gradient's step does (see "Convergence")
+        cauchy = g @ (_project(y, sets) - v)
+        v, g, change, kind = descend(v, g, newton, ACCEPT * best, cauchy, risen)
+        if kind in ("segment", "gradient") and _natural(v, g, c, sets, program.q)[0] > STALL * residual:
+            v, g, more = gradient_step(v, g)
+            change += more
+        risen += change
+        kinds[kind] += 1
+        descent.append((kind, change, cauchy))
     x = sets.shift + sets.scale * v
-    info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history}
+    info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history,
+            "steps": kinds, "descent": descent}
     if sets.coupling is not None:  # the program of the radii reached: x is its answer
         b = program.b.copy()
         b[form.ball_radius_rows] = info["radii"] = sets.radii(v)
