@@ -149,8 +149,9 @@ class Model:
             options = {**options, "tol": GAUSS_TOL}
         result = ProgramSession(solver, options).solve(self, timings, extended=options.get("cvxpy_model") is not None)
         if not result.solved and solver == "auto" and solvers.matrix_free(self.program) and self.reason != CHOSEN:
-            # newton-cg has no convergence guarantee (a Tresca dual on a tall 3-D block, a punch on a foundation
-            # failed after 100 steps): what auto chose gives way to the sparse primal, which Clarabel solves
+            # newton-cg converges, but its step bound can exceed max_iter (the two-body Tresca dual at 10⁵ DOFs
+            # applied matrix-free: 100 steps, residual 9e-5; docs/performance.md): what auto chose gives way to
+            # the sparse primal, which Clarabel solves
             reason = f"{self.reason}; newton-cg failed ({result.solver_status}), so the sparse primal instead"
             return formulate(self.fem, "primal", dict(self.timings), reason=reason).solve(solver, progress, **options)
         return result
@@ -342,8 +343,9 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
 DENSE_NEWTON = "auto: newton-cg on the dense dual (Clarabel where it fails)"
 """Why newton-cg answered a dense dual that ``auto`` was left (docs/performance.md, "newton-cg on a dense W"): its
 Newton steps are dense Cholesky solves of the reduced W, 2–10× faster than Clarabel with the polish (3-D punch,
-2.8·10⁵ DOFs, Tresca: 8.1 s against 38.6 s), but it has no convergence guarantee (a two-body Tresca dual at 10⁵ DOFs
-stopped after 100 Newton steps, 1.4 s, and Clarabel answered in 2.4 s)."""
+2.8·10⁵ DOFs, Tresca: 8.1 s against 38.6 s); it converges (a bounded number of steps), but the bound may exceed its
+step limit (a two-body Tresca dual at 10⁵ DOFs stopped after 100 Newton steps, 1.4 s, before the globalization; Clarabel
+answered in 2.4 s)."""
 
 
 DENSE_NEWTON_STEPS = 50
