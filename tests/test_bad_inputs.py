@@ -67,6 +67,8 @@ def raises(build, field: str, fix: str):
     (lambda: cc.solve("scene.toml"), "scene", "cc.load_scene(path)"),
     (lambda: cc.prepare(["scene"]), "scene", "cc.load_scene(path)"),
     (lambda: cc.prepare(BASE).solve(progress="print"), "progress", "e.g. progress=print"),
+    (lambda: cc.solve(BASE).save("never_written", formats="json"), "formats", "formats=('json',)"),
+    (lambda: cc.load_scene("no/such/scene.toml"), "toml", "give the path of a scene file"),
 ])
 def test_the_python_api_checks_types_where_values_enter(build, field, fix):
     raises(build, field, fix)

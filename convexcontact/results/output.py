@@ -48,6 +48,9 @@ def write_vtk(result, path: Path):
 def begin(result, directory, formats=FORMATS) -> tuple[Path, list[Path]]:
     """The output folder (created, once ``formats`` are known ones) and, if asked for, ``result``'s
     summary.json written into it: how every ``save`` starts."""
+    one_string = isinstance(formats, str)  # set("json") would be its letters
+    if one_string:  # a ValueError, as every bad input of the package
+        raise ValueError(f"formats: a collection of formats, got the string {formats!r}; e.g. formats=('json',)")
     unknown = set(formats) - set(FORMATS)
     if unknown:
         raise ValueError(f"formats: unknown {sorted(unknown)}; choose from {FORMATS}")

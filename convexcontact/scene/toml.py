@@ -104,9 +104,11 @@ def load_scene(path) -> Scene:
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as error:
-        raise SceneError("toml", f"cannot read {path}: {error.strerror or error}") from None
+        raise SceneError("toml", f"cannot read {path}: {error.strerror or error}",
+                         "give the path of a scene file (examples/scenes/*.toml; docs/scenes.md)") from None
     except UnicodeDecodeError as error:
-        raise SceneError("toml", f"{path.name} is not UTF-8 text ({error.reason})") from None
+        raise SceneError("toml", f"{path.name} is not UTF-8 text ({error.reason})",
+                         "a scene file is TOML text (docs/scenes.md)") from None
     except tomllib.TOMLDecodeError as error:
         raise SceneError("toml", f"{path.name}: {_decode_message(error)}", "fix the TOML syntax there") from None
     data.setdefault("name", path.stem)
