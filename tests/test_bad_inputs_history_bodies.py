@@ -392,7 +392,7 @@ def test_a_search_estimated_too_long_is_refused_before_w_and_after_the_first_run
     raises(lambda: cc.all_solutions(scene), "solutions", "confirm=True")
     monkeypatch.undo()
     monkeypatch.setattr(solutions_driver, "PICARD_RUN", (1e-12, 21))  # passes the estimate from the size
-    monkeypatch.setattr(solutions_driver, "LONG_SEARCH", 1e-9)
+    monkeypatch.setattr(solutions_driver, "LONG_RUN", 1e-9)
     reports = []
     message = raises(lambda: cc.all_solutions(scene, progress=lambda *report: reports.append(report)), "solutions",
                      "confirm=True")

@@ -243,9 +243,9 @@ def test_the_json_summary_is_checked_before_the_solve(capsys, folder, command, t
 
 def test_the_estimates_refuse_only_beyond_the_limit():
     """One run under the limit passes, the same count over it is refused: the estimate, not a guess at the caller."""
-    arguments.check_duration("--x", 10, arguments.LIMIT / 10, "solves", "fewer")
+    arguments.check_duration("--x", 10, arguments.LONG_RUN / 10, "solves", "fewer")
     with pytest.raises(ValueError, match=r"^--x: 11 solves of about 3.6e\+02 s each would take about 1.1 h"):
-        arguments.check_duration("--x", 11, arguments.LIMIT / 10, "solves", "fewer")
+        arguments.check_duration("--x", 11, arguments.LONG_RUN / 10, "solves", "fewer")
 
 
 def test_a_study_that_answered_no_case_exits_1(monkeypatch, tmp_path, capsys):

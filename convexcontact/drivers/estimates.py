@@ -7,6 +7,11 @@ import scipy.sparse as sp
 
 from ..scene.model import Scene
 
+LONG_RUN = 3600.0
+"""Seconds a run (a history, a search for every solution, a bench or a study) may be estimated to take before it is
+refused or, where the call takes ``confirm``, needs it: a 10⁶-step history of a small scene ran about 4 hours, and a
+search over 1,001 contact nodes for hours, without a word."""
+
 
 def duration(seconds: float) -> str:
     """``seconds`` in hours beyond an hour, else in minutes."""

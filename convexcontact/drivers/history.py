@@ -28,7 +28,7 @@ from ..fem.mesh import available_memory
 from ..results.result import ContactResult
 from ..scene.history import History
 from ..scene.model import Coulomb, Scene, SceneError, of_type
-from .estimates import duration, footprint, reachable
+from .estimates import LONG_RUN, duration, footprint, reachable
 from .model import CERTIFIED, Model, ProgramSession, check_formulation_name, condensed, formulate, timed
 
 
@@ -225,9 +225,6 @@ def drive(fem: FEModel) -> tuple[float, ...]:
 MEASURED_STEPS = 2
 """Steps solved before the rest of a history is estimated: the first sets up the solver session, the second
 starts from the first's answer, as every later step does."""
-LONG_RUN = 3600.0
-"""Seconds a history may be estimated to take without ``confirm=True``: a 10⁶-step history of a small scene would
-have run about 4 hours, every step kept in memory, without a word."""
 
 
 def check_cost(count: int, steps: list[ContactResult], seconds: float, confirm: bool) -> None:

@@ -39,7 +39,7 @@ from ..fem.assembly import FEModel, assemble
 from ..fem.mesh import available_memory
 from ..results.result import ContactResult
 from ..scene.model import Coulomb, Scene, SceneError, of_type
-from .estimates import duration
+from .estimates import LONG_RUN, duration
 from .model import Model, check_formulation_name, field_at_points, formulate, timed
 
 EXHAUSTIVE_LIMIT = 10
@@ -120,7 +120,7 @@ def all_solutions(scene: Scene, solver: str = "clarabel", formulation: str = "au
 
     ``formulation``: the condensed dual is enumerated ("auto" or "dual"). ``progress(done, count, what)`` is called
     after each Picard run of a search and each Picard slope. ``confirm=True`` runs a search estimated beyond
-    :data:`LONG_SEARCH` seconds.
+    :data:`LONG_RUN` seconds.
     """
     law = of_type(scene, Scene, "scene", "build cc.Scene(...) with a cc.Coulomb law").contact.law
     if not isinstance(law, Coulomb):
@@ -182,13 +182,11 @@ SEARCH_RUNS = 17
 PICARD_RUN = (30.0, 200)
 """(seconds, contact nodes): one Picard run measured on a 2-D block (Clarabel, 6 iterations; 0.55 s at 51 nodes,
 2.2 s at 101), growing as m³ (the dense solves) — an estimate, refined by the first run's time."""
-LONG_SEARCH = 3600.0
-"""Seconds a search may be estimated to take without ``confirm=True`` (1,001 nodes ran for hours, silently)."""
 
 
 def check_size(m: int, confirm: bool) -> None:
     """Refuse, from the contact nodes alone, a search whose dense W would not fit in memory, or that would take
-    more than :data:`LONG_SEARCH` unless ``confirm``."""
+    more than :data:`LONG_RUN` unless ``confirm``."""
     need, have = DENSE_COPIES * 8.0 * (2 * m) ** 2, available_memory()
     if need > have:
         fit = int((have / (DENSE_COPIES * 32.0)) ** 0.5)
@@ -199,7 +197,7 @@ def check_size(m: int, confirm: bool) -> None:
     if m <= EXHAUSTIVE_LIMIT:
         return
     seconds = SEARCH_RUNS * PICARD_RUN[0] * (m / PICARD_RUN[1]) ** 3
-    if seconds > LONG_SEARCH and not confirm:
+    if seconds > LONG_RUN and not confirm:
         raise SceneError("solutions", f"a search for every solution over {m} contact nodes would take about "
                          f"{duration(seconds)} ({SEARCH_RUNS} Picard runs of about {duration(seconds / SEARCH_RUNS)} "
                          f"each, estimated from the size)", "give fewer contact nodes (a coarser mesh), or "
@@ -208,7 +206,7 @@ def check_size(m: int, confirm: bool) -> None:
 
 class Progress:
     """Reports each Picard run of a search and, after the first, refuses the rest estimated from it beyond
-    :data:`LONG_SEARCH` unless confirmed."""
+    :data:`LONG_RUN` unless confirmed."""
 
     def __init__(self, report, confirm: bool):
         self.report, self.confirm, self.start = report, confirm, time.perf_counter()
@@ -217,7 +215,7 @@ class Progress:
         if self.report is not None:
             self.report(done, count, f"Picard run: {result.status}")
         seconds = (count - done) * (time.perf_counter() - self.start)
-        if done == 1 and seconds > LONG_SEARCH and not self.confirm:
+        if done == 1 and seconds > LONG_RUN and not self.confirm:
             raise SceneError("solutions", f"the other {count - done} Picard runs of the search would take about "
                              f"{duration(seconds)} (measured on the first)", "give fewer contact nodes (a coarser "
                              "mesh), or confirm=True (convexcontact run --solutions all --confirm) to run it")

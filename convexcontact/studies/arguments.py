@@ -11,6 +11,7 @@ import argparse
 import contextlib
 import math
 
+from ..drivers.estimates import LONG_RUN, duration
 from ..scene.model import SceneError
 
 
@@ -60,13 +61,10 @@ SECONDS_PER_DOF = 5e-5
 4·10⁴ DOFs) to 2.5·10⁻⁴ (Tresca, the sliding block, 10⁴ DOFs) on the shared 2-vCPU machines. It refuses runs of
 hours; it does not predict run times."""
 
-LIMIT = 3600.0
-"""Seconds a bench or study may be estimated to take before it is refused."""
-
-
 def check_duration(option: str, count: float, each: float, what: str, fix: str) -> None:
-    """Refuse, naming ``option``, ``count`` runs (``what``) of about ``each`` seconds when they exceed :data:`LIMIT`."""
-    if count * each > LIMIT:
+    """Refuse, naming ``option``, ``count`` runs (``what``) of about ``each`` seconds when they exceed
+    :data:`~convexcontact.drivers.estimates.LONG_RUN`."""
+    if count * each > LONG_RUN:
         raise ValueError(f"{option}: {count:.3g} {what} of about {each:.2g} s each would take about "
-                         f"{count * each / 3600:.3g} h, beyond the {LIMIT / 3600:g} h a run may take here; {fix} "
-                         f"(about {LIMIT / each:.3g} of them fit)")
+                         f"{duration(count * each)}, beyond the {LONG_RUN / 3600:g} h a run may take here; {fix} "
+                         f"(about {LONG_RUN / each:.3g} of them fit)")
