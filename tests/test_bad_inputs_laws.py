@@ -320,3 +320,15 @@ def test_a_mesh_file_of_lines_only_is_named(tmp_path):
 ])
 def test_the_scenes_other_classes_name_the_field_and_a_fix(build, field, words):
     refused(build, field, *words)
+
+
+def test_a_slip_bound_of_a_scene_whose_loads_are_below_resolution_is_not_refused():
+    """The fuzz suite's scene: a punch that does not reach Γ_C and a Dirichlet value of 5e-118 set no load scale
+    (the floor MIN_STRAIN), so a slip bound is 'large' only beside nothing; the answer is u = 0, certified."""
+    scene = cc.Scene(body=cc.Body(cc.Rectangle(1.0, 0.5, 3, 1, origin=(-0.5, 0.0))), materials=cc.Material(1.0, 0.0),
+                     dirichlet=(cc.Dirichlet("top", ux=5.255944530576004e-118, uy=0.0),),
+                     contact=cc.Contact("bottom", cc.Obstacle("parabolic", radius=2.0, depth=0.00390625),
+                                        cc.Tresca(slip_bound=0.00390625)))
+    result = cc.solve(scene, "clarabel")
+    assert result.status == "solved" and result.certificate.passes(1e-8)
+    assert np.abs(result.contact.pressure).max() < 1e-12

@@ -47,8 +47,6 @@ from ..fem.friction import FrictionPoints
 from ..fem.mortar import PairTrace
 from ..formulations.fields import ContactFields
 
-TINY = 1e-300
-
 
 @dataclass(frozen=True)
 class Certificate:
@@ -153,7 +151,9 @@ def friction_residuals(friction, fields, slip_bound, p_ref, u_ref, epsilon=None)
     if epsilon is None:  # λ_T = Π_{B(s)}(λ_T − ρ v)
         trial = lam_T - (p_ref / u_ref) * slip
         size = np.linalg.norm(trial, axis=1)
-        shrink = np.minimum(1.0, slip_bound / np.maximum(size, TINY))
+        # the projection's factor min(1, s/‖trial‖), divided only where it is below 1 (s/‖trial‖ overflowed for a
+        # bound far beyond a tiny trial: the fuzz suite's unloaded scenes)
+        shrink = np.divide(slip_bound, size, out=np.ones_like(size), where=size > slip_bound)
         law = lam_T - shrink[:, None] * trial
     else:  # λ_T = −s v / sqrt(‖v‖² + ε²)
         magnitude = np.sqrt((slip**2).sum(axis=1) + epsilon**2)
