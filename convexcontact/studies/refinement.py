@@ -79,6 +79,8 @@ def rows_of(method: str, results, seconds, errors, reference: str) -> list[dict]
 def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Callable | None = None) -> list[dict]:
     """Rows (:data:`FIELDS`) of uniform and adaptive refinement of ``scene`` (one body, triangles or tetrahedra for
     the adaptive loop to be local); ``progress(text)`` after each solve."""
+    if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or levels < 2:
+        raise ValueError(f"levels: the number of uniform levels, an integer ≥ 2, got {levels!r}; e.g. 4")
     say = progress or (lambda text: None)
     coarse = build_mesh(scene.body)
     solve(scene).error_budget  # noqa: B018 -- warm-up: the first solve of a process pays its imports, not timed

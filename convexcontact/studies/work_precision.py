@@ -55,6 +55,8 @@ EPSILON_FACTORS = (1e-2, 1e-3, 1e-4, 1e-5)
 STIFFNESS_FACTORS = (1e2, 1e3, 1e4, 1e5)
 """c_N / (E/L) over three decades; Clarabel stops near 1e5 (docs/friction.md) — an outcome, recorded."""
 REFERENCE_TOLS = (1e-12, 1e-11, 1e-10)
+TOLS = (1e-4, 1e-6, 1e-8, 1e-10)
+"""The solver tolerances of the command's rows by default."""
 CLOSED_FORM = "closed form"
 FIELDS = ("scene", "ndof", "method", "parameter", "formulation", "solver", "tol", "status", "time", "error",
           "pressure_error", "friction_error", "certificate", "iterations", "reference", "message")
@@ -383,7 +385,7 @@ def main(argv=None) -> list[dict]:
                         help="mesh sizes, one study each against one reference — hertz: nx (40); punch: h (0.02)")
     parser.add_argument("--reference-size", type=number("80"), default=None,
                         help="finer mesh for the overkill reference")
-    parser.add_argument("--tol", type=number("1e-8"), nargs="+", default=[1e-4, 1e-6, 1e-8, 1e-10])
+    parser.add_argument("--tol", type=number("1e-8"), nargs="+", default=list(TOLS))
     parser.add_argument("--solvers", nargs="+", default=list(SOLVERS), help=f"default: {' '.join(SOLVERS)}")
     parser.add_argument("--formulations", nargs="+", choices=("primal", "dual", "dual-matrix-free"),
                         default=list(FORMULATIONS))
@@ -436,6 +438,14 @@ def refinement_main(args) -> list[dict]:
     from ..results.output import check_new_files
     from . import refinement
 
+    solver_grid = {"--reference-size": (args.reference_size, None), "--tol": (args.tol, list(TOLS)),
+                   "--solvers": (args.solvers, list(SOLVERS)), "--formulations": (args.formulations, list(FORMULATIONS))}
+    for option, (value, default) in solver_grid.items():
+        if value != default:
+            raise ValueError(f"{option}: the refinement comparison solves every level exactly with the default solver "
+                             f"against its own reference; drop {option} or --refinement")
+    if len(args.size) > 1:
+        raise ValueError("--size: --refinement starts from one mesh and refines it; give one --size")
     size = args.size[0] if args.size[0] is not None else (REFINEMENT_BASE if args.scene != "punch" else None)
     dofs = library_dofs(args.scene, size, "--size")
     finest = dofs * 4.0 ** (args.refinement - 1 + refinement.REFERENCE_LEVELS)
