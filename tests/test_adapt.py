@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from test_estimate import flat_punch
 
-from convexcontact.studies import refinement
+from convexcontact.studies import refinement, work_precision
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +43,7 @@ def test_every_level_bounds_its_true_error(rows):
 def test_the_pareto_front_of_error_against_time_is_not_dominated(rows):
     """Each row of the front is faster than the next and less accurate; no other row is both faster and more
     accurate than a front row."""
-    front = refinement.pareto(rows)
+    front = work_precision.pareto(rows)
     assert [r["time"] for r in front] == sorted(r["time"] for r in front)
     assert all(a["error"] > b["error"] for a, b in itertools.pairwise(front))
     for f in front:

@@ -9,7 +9,8 @@ nested in it, so u_h is prolonged exactly); the estimate is the result's ``error
 
     from convexcontact.studies import refinement
     rows = refinement.compare(scene, levels=4)
-    print(refinement.table(rows)); refinement.plot(rows, "refinement.png")
+    front = work_precision.pareto(rows)
+    print(refinement.table(rows, front)); refinement.plot(rows, "refinement.png", front)
 """
 
 from __future__ import annotations
@@ -21,13 +22,13 @@ from pathlib import Path
 
 import numpy as np
 import skfem as fe
+from scipy.spatial import cKDTree
 
 from ..drivers.adapt import adapt
 from ..drivers.solve import solve
 from ..fem.mesh import build_mesh
 from ..results.result import ContactResult
 from ..scene.model import Body, Scene
-from .work_precision import pareto
 
 REFERENCE_LEVELS = 2
 """Uniform refinements between a family's finest mesh and its reference (the true error then reads ≈ 3 % small for
@@ -48,19 +49,50 @@ def timed_solve(scene: Scene) -> tuple[ContactResult, float]:
     return result, time.perf_counter() - start
 
 
+def locate(mesh: fe.MeshTri1, points: np.ndarray, candidates: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """The triangle of ``mesh`` holding each point (2, n) and the point's barycentric coordinates (n, 3), among its
+    nearest cells by centroid, more of them where a thin cell hides (scikit-fem's finder tests every point against
+    the union of all candidates: (points × cells) memory on a fine reference)."""
+    tree = cKDTree(mesh.p[:, mesh.t].mean(axis=1).T)
+    cell = np.full(points.shape[1], -1)
+    weights = np.zeros((points.shape[1], 3))
+    todo = np.arange(points.shape[1])
+    while todo.size:
+        k = min(candidates, mesh.nelements)
+        _, near = tree.query(points[:, todo].T, k=k)
+        near = near.reshape(todo.size, k)
+        corners = mesh.p[:, mesh.t[:, near]]  # (2, 3, points, k)
+        e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+        r = points[:, todo, None] - corners[:, 0]
+        det = e1[0] * e2[1] - e1[1] * e2[0]
+        b1, b2 = (r[0] * e2[1] - r[1] * e2[0]) / det, (e1[0] * r[1] - e1[1] * r[0]) / det
+        tol = 1e-10
+        inside = (b1 >= -tol) & (b2 >= -tol) & (b1 + b2 <= 1 + tol)
+        found = inside.any(axis=1)
+        column = inside.argmax(axis=1)[found]
+        rows = np.flatnonzero(found)
+        cell[todo[found]] = near[rows, column]
+        weights[todo[found]] = np.column_stack([1 - b1[rows, column] - b2[rows, column], b1[rows, column],
+                                                b2[rows, column]])
+        if k == mesh.nelements and not found.all():
+            raise ValueError("a reference node lies in no cell of the coarse mesh: the meshes are not nested")
+        todo, candidates = todo[~found], 4 * candidates
+    return cell, weights
+
+
 def true_errors(results: Sequence[ContactResult], reference: ContactResult) -> list[float]:
-    """‖u_ref − u_h‖_E / ‖u_ref‖_E of each result, u_h interpolated at the reference's nodes (exact on nested
+    """‖u_ref − u_h‖_E / ‖u_ref‖_E of each P1 result, u_h interpolated at the reference's nodes (exact on nested
     meshes)."""
     fine = reference.fem
     u_ref = reference.displacement / fine.scaling.displacement
     norm = np.sqrt(u_ref @ (fine.K_full @ u_ref))
-    nodes = fe.CellBasis(fine.mesh, fine.basis.elem.elem).doflocs
     out = []
     for result in results:
         fem = result.fem
-        probes = fe.CellBasis(fem.mesh, fem.basis.elem.elem).probes(nodes)
-        u = result.displacement / fem.scaling.displacement
-        error = u_ref - np.column_stack([probes @ c for c in u.reshape(-1, fem.dim).T]).ravel()
+        cell, weights = locate(fem.mesh, fine.mesh.p)
+        u = (result.displacement / fem.scaling.displacement).reshape(-1, fem.dim)  # (vertices, d) for P1
+        prolonged = np.einsum("nm,nmd->nd", weights, u[fem.mesh.t[:, cell].T]).ravel()
+        error = u_ref - prolonged
         out.append(float(np.sqrt(error @ (fine.K_full @ error)) / norm))
     return out
 
@@ -77,10 +109,13 @@ def rows_of(method: str, results, seconds, errors, reference: str) -> list[dict]
 
 
 def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Callable | None = None) -> list[dict]:
-    """Rows (:data:`FIELDS`) of uniform and adaptive refinement of ``scene`` (one body, triangles or tetrahedra for
-    the adaptive loop to be local); ``progress(text)`` after each solve."""
+    """Rows (:data:`FIELDS`) of uniform and adaptive refinement of ``scene`` (one body, P1 triangles: the true error
+    interpolates them); ``progress(text)`` after each solve."""
     if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or levels < 2:
         raise ValueError(f"levels: the number of uniform levels, an integer ≥ 2, got {levels!r}; e.g. 4")
+    if scene.body.element != "P1" or build_mesh(scene.body).t.shape[0] != 3:
+        raise ValueError(f"scene: the comparison measures P1 triangles (their true error is interpolated exactly), "
+                         f"got {scene.body.element}; give a 2-D P1 scene")
     say = progress or (lambda text: None)
     coarse = build_mesh(scene.body)
     solve(scene).error_budget  # noqa: B018 -- warm-up: the first solve of a process pays its imports, not timed
@@ -104,9 +139,10 @@ def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Call
                       true_errors(adaptive, adaptive_reference), label.format(adaptive_reference.ndof)))
 
 
-def table(rows: Sequence[dict]) -> str:
-    """Aligned text table; ``*`` marks the Pareto front of true error against run time."""
-    front = {id(r) for r in pareto(rows)}
+def table(rows: Sequence[dict], front: Sequence[dict] = ()) -> str:
+    """Aligned text table; ``*`` marks the rows of ``front`` (the Pareto front of true error against run time,
+    :func:`.work_precision.pareto`)."""
+    front = {id(r) for r in front}
     header = f"{'':2}{'method':<10}{'level':>6}{'DOFs':>9}{'time [s]':>10}{'error':>10}{'estimate':>10}{'η/error':>9}"
     lines = [header]
     for r in rows:
@@ -119,8 +155,8 @@ def table(rows: Sequence[dict]) -> str:
     return "\n".join(lines)
 
 
-def plot(rows: Sequence[dict], path, title: str | None = None) -> Path:
-    """True error and estimate against DOFs (left) and against run time (right, with the Pareto front)."""
+def plot(rows: Sequence[dict], path, front: Sequence[dict] = (), title: str | None = None) -> Path:
+    """True error and estimate against DOFs (left) and against run time (right, with the Pareto ``front``)."""
     from ..results.plots import plt, save_figure
 
     fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.4))
@@ -133,7 +169,6 @@ def plot(rows: Sequence[dict], path, title: str | None = None) -> Path:
             ax.loglog(x, [r["error"] for r in group], "o-", color=color, label=f"{method}: true error")
             ax.loglog(x, [r["estimate"] or np.nan for r in group], "^--", color=color, mfc="none",
                       label=f"{method}: estimate")
-    front = pareto(rows)
     if front:
         axes[1].step([r["time"] for r in front], [r["error"] for r in front], "k-", where="post", lw=1.0,
                      label="Pareto front (true error)")

@@ -462,8 +462,9 @@ def refinement_main(args) -> list[dict]:
         writer = csv.DictWriter(stream, fieldnames=refinement.FIELDS)
         writer.writeheader()
         writer.writerows({k: "" if row.get(k) is None else row[k] for k in refinement.FIELDS} for row in rows)
-    refinement.plot(rows, args.out / f"{args.scene}_refinement.png")
-    text = refinement.table(rows)
+    front = pareto(rows)
+    refinement.plot(rows, args.out / f"{args.scene}_refinement.png", front)
+    text = refinement.table(rows, front)
     (args.out / f"{args.scene}_refinement.txt").write_text(text + "\n")
     print(text)
     return rows
