@@ -101,7 +101,7 @@ def patch_pairs(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     opposite = opposite_facets(mesh)
     sign = np.where(mesh.f2t[0, opposite] == np.arange(mesh.nelements)[:, None], 1.0, -1.0)
     pair = 2 * opposite[:, None, :] + (mesh.facets[1, opposite][:, None, :] == mesh.t.T[:, :, None])
-    return opposite, sign, pair
+    return opposite, sign, pair.astype(np.int32)  # 32-bit indices: half the memory traffic of the gathers
 
 
 def propagate(first, second, s1, s2, rhs, known, values) -> None:
@@ -109,7 +109,7 @@ def propagate(first, second, s1, s2, rhs, known, values) -> None:
     constraint with one of its two fluxes known gives the other, sweep after sweep along the chains of cells around
     each vertex (about half as many sweeps as the largest patch has cells). ``values`` (columns: right-hand sides) and
     ``known`` hold the seeds."""
-    active = np.arange(first.size)
+    active = np.arange(first.size, dtype=np.int32)
     while active.size:
         f, g = first[active], second[active]
         known_f, known_g = known[f], known[g]
