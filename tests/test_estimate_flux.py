@@ -73,3 +73,16 @@ def test_cell_geometry_gradients_are_those_of_the_hat_functions():
     edge = corners[:, 1] - corners[:, 0]
     np.testing.assert_allclose(np.einsum("ckx,cx->ck", grads, edge), np.tile([-1.0, 1.0, 0.0], (len(area), 1)),
                                atol=1e-9)
+
+
+@pytest.mark.parametrize("non_penetration", ["weak", "gauss"])
+def test_weak_and_gauss_multipliers_equilibrate_through_their_nodal_forces(non_penetration):
+    """Hild's weak rows and Gauss-point rows hold the contact through nodal forces F = Cᵀλ too: with the lumped
+    traction F / w as the Neumann datum every patch problem is compatible (defect at round-off), and the bound is
+    within 10 % of the nodal rows' on the same mesh (measured: 0.551 nodal, 0.583 weak, 0.579 gauss)."""
+    scene = hertz_punch(nx=16)
+    nodal = cc.solve(scene).error_estimate
+    other = cc.solve(dataclasses.replace(scene, contact=dataclasses.replace(
+        scene.contact, law=cc.Signorini(non_penetration=non_penetration)))).error_estimate
+    assert other.defect < 1e-12
+    assert abs(other.relative / nodal.relative - 1) < 0.1

@@ -170,6 +170,8 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     rhs = -area[None, :, None] * (body_force[:, None, None] / 3.0 - against_rows(grads, sigma_h))
     known = np.zeros((2, npairs), dtype=bool)
     values = np.zeros((2, npairs, 2))  # a particular solution and the patch's circulation (where no flux is known)
+    any_pair = np.empty(mesh.nvertices, dtype=np.int64)
+    any_pair[patch.ravel()] = first.ravel()
     for i in range(2):
         neumann = np.flatnonzero(boundary & ~held[i])
         for side in range(2):
@@ -179,16 +181,16 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
         has_known = np.zeros(mesh.nvertices, dtype=bool)
         has_known[mesh.facets[:, neumann].ravel()] = True
         dirichlet = np.flatnonzero(boundary & held[i])
-        seed = np.full(mesh.nvertices, -1)
-        seed[patch.ravel()] = first.ravel()
+        seed = any_pair.copy()
         seed[mesh.facets[:, dirichlet].ravel()] = np.concatenate([2 * dirichlet, 2 * dirichlet + 1])
-        seeded = seed[~has_known & (seed >= 0)]
+        seeded = seed[~has_known]
         known[i, seeded] = True
         values[i, seeded, 1] = 1.0
-    offset = np.array([0, npairs])[:, None]
-    both = np.column_stack([rhs.ravel(), np.zeros(rhs.size)])
+    both = np.zeros((rhs.size, 2))
+    both[:, 0] = rhs.ravel()
     flat_values = values.reshape(-1, 2)
-    propagate((first.ravel() + offset).ravel(), (second.ravel() + offset).ravel(), np.tile(s1.ravel(), 2),
+    f, g = first.ravel(), second.ravel()
+    propagate(np.concatenate([f, f + npairs]), np.concatenate([g, g + npairs]), np.tile(s1.ravel(), 2),
               np.tile(s2.ravel(), 2), both, known.ravel(), flat_values)
     values = flat_values.reshape(2, npairs, 2)
     x = optimal_circulation(values, first, second, s1, s2, mass, moment, sigma_h, mesh)
