@@ -33,6 +33,7 @@ import numpy as np
 
 from .assembly import FEModel
 from .estimate import ContactState, applied_traction, components, held_components
+from .mesh import check_boundary
 
 
 @dataclass(frozen=True)
@@ -246,10 +247,34 @@ def cell_norms(vertex_stress, sigma_h, lam, mu, area):
     return area * energy / (6 * mu), area * 2 * (w * w).sum(axis=1) / (6 * mu)
 
 
-def facet_moments(fem: FEModel, lumped: np.ndarray) -> np.ndarray:
+def contact_facets(fem: FEModel) -> np.ndarray:
+    """The facets whose traction is the contact's: Γ_C (a pair's slave side) and the master sides of pairs."""
+    facets = [fem.contact.facets]
+    contact = fem.scene.contact
+    for pair in getattr(contact, "pairs", None) or (contact,):
+        if getattr(pair, "master", ""):
+            facets.append(check_boundary(fem.mesh, pair.master, "contact.master"))
+    return np.unique(np.concatenate(facets))
+
+
+def lumped_traction(fem: FEModel, state: ContactState, facets: np.ndarray) -> np.ndarray:
+    """t_a = F_a / w_a (vertices, d) at the nodes of the contact ``facets``, F the nodal contact forces (a pair's on
+    both sides) and w_a = Σ |E| / 2 over a's contact facets on its side."""
+    mesh = fem.mesh
+    forces = np.zeros((mesh.nvertices, fem.dim))
+    forces[fem.contact.dofs[:, 0] // fem.dim] = state.forces
+    if state.master_forces is not None:
+        forces[fem.contact.master_dofs[:, 0] // fem.dim] += state.master_forces
+    weights = np.bincount(mesh.facets[:, facets].ravel(), np.tile(0.5 * facet_lengths(mesh, facets), 2),
+                          minlength=mesh.nvertices)
+    return np.divide(forces, weights[:, None], out=np.zeros_like(forces), where=weights[:, None] > 0)
+
+
+def facet_moments(fem: FEModel, lumped: np.ndarray, on: np.ndarray) -> np.ndarray:
     """∫_E ψ_a g_i (2 vertices of E in ``mesh.facets`` order, d, nfacets) on the boundary facets: g the applied
-    traction (constant on each straight facet) and, on Γ_C, the lumped contact traction t_a = F_a / w_a near each
-    node a (``lumped`` (vertices, d)): the moment |E| t_a / 2, whose sum over a's facets is the nodal force F_a."""
+    traction (constant on each straight facet) and, on the contact facets ``on``, the lumped contact traction
+    t_a = F_a / w_a near each node a (``lumped`` (vertices, d)): the moment |E| t_a / 2, whose sum over a's facets is
+    the nodal force F_a."""
     mesh = fem.mesh
     out = np.zeros((2, 2, mesh.nfacets))
     facets = mesh.boundary_facets()
@@ -261,7 +286,6 @@ def facet_moments(fem: FEModel, lumped: np.ndarray) -> np.ndarray:
     # one point per straight facet is all applied_traction reads of a basis (a scikit-fem FacetBasis costs more)
     points = SimpleNamespace(find=facets, normals=normal[:, :, None], dx=np.empty((facets.size, 1)))
     out[:, :, facets] = 0.5 * length * applied_traction(fem, points)[None, :, :, 0]
-    on = fem.contact.facets
     out[:, :, on] = 0.5 * facet_lengths(mesh, on)[None, None] * lumped[mesh.facets[:, on]].transpose(0, 2, 1)
     return out
 
@@ -330,14 +354,16 @@ def contact_terms(fem: FEModel, state: ContactState, lumped: np.ndarray) -> dict
 
 
 def flux_estimate(fem: FEModel, u: np.ndarray, state: ContactState) -> FluxEstimate:
-    """The equilibrated-flux estimate of the full (scaled) P1 displacement ``u`` under the contact ``state``."""
+    """The equilibrated-flux estimate of the full (scaled) P1 displacement ``u`` under the contact ``state``; for a
+    pair of bodies (mortar or node to segment) each body's traction on its contact side is the datum, and the
+    complementarity and friction terms are the slave side's (relative gap and slip)."""
     mesh = fem.mesh
-    lumped = np.zeros((mesh.nvertices, fem.dim))
-    lumped[fem.contact.dofs[:, 0] // fem.dim] = state.forces / fem.contact.weights[:, None]
+    on = contact_facets(fem)
+    lumped = lumped_traction(fem, state, on)
     held = np.zeros((fem.dim, mesh.nfacets), dtype=bool)
     boundary = mesh.boundary_facets()
     held[:, boundary] = held_components(fem, boundary)
-    stress = equilibrate(fem, components(fem, u), facet_moments(fem, lumped), held)
+    stress = equilibrate(fem, components(fem, u), facet_moments(fem, lumped, on), held)
     per_facet = contact_terms(fem, state, lumped)
     cells = mesh.f2t[0, fem.contact.facets]
     parts = {"equilibrated": stress.symmetric, "asymmetry": (KORN**2 - 1) * stress.skew}

@@ -151,13 +151,14 @@ class ContactResult:
     @property
     def estimated(self) -> bool:
         """Whether the result carries an error estimate: solved, not switched off (``estimate_error``), one body."""
-        return self.solved and self.estimate_error and not isinstance(self.fem.contact, PairTrace)
+        return self.solved and self.estimate_error and (flux_supported(self.fem)
+                                                         or not isinstance(self.fem.contact, PairTrace))
 
     @cached_property
     def residual_estimate(self) -> ErrorEstimate | None:
         """The residual estimate of the discretization error (:mod:`convexcontact.fem.estimate`), scaled units;
         None without an answer, when switched off (``estimate_error``) or for two bodies (not estimated)."""
-        if not self.estimated:
+        if not self.estimated or isinstance(self.fem.contact, PairTrace):
             return None
         return estimate(self.fem, self.displacement / self.fem.scaling.displacement, contact_state(self))
 
@@ -295,7 +296,8 @@ def contact_state(result: ContactResult) -> ContactState:
     return ContactState(c.forces / scaling.force, c.normal_displacement / scaling.displacement,
                         c.gap / scaling.displacement, slip, constrained=compliance_of(law) is None,
                         gap_at_nodes=non_penetration != "gauss",
-                        nodal_friction=non_penetration == "nodal" and getattr(law, "quadrature", "nodal") == "nodal")
+                        nodal_friction=non_penetration == "nodal" and getattr(law, "quadrature", "nodal") == "nodal",
+                        master_forces=None if c.master_forces is None else c.master_forces / scaling.force)
 
 
 def contact_nodes(
