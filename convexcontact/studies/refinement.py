@@ -21,7 +21,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 import skfem as fe
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..drivers.adapt import adapt
@@ -80,19 +82,39 @@ def locate(mesh: fe.MeshTri1, points: np.ndarray, candidates: int = 16) -> tuple
     return cell, weights
 
 
+def bodies_of(mesh: fe.Mesh) -> np.ndarray:
+    """The body (connected component, numbered from the lowest vertex) of each vertex."""
+    n = mesh.nvertices
+    edges = sp.coo_matrix((np.ones(mesh.facets.shape[1]), (mesh.facets[0], mesh.facets[1])), (n, n))
+    return connected_components(edges, directed=False)[1]
+
+
+def prolong(result: ContactResult, points: np.ndarray, body: np.ndarray) -> np.ndarray:
+    """The P1 displacement of ``result`` (scaled) at ``points`` (2, n), each point looked for in the cells of its own
+    ``body`` (two bodies touch at their contact: a point there lies in both)."""
+    fem = result.fem
+    mesh = fem.mesh
+    label = bodies_of(mesh)
+    u = (result.displacement / fem.scaling.displacement).reshape(-1, fem.dim)  # (vertices, d) for P1
+    out = np.zeros((points.shape[1], fem.dim))
+    for b in np.unique(label):
+        at = np.flatnonzero(body == b)
+        cells = mesh.t[:, label[mesh.t[0]] == b]
+        cell, weights = locate(fe.MeshTri(mesh.p, cells), points[:, at])
+        out[at] = np.einsum("nm,nmd->nd", weights, u[cells[:, cell].T])
+    return out.ravel()
+
+
 def true_errors(results: Sequence[ContactResult], reference: ContactResult) -> list[float]:
     """‖u_ref − u_h‖_E / ‖u_ref‖_E of each P1 result, u_h interpolated at the reference's nodes (exact on nested
-    meshes)."""
+    meshes; one body or several, each in its own cells)."""
     fine = reference.fem
     u_ref = reference.displacement / fine.scaling.displacement
     norm = np.sqrt(u_ref @ (fine.K_full @ u_ref))
+    body = bodies_of(fine.mesh)
     out = []
     for result in results:
-        fem = result.fem
-        cell, weights = locate(fem.mesh, fine.mesh.p)
-        u = (result.displacement / fem.scaling.displacement).reshape(-1, fem.dim)  # (vertices, d) for P1
-        prolonged = np.einsum("nm,nmd->nd", weights, u[fem.mesh.t[:, cell].T]).ravel()
-        error = u_ref - prolonged
+        error = u_ref - prolong(result, fine.mesh.p, body)
         out.append(float(np.sqrt(error @ (fine.K_full @ error)) / norm))
     return out
 
