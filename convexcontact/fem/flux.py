@@ -1,27 +1,29 @@
 """An equilibrated stress (Prager–Synge) for 2-D P1 triangles: a guaranteed bound of the energy error of the problem
-with the contact traction fixed (docs/estimate.md).
+with the contact traction fixed, plus the contact terms (docs/estimate.md).
 
 Row by row of the stress, σ̂ is the sum over the vertices a of the patch fluxes σ_a in Raviart–Thomas RT0 on the
 patch ω_a of a (Braess–Schöberl; Ern–Vohralík)::
 
     σ_a = argmin ‖σ − ψ_a σ_h‖_{ω_a}   over RT0(ω_a), row i, with
           −div σ = Π_0(ψ_a f − ∇ψ_a · σ_h)   on each cell of ω_a,
-          σ n = Π_0... : ∫_E σ n = ∫_E ψ_a g  on the facets E ∋ a of Γ_N (g the applied traction) and of Γ_C
-                                           (g = t_h, the contact traction the discrete problem holds),
-          σ n = 0  on ∂ω_a inside the body, free on the facets where component i is held (Dirichlet).
+          ∫_E σ n = ∫_E ψ_a g     on the facets E ∋ a of Γ_N (g the applied traction),
+          ∫_E σ n = |E| t_a / 2   on the contact facets E ∋ a (t_a = F_a / w_a: the nodal contact force lumped),
+          σ n = 0 on ∂ω_a inside the body, free on the facets where component i is held (Dirichlet).
 
-The patch problems are solvable because u_h is the discrete solution (the residual vanishes on ψ_a e_i). Then
-−div σ̂ = f (f constant per cell), σ̂ n = Π_0 g on every facet, and for the continuum solution u of the problem whose
-traction on Γ_C is Π_0 t_h, e = u − u_h (Prager–Synge, with σ̂ not symmetric)::
+The patch problems are solvable because u_h is the discrete solution (the residual vanishes on ψ_a e_i, and the
+contact fluxes at a sum to F_a). Then −div σ̂ = f (f constant per cell), σ̂ n = g on Γ_N and the facet mean t̂ of the
+lumped tractions on the contact facets; for the continuum solution u of the problem whose contact traction is t̂,
+e = u − u_h (Prager–Synge, σ̂ not symmetric)::
 
     ‖e‖_E ≤ ‖C^{-½}(sym σ̂ − σ_h)‖ + (C_K² − 1)^{½} ‖(2μ)^{-½} skew σ̂‖,
 
 C_K Korn's constant of the body and its Dirichlet boundary (‖∇v‖ ≤ C_K ‖ε(v)‖; √2 for v = 0 on the whole
-boundary). The first term is the equilibrated estimate η_F, the second the asymmetry of the row-wise reconstruction.
+boundary). :func:`flux_estimate` adds the complementarity and friction terms of the contact (Weiss–Wohlmuth).
 
-Written by hand (not with scikit-fem's RT elements): each patch problem has a handful of unknowns (the fluxes through
-the facets at a), and assembling them as scikit-fem forms would be one Python call per patch. Here every patch is
-assembled at once with NumPy and the block-diagonal saddle-point systems of all patches are solved in one sparse LU.
+Written by hand (not with scikit-fem's RT elements): a patch problem in RT0 is the chain of cells around a, one
+divergence constraint per cell on the two fluxes through its facets at a, solved by propagation from one known flux,
+with one free circulation where none is known; assembling scikit-fem forms would be one Python call per patch. Here
+every patch is solved at once with NumPy, no linear system.
 """
 
 from __future__ import annotations
@@ -125,21 +127,16 @@ def propagate(first, second, s1, s2, rhs, known, values) -> None:
         active = active[~(known_f & known_g | forward | backward)]  # constraints still waiting for a flux
 
 
-LUMPING = (np.ones((3, 3)) + np.eye(3)) / 12.0
-"""∫_T λ_m λ_n / |T|."""
-
-
 def rt0_integrals(corners: np.ndarray, area: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """∫_T φ_k · φ_l (cells, 3, 3) and ∫_T λ_j φ_k (cells, j, k, 2) of the RT0 functions φ_k = (x − p_k) / 2|T|
-    (unit outward flux through the facet opposite vertex k), from x − p_k = Σ_m λ_m (p_m − p_k)."""
+    (unit outward flux through the facet opposite vertex k). With x − p_k = Σ_m λ_m (p_m − p_k), ∫ λ_m λ_n =
+    |T| (1 + δ_mn) / 12 and the vertices c_m taken from the centroid (Σ c_m = 0) they reduce to
+    (Σ_m |c_m|² / 12 + c_k · c_l) / 4|T| and (c_j / 12 − c_k / 3) / 2."""
     centred = corners - corners.mean(axis=1, keepdims=True)
-    gram = (centred[:, :, None, :] * centred[:, None, :, :]).sum(axis=3)  # p_m · p_n
-    # Σ_mn L_mn (p_m − p_k)·(p_n − p_l), the rows of L summing to 1/3 and L to 1
-    weighted = (gram * LUMPING).sum(axis=(1, 2))[:, None, None]
-    mass = (weighted - gram.sum(axis=1)[:, :, None] / 3 - gram.sum(axis=1)[:, None, :] / 3 + gram)
-    lumped = (LUMPING[None, :, :, None] * centred[:, None, :, :]).sum(axis=2)  # Σ_m L_jm p_m
-    moment = (lumped[:, :, None] - centred[:, None] / 3.0) / 2.0
-    return mass / (4.0 * area[:, None, None]), moment
+    gram = (centred[:, :, None, :] * centred[:, None, :, :]).sum(axis=3)  # c_m · c_n
+    mass = (gram + (gram[:, 0, 0] + gram[:, 1, 1] + gram[:, 2, 2])[:, None, None] / 12.0) / (4.0 * area[:, None, None])
+    moment = (centred[:, :, None] / 12.0 - centred[:, None] / 3.0) / 2.0
+    return mass, moment
 
 
 def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarray, held: np.ndarray) -> Equilibrated:
