@@ -426,6 +426,11 @@ def matrix_free_obstruction(obstacle, law) -> str | None:
 def check_formulation(scene: Scene, formulation: str, solver: str = "auto") -> None:
     """Refuse, before any assembly, a formulation the scene (or the ``solver``) cannot have, naming the ones it can."""
     check_formulation_name(formulation)
+    if scene.history is None and any(getattr(m, "plastic", False) for m in (
+            scene.materials.values() if isinstance(scene.materials, dict) else (scene.materials,))):
+        raise SceneError("history", "a plastic body (a material with yield_stress) has no static answer: its state "
+                         "depends on the loading path", "give the scene a history (one step loads it at once) and "
+                         "run it with cc.run_history (docs/plasticity.md), or drop yield_stress")
     if formulation == MATRIX_FREE and solver.partition(":")[0] not in ("auto", "newton-cg"):
         raise SceneError("formulation", f"{MATRIX_FREE!r} applies W as an operator, which only newton-cg solves, "
                          f"and solver = {solver!r} needs it as a matrix",

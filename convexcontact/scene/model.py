@@ -26,12 +26,18 @@ class Material:
 
     ``viscosity`` η ≥ 0 makes it a Kelvin–Voigt body (seed 002, eq. 2.3.3), σ = A ε(u̇) + B ε(u) with
     A = (η/E) B: a retardation time τ = η/E (time units of the history). It acts only in a history.
+
+    ``yield_stress`` σ_Y ≥ 0 makes it elasto-viscoplastic (von Mises, Perzyna; docs/plasticity.md):
+    ε̇_p = ⟨‖s‖ − √(2/3)σ_Y⟩ s/(η_p‖s‖), s the stress deviator, η_p = ``plastic_viscosity`` ≥ 0 (a stress
+    times a time; 0: rate-independent J2 perfect plasticity). It too acts only in a history.
     """
 
     E: float
     nu: float
     name: str = field(default="material", compare=False)
     viscosity: float = 0.0
+    yield_stress: float | None = None
+    plastic_viscosity: float = 0.0
 
     def __post_init__(self):
         of_type(self.name, str, "material.name", "name the mesh subdomain it is for, e.g. 'steel'")
@@ -52,6 +58,33 @@ class Material:
         object.__setattr__(self, "E", E)
         object.__setattr__(self, "nu", nu)
         object.__setattr__(self, "viscosity", float(self.viscosity))
+        self._check_plasticity()
+
+    @property
+    def plastic(self) -> bool:
+        return self.yield_stress is not None
+
+    def _check_plasticity(self):
+        """σ_Y ≥ 0 and η_p ≥ 0, not both 0 (no deviatoric stiffness left), no η_p without σ_Y, no Kelvin–Voigt."""
+        eta = finite(self.plastic_viscosity, f"{self.name}.plastic_viscosity")
+        if eta < 0:
+            raise SceneError(f"{self.name}.plastic_viscosity", f"must be ≥ 0 (0 is rate-independent), got {eta}",
+                             "give η_p ≥ 0, a stress times a time")
+        object.__setattr__(self, "plastic_viscosity", float(eta))
+        if self.yield_stress is None:
+            if eta > 0:
+                raise SceneError(f"{self.name}.plastic_viscosity", "given without a yield stress",
+                                 "give yield_stress = σ_Y ≥ 0 too, or drop plastic_viscosity")
+            return
+        sigma = finite(self.yield_stress, f"{self.name}.yield_stress")
+        if sigma < 0 or (sigma == 0 and eta == 0):
+            raise SceneError(f"{self.name}.yield_stress", f"must be > 0, or ≥ 0 with plastic_viscosity > 0, got "
+                             f"{sigma}" + (" with plastic_viscosity 0: the body would flow freely" if sigma == 0
+                                           else ""), "give σ_Y > 0 (a stress), or η_p > 0 for a viscous fluid")
+        if self.viscosity:
+            raise SceneError(f"{self.name}.viscosity", "a Kelvin–Voigt viscosity beside a yield stress is not built",
+                             "drop viscosity (plastic_viscosity is the plastic rate effect), or drop yield_stress")
+        object.__setattr__(self, "yield_stress", float(sigma))
 
 
 @dataclass(frozen=True)

@@ -61,7 +61,7 @@ RECTANGLE = {
     "grading": PAIR, "refine_x": NUMBER, "refine_y": TEXT,
 }
 BOX = {**BODY, "size": TRIPLE, "cells": INTEGERS3, "origin": TRIPLE, "grading": TRIPLE, "refine": TRIPLE}
-MATERIAL = {"E": NUMBER, "nu": NUMBER, "viscosity": NUMBER}
+MATERIAL = {"E": NUMBER, "nu": NUMBER, "viscosity": NUMBER, "yield_stress": NUMBER, "plastic_viscosity": NUMBER}
 DIRICHLET = {"boundary": TEXT, "ux": NUMBER, "uy": NUMBER, "uz": NUMBER}
 TRACTION = {"boundary": TEXT, "pressure": NUMBER, "vector": VECTOR}
 CONTACT = {"boundary": TEXT, "law": TEXT}
