@@ -18,6 +18,7 @@ updating q and b and starting from the previous answer (Clarabel's polish, OSQP'
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -65,7 +66,9 @@ class HistoryResult:
         names = ("normal_force", "tangential_force", "max_pressure", "contact_half_width", "obstacle_advance",
                  "obstacle_shift")
         out = {"time": list(self.times), "status": [s.status for s in self.steps]}
-        for name in names:
+        plastic = ("max_equivalent_plastic_strain", "max_von_mises") if any(hasattr(s, "plastic") for s in self.steps) \
+            else ()
+        for name in names + plastic:
             out[name] = [value(step, name) for step in self.steps]
         out["n_closed"] = [int(s.closed.sum()) if s.solved else None for s in self.steps]
         for state in ("stick", "slip"):
@@ -171,8 +174,9 @@ def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progr
     of_type(confirm, bool, "confirm", "give confirm=True to run a history estimated to take long, else leave it out")
     scene.history.check(scene)
     timings: dict = {}
-    process = Process(scene, formulation, timings)
-    stepper = Stepper(solver, options)
+    build = next((build for applies, build in PROCESSES if applies(scene)), None)
+    process, stepper = build(scene, formulation, solver, options, timings) if build else \
+        (Process(scene, formulation, timings), Stepper(solver, options))
     results, count = [], len(scene.history)
     for k in range(count):
         step_timings: dict = {}
@@ -191,6 +195,11 @@ def run(scene: Scene, solver: str = "clarabel", formulation: str = "auto", progr
         if k + 1 == MEASURED_STEPS and count > MEASURED_STEPS:
             check_cost(count, results, time.perf_counter() - start, confirm)
     return HistoryResult(scene, scene.history, results, timings)
+
+
+PROCESSES: list[tuple[Callable, Callable]] = []
+"""(applies(scene), build(scene, formulation, solver, options, timings) → (process, stepper)) of the bodies whose steps
+are no elastic program, registered by their modules (:mod:`.plastic_history`)."""
 
 
 def judge_on_its_own_scale(result: ContactResult, envelope: FEModel) -> None:
