@@ -15,7 +15,7 @@ from convexcontact.scene.toml import scene_from_dict
 
 SURFACES = ("cc.Material", "reader toml", "cc.run_history", "cc.solve", "cc.prepare")
 
-STEEL = dict(E=1.0, nu=0.3)
+STEEL = {"E": 1.0, "nu": 0.3}
 
 
 def raises(build, field: str, fix: str):

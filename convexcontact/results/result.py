@@ -15,6 +15,7 @@ from ..fem.mortar import PairTrace
 from ..formulations.fields import ContactFields
 from ..scene.model import compliance_of
 from .certificate import Certificate, normal_displacement, normal_gap, pair_multipliers
+from .fields_out import element_stress
 
 CLOSED_PRESSURE = 1e-6
 """A node is closed when its pressure exceeds this fraction of the largest pressure, and of the
@@ -183,6 +184,10 @@ class ContactResult:
         share = budget["discretization"]
         return [*self.fem.warnings,
                 f"estimated discretization error {share:.0%} of the energy norm (over {LARGE_ERROR:.0%}): {remedy}"]
+
+    def cell_fields(self) -> dict[str, np.ndarray]:
+        """The per-cell fields of solution.vtu (user units): element stresses and von Mises."""
+        return element_stress(self)
 
     def summary(self) -> dict:
         """JSON-ready summary (see docs/certificate.md for the certificate, docs/estimate.md for the error budget)."""
