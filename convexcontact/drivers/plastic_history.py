@@ -15,6 +15,7 @@ import numpy as np
 from .. import solvers
 from ..conic import ConicSolution
 from ..fem.plasticity import check_plastic_body, material_per_element, plastic_points
+from ..formulations.fields import ContactFields
 from ..formulations.plastic import PlasticStep, plastic
 from ..results.certificate import Certificate
 from ..results.plastic import PlasticResult, PlasticState
@@ -95,7 +96,8 @@ class PlasticProcess(Process):
 
 class PlasticStepper:
     """Solves a plastic step and certifies it: the contact certificate, with the plastic strain's nodal forces Gα
-    as a load, and the material law's residuals (:meth:`PlasticState.residuals`)."""
+    as a load, and the material law's residuals (:meth:`PlasticState.residuals`). Where Newton's method applies
+    (:mod:`.plastic_polish`) it finishes the interior point's answer."""
 
     def __init__(self, process: PlasticProcess, solver: str, options: dict):
         self.process, self.solver, self.options = process, solver, options
@@ -105,24 +107,24 @@ class PlasticStepper:
         with timed(timings, "formulation"):
             program, contact = plastic(model.program, process.step(model))
         with timed(timings, "solve"):
-            solution = solvers.solve(program, self.solver, **self.options)
+            solution = contact(solvers.solve(program, self.solver, **self.options))
         with timed(timings, "postprocess"):
-            return self.result(model, solution, contact(solution), timings)
-
-    def result(self, model: Model, solution: ConicSolution, contact: ConicSolution, timings: dict):
-        process, fem = self.process, model.fem
-        fields = polished = None
-        if contact.status in ("solved", "inaccurate") and np.isfinite(contact.x).all():
-            fields = model.recover(contact)
-            if plastic_polish.applies(model):
+            polished = None
+            if plastic_polish.applies(model) and solution.solved and np.isfinite(solution.x).all():
                 polished = plastic_polish.polish(model, process.points, process.coupling, process.alpha,
-                                                 process.radius, process.relaxation / process.dt, fields)
-        fields = polished or fields
-        u_full = fem.full(contact.x[: fem.n_free] if fields is None else fields.u)
+                                                 process.radius, process.relaxation / process.dt, model.recover(solution))
+            return self.result(model, solution, *(polished or (None, 0)), timings)
+
+    def result(self, model: Model, solution: ConicSolution, fields: ContactFields | None, newton_steps: int,
+               timings: dict):
+        """The certified result of the step from the solver's ``solution`` of its contact program, or from Newton's
+        ``fields`` where they were found."""
+        process, fem = self.process, model.fem
+        u_full = fem.full(fields.u if fields is not None else solution.x[: fem.n_free])
         state = process.state(u_full)
         loaded = keeping_K(replace(fem, f_full=fem.f_full + process.coupling @ state.alpha), fem)
-        result = replace(model, fem=loaded).result(contact, timings, model.slip_bound, fields=fields,
-                                                   extra={"newton_polish": polished is not None})
+        result = replace(model, fem=loaded).result(solution, timings, model.slip_bound, fields=fields,
+                                                   extra={"newton_steps": newton_steps})
         result.fem = fem
         if result.certificate is None:
             return result

@@ -24,9 +24,9 @@ from ..fem.plasticity import PlasticPoints
 from ..formulations.fields import ContactFields
 from ..formulations.primal import carrying
 
-ROUNDS, STEPS = 5, 8
-"""Active-set rounds, and Newton steps in each."""
-CONVERGED = 1e-13
+ROUNDS, STEPS, LINE_SEARCH = 5, 12, 12
+"""Active-set rounds, Newton steps in each, halvings of a step."""
+CONVERGED = 1e-12
 """Largest equilibrium residual, relative to the largest nodal force, at which Newton stops."""
 
 
@@ -54,36 +54,49 @@ def tangent(points: PlasticPoints, u_full, old, radius, viscosity) -> tuple[np.n
                                             shape=(count * k, count * k)).tocsr()
 
 
-def polish(model, points: PlasticPoints, coupling: sp.spmatrix, old, radius, viscosity, fields: ContactFields):
-    """The exact answer of the step from ``fields`` (the interior point's, scaled), or None if Newton does not settle
-    on a feasible one."""
+def polish(model, points: PlasticPoints, coupling: sp.spmatrix, old, radius, viscosity, fields: ContactFields,
+           rounds: int = ROUNDS):
+    """The exact answer of the step from ``fields`` (the interior point's, scaled) and the Newton steps it took, or
+    None if Newton does not settle on a feasible one within ``rounds`` active-set rounds."""
     fem, C = model.fem, model.C
     contact = fem.contact
     A = (C @ contact.N).tocsr()
     b = contact.weighted_gap(C) - C @ contact.normal_offset
     weights, rows = contact.row_weights(C), carrying(A)
-    free = fem.free
-    D = points.deviatoric[:, free]
-    G = coupling[free]
+    G = coupling[fem.free]
+    force = max(np.abs(fem.f).max(initial=0.0), np.abs(fem.K @ fields.u).max(), contact.weights.max())
+
+    def residual(u, z, active):
+        """The optimality system's residual (equilibrium over the force scale, then the active rows' gaps) at u, z."""
+        increment, M = tangent(points, fem.full(u), old, radius, viscosity)
+        equilibrium = fem.K @ u - G @ (old + increment) - fem.f + A.T @ z
+        return np.concatenate([equilibrium / force, b[active] - A[active] @ u]), M
+
     u, z = fields.u.copy(), np.where(rows, fields.pressure, 0.0)
-    active = rows & (z > (b - A @ u) / weights)
-    force = max(np.abs(fem.f).max(initial=0.0), np.abs(fem.K @ u).max(), contact.weights.max())
-    for _ in range(ROUNDS):
+    active, steps = rows & (z > (b - A @ u) / weights), 0
+    for _ in range(rounds):
+        r, M = residual(u, z, active)
         for _ in range(STEPS):
-            increment, M = tangent(points, fem.full(u), old, radius, viscosity)
-            residual = fem.K @ u - G @ (old + increment) - fem.f + A.T @ z
-            gap = b[active] - A[active] @ u
-            if np.abs(residual).max() <= CONVERGED * force and np.abs(gap).max(initial=0.0) <= CONVERGED:
+            if np.abs(r).max() <= CONVERGED:
                 break
-            J = fem.K - G @ M @ D
+            J = fem.K - G @ M @ points.deviatoric[:, fem.free]
             kkt = sp.bmat([[J, A[active].T], [A[active], None]], format="csc")
-            step = spla.splu(kkt).solve(np.concatenate([-(residual - A.T @ z), gap]))
-            u += step[: u.size]
-            z = np.zeros_like(z)
-            z[active] = step[u.size:]
+            rhs = np.concatenate([-(r[: u.size] * force - A.T @ z), r[u.size:]])
+            step = spla.splu(kkt).solve(rhs)
+            direction, target = step[: u.size], np.zeros_like(z)
+            target[active] = step[u.size:]
+            steps += 1
+            for length in 0.5 ** np.arange(LINE_SEARCH):  # backtracking on ‖r‖: the points' flow switches on and off
+                trial_u, trial_z = u + length * direction, z + length * (target - z)
+                trial, trial_M = residual(trial_u, trial_z, active)
+                if np.linalg.norm(trial) < (1 - 1e-4 * length) * np.linalg.norm(r):
+                    break
+            u, z, r, M = trial_u, trial_z, trial, trial_M
         slack = (b - A @ u) / weights
         settled = rows & (z > slack)
-        if np.array_equal(settled, active) and slack.min(initial=0.0) >= -CONVERGED and z.min(initial=0.0) >= 0:
-            return ContactFields(u=u, pressure=z)
+        if np.abs(r).max() > CONVERGED:
+            return None  # Newton does not settle on this active set
+        if np.array_equal(settled, active) and slack[rows].min(initial=0.0) >= -CONVERGED and z.min(initial=0) >= 0:
+            return ContactFields(u=u, pressure=z), steps
         active = settled
     return None
