@@ -144,6 +144,17 @@ def test_the_flat_punch_saturates_just_above_prandtls_limit_pressure(tmp_path):
     assert {"solution.pvd", "solution_0003.vtu", "history.png", "summary.json"} <= {p.name for p in tmp_path.iterdir()}
 
 
+def test_the_example_scene_file_is_the_examples_punch():
+    """examples/scenes/plastic_punch.toml reads into the scene of examples/plastic_punch.py at nx = 24."""
+    punch = example("plastic_punch")
+    scene = cc.load_scene(Path(__file__).resolve().parents[1] / "examples" / "scenes" / "plastic_punch.toml")
+    expected = punch.flat_punch(24, [m * punch.PRANDTL / E for m in (2, 8, 32)])
+    assert (scene.materials, scene.body, scene.dirichlet) == (expected.materials, expected.body, expected.dirichlet)
+    assert scene.contact.obstacle.shape == "flat_punch" and scene.contact.obstacle.radius == punch.HALF_WIDTH
+    np.testing.assert_allclose(scene.history.values["obstacle.depth"], expected.history.values["obstacle.depth"],
+                               rtol=1e-3)
+
+
 def test_the_series_carries_the_plastic_fields(tmp_path):
     """solution_NNNN.vtu holds the plastic strain, the equivalent plastic strain and von Mises at each step
     (the relaxation's closed form), summary.json the plastic maxima."""
