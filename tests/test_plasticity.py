@@ -97,6 +97,26 @@ def test_perzyna_relaxation_follows_backward_euler_and_the_exponential(yield_str
     assert abs((deviator[-1] - radius) / exponential - 1) < 0.05
 
 
+@pytest.mark.parametrize("element", ["P1", "Q1"])
+def test_a_3d_confined_block_relaxes_by_the_same_recursion(element):
+    """The block in 3-D (rollers on its four sides, the top held at −ε along z): uniaxial strain along z, the five
+    deviatoric coordinates of 3-D keeping the direction diag(−1, −1, 2)/√6 — the plane-strain closed form."""
+    dt, steps, eta = 0.5, 3, 0.5
+    scene = cc.Scene(
+        body=cc.Body(Box(cells=(1, 1, 1)), element),
+        materials=cc.Material(E, NU, yield_stress=YIELD, plastic_viscosity=eta),
+        dirichlet=tuple(cc.Dirichlet(side, **{axis: 0.0}) for side, axis in
+                        (("left", "ux"), ("right", "ux"), ("front", "uy"), ("back", "uy"))) +
+        (cc.Dirichlet("top", uz=-STRAIN),),
+        contact=cc.Contact("bottom", cc.Obstacle("flat"), cc.Signorini()),
+        history=cc.History(list(dt * np.arange(1, steps + 1)), {"dirichlet[top].uz": [-STRAIN] * steps}))
+    result = cc.run_history(scene)
+    assert result.status == "solved"
+    deviator = deviator_magnitudes(SHEAR * 2 * STRAIN / np.sqrt(6), np.sqrt(2 / 3) * YIELD, eta / SHEAR, dt, steps)
+    np.testing.assert_allclose(result.series()["normal_force"], BULK * STRAIN + 2 / np.sqrt(6) * deviator, rtol=1e-10)
+    np.testing.assert_allclose(result.series()["max_von_mises"], np.sqrt(1.5) * deviator, rtol=1e-10)
+
+
 def test_rate_independent_relaxation_stops_at_the_yield_surface_at_once():
     """η_p = 0: one step lands on the yield surface, σ_yy − σ_xx = σ_Y: the foundation carries K ε + (2/3) σ_Y."""
     step = cc.run_history(confined_block("Q1", [1.0], eta=0.0)).steps[0]
