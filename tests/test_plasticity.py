@@ -165,6 +165,21 @@ def test_the_flat_punch_saturates_just_above_prandtls_limit_pressure(tmp_path):
     assert {"solution.pvd", "solution_0003.vtu", "history.png", "summary.json"} <= {p.name for p in tmp_path.iterdir()}
 
 
+def test_a_rough_punch_is_certified_and_carries_more_than_the_smooth_one():
+    """Tresca friction with the bound σ_Y (≥ k: the face sticks where it can) on the punch (nx = 16): the Newton
+    finish holds the sticking points as equalities and the slipping ones at ±s, so every step is certified to
+    round-off, friction law included; the rough face carries more than the smooth one at the same depth (a
+    kinematic bound over fewer admissible motions)."""
+    punch = example("plastic_punch")
+    smooth = punch.flat_punch(16, [m * punch.PRANDTL / E for m in (2, 8, 32)])
+    rough = cc.run_history(smooth.with_law(cc.Tresca(slip_bound=punch.YIELD_STRESS)))
+    assert rough.status == "solved"
+    assert max(step.certificate.worst for step in rough.steps) < 1e-12
+    assert all(step.extra["newton_steps"] > 0 for step in rough.steps)
+    ratio = np.array(rough.series()["normal_force"]) / np.array(cc.run_history(smooth).series()["normal_force"])
+    assert (ratio > 1.0).all()
+
+
 def test_the_example_scene_file_is_the_examples_punch():
     """examples/scenes/plastic_punch.toml reads into the scene of examples/plastic_punch.py at nx = 24."""
     punch = example("plastic_punch")

@@ -9,9 +9,9 @@ system is, in u and the pressures z_A of the active contact rows A,
 semismooth in u, its Jacobian K − Gᵀ-weighted consistent tangent (the Hessian of the convex step energy in u).
 From the interior point's u and active set, Newton's steps end at the exact discrete answer in a few sparse
 solves; the active set is corrected by the Signorini natural map (a primal-dual active set round) until it settles.
-Built for Signorini against a rigid obstacle under displacement control (no friction, no compliance, no force
-control: their rows are not equalities of u alone); the answer is kept only if it is feasible and its residual
-smaller.
+Built for Signorini and 2-D exact Tresca friction (sticking points: equalities R_S u + o_S = 0; slipping points:
+their traction ±s fixed) against a rigid obstacle under displacement control (no compliance, no force control, no
+3-D friction: their rows are not equalities of u alone); the answer is kept only if it is feasible and settled.
 """
 
 from __future__ import annotations
@@ -31,8 +31,10 @@ CONVERGED = 1e-12
 
 
 def applies(model) -> bool:
-    contact = model.fem.contact
-    return model.friction is None and model.compliance is None and contact.obstacle_coupling is None
+    """Signorini (or 2-D exact Tresca) against a rigid obstacle under displacement control."""
+    contact, friction = model.fem.contact, model.friction
+    planar = friction is None or (friction.dim == 1 and model.epsilon is None and friction.coupling is None)
+    return planar and model.compliance is None and contact.obstacle_coupling is None
 
 
 def tangent(points: PlasticPoints, u_full, old, radius, viscosity) -> tuple[np.ndarray, sp.spmatrix]:
@@ -58,45 +60,68 @@ def polish(model, points: PlasticPoints, coupling: sp.spmatrix, old, radius, vis
            rounds: int = ROUNDS):
     """The exact answer of the step from ``fields`` (the interior point's, scaled) and the Newton steps it took, or
     None if Newton does not settle on a feasible one within ``rounds`` active-set rounds."""
-    fem, C = model.fem, model.C
+    fem, C, friction = model.fem, model.C, model.friction
     contact = fem.contact
+    # the contact rows E (normal: C N; friction: −R) with E u ≤ e (normal) or E u = e (sticking), multipliers y whose
+    # force is Eᵀy: y = (pressures, friction tractions λ_T)
     A = (C @ contact.N).tocsr()
-    b = contact.weighted_gap(C) - C @ contact.normal_offset
-    weights, rows = contact.row_weights(C), carrying(A)
+    m = A.shape[0]
+    E = sp.vstack([A] + ([-friction.R] if friction else []), format="csr")
+    e = np.concatenate([contact.weighted_gap(C) - C @ contact.normal_offset] + ([friction.offset] if friction else []))
+    weights = contact.row_weights(C)
+    bound = model.slip_bound if friction else np.zeros(0)
+    rows = carrying(E)
     G = coupling[fem.free]
     force = max(np.abs(fem.f).max(initial=0.0), np.abs(fem.K @ fields.u).max(), contact.weights.max())
 
-    def residual(u, z, active):
-        """The optimality system's residual (equilibrium over the force scale, then the active rows' gaps) at u, z."""
-        increment, M = tangent(points, fem.full(u), old, radius, viscosity)
-        equilibrium = fem.K @ u - G @ (old + increment) - fem.f + A.T @ z
-        return np.concatenate([equilibrium / force, b[active] - A[active] @ u]), M
+    def sets(u, y):
+        """Active rows (closed nodes, sticking points) and the multipliers fixed by the law (slipping points' ±s),
+        by the natural maps of Signorini's and Tresca's laws."""
+        active = rows & np.concatenate([y[:m] > (e[:m] - A @ u) / weights, np.zeros(E.shape[0] - m, bool)])
+        fixed = np.zeros_like(y)
+        if friction:
+            trial = y[m:] + (E[m:] @ u - e[m:]) / friction.weights  # λ_T − v, v = (R u + o)/ω the slip
+            stick = np.abs(trial) < bound
+            active[m:] = rows[m:] & stick
+            fixed[m:] = np.where(rows[m:] & ~stick, bound * np.sign(trial), 0.0)
+        return active, fixed
 
-    u, z = fields.u.copy(), np.where(rows, fields.pressure, 0.0)
-    active, steps = rows & (z > (b - A @ u) / weights), 0
+    def residual(u, y, active):
+        """The optimality system's residual (equilibrium over the force scale, then the active rows' gaps) at u, y."""
+        increment, M = tangent(points, fem.full(u), old, radius, viscosity)
+        equilibrium = fem.K @ u - G @ (old + increment) - fem.f + E.T @ y
+        return np.concatenate([equilibrium / force, e[active] - E[active] @ u]), M
+
+    u = fields.u.copy()
+    y = np.where(rows, np.concatenate([fields.pressure] + ([fields.friction] if friction else [])), 0.0)
+    (active, fixed), steps = sets(u, y), 0
+    y = np.where(active, y, fixed)
     for _ in range(rounds):
-        r, M = residual(u, z, active)
+        r, M = residual(u, y, active)
         for _ in range(STEPS):
             if np.abs(r).max() <= CONVERGED:
                 break
             J = fem.K - G @ M @ points.deviatoric[:, fem.free]
-            kkt = sp.bmat([[J, A[active].T], [A[active], None]], format="csc")
-            rhs = np.concatenate([-(r[: u.size] * force - A.T @ z), r[u.size:]])
+            kkt = sp.bmat([[J, E[active].T], [E[active], None]], format="csc")
+            rhs = np.concatenate([-(r[: u.size] * force - E[active].T @ y[active]), r[u.size:]])
             step = spla.splu(kkt).solve(rhs)
-            direction, target = step[: u.size], np.zeros_like(z)
+            direction, target = step[: u.size], fixed.copy()
             target[active] = step[u.size:]
             steps += 1
             for length in 0.5 ** np.arange(LINE_SEARCH):  # backtracking on ‖r‖: the points' flow switches on and off
-                trial_u, trial_z = u + length * direction, z + length * (target - z)
-                trial, trial_M = residual(trial_u, trial_z, active)
+                trial_u, trial_y = u + length * direction, y + length * (target - y)
+                trial, trial_M = residual(trial_u, trial_y, active)
                 if np.linalg.norm(trial) < (1 - 1e-4 * length) * np.linalg.norm(r):
                     break
-            u, z, r, M = trial_u, trial_z, trial, trial_M
-        slack = (b - A @ u) / weights
-        settled = rows & (z > slack)
+            u, y, r, M = trial_u, trial_y, trial, trial_M
         if np.abs(r).max() > CONVERGED:
-            return None  # Newton does not settle on this active set
-        if np.array_equal(settled, active) and slack[rows].min(initial=0.0) >= -CONVERGED and z.min(initial=0) >= 0:
-            return ContactFields(u=u, pressure=z), steps
-        active = settled
+            return None  # Newton does not settle on these sets
+        settled, law = sets(u, y)
+        slack = (e[:m] - A @ u) / weights
+        feasible = slack[rows[:m]].min(initial=0.0) >= -CONVERGED and y[:m].min(initial=0.0) >= 0 and \
+            (np.abs(y[m:]) <= bound * (1 + CONVERGED)).all()
+        if np.array_equal(settled, active) and np.array_equal(law, fixed) and feasible:
+            return ContactFields(u=u, pressure=y[:m], friction=y[m:] if friction else None), steps
+        active, fixed = settled, law
+        y = np.where(active, y, fixed)
     return None
