@@ -105,9 +105,16 @@ def never(*_, **__):
 ])
 def test_a_plastic_history_refuses_what_it_is_not_built_for(monkeypatch, scene, options, field, fix):
     monkeypatch.setattr(plastic_history.PlasticProcess, "__init__", never)
-    if field == "body.plane":  # the hypothesis is read off the assembled body (a mesh file may be 2-D or 3-D)
-        monkeypatch.undo()
     raises(lambda: cc.run_history(scene, **options), field, fix)
+
+
+@pytest.mark.parametrize("eta, times", [(1e200, [1e-200, 1.0]), (1e3, [1e-10, 1.0])])
+def test_a_step_far_below_the_plastic_relaxation_time_is_refused(monkeypatch, eta, times):
+    """η_p/(E Δt) beyond 10¹²: the increment would be lost in round-off (beyond the floats: an overflow)."""
+    monkeypatch.setattr(plastic_history.PlasticProcess, "__init__", never)
+    scene = dataclasses.replace(block(cc.Material(**STEEL, yield_stress=0.002, plastic_viscosity=eta)),
+                                history=cc.History(times, {"dirichlet[top].uy": [-0.01, -0.01]}))
+    raises(lambda: cc.run_history(scene), "history.times[0]", "smaller plastic_viscosity")
 
 
 def test_a_plastic_part_of_several_bodies_is_refused(monkeypatch):

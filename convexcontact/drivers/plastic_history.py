@@ -8,18 +8,20 @@ strain from step to step, and :class:`PlasticStepper` extends each step's progra
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
 
 from .. import solvers
 from ..conic import ConicSolution
-from ..fem.plasticity import check_plastic_body, material_per_element, plastic_points
+from ..fem.plasticity import material_per_element, plastic_points
 from ..formulations.fields import ContactFields
 from ..formulations.plastic import PlasticStep, plastic
 from ..results.certificate import Certificate
 from ..results.plastic import PlasticResult, PlasticState
 from ..scene.bodies import Bodies
+from ..scene.history import VISCOUS_RATIO, power
 from ..scene.model import Coulomb, Material, Scene, SceneError
 from . import plastic_polish
 from .history import PROCESSES, Process, keeping_K
@@ -37,6 +39,9 @@ def plastic_scene(scene: Scene) -> bool:
 
 def check_plastic_scene(scene: Scene, formulation: str, solver: str) -> None:
     """Refuse, before any assembly, what the plastic steps are not built for."""
+    if scene.body.plane != "strain":  # 2-D only: a 3-D body refuses plane stress itself
+        raise SceneError("body.plane", "plasticity is built for plane strain and 3-D bodies (plane stress bends the "
+                         "yield surface of the in-plane stresses)", "give plane = 'strain' (the default)")
     if isinstance(scene.body, Bodies):
         raise SceneError("materials", "a yield stress in a scene of several bodies: plasticity is built for one body",
                          "drop yield_stress from the parts' materials, or model one body against a rigid obstacle")
@@ -46,9 +51,24 @@ def check_plastic_scene(scene: Scene, formulation: str, solver: str) -> None:
     if formulation not in ("auto", "primal"):
         raise SceneError("formulation", f"{formulation!r}: a plastic body's strains couple all its DOFs, so its steps "
                          "are posed in the primal only", "use formulation='primal' or 'auto'")
+    check_plastic_steps(scene)
     if solver.partition(":")[0] not in CONIC_SOLVERS:
         raise ValueError(f"solver: {solver!r} cannot take the plastic points' second-order cones; use 'clarabel' "
                          "(or 'auto'), or 'cvxpy:NAME' with a conic solver such as 'cvxpy:CLARABEL'")
+
+
+def check_plastic_steps(scene: Scene) -> None:
+    """Refuse a step Δt so short against a material's plastic relaxation time η_p/E that the viscous term drowns the
+    elastic one (:data:`~convexcontact.scene.history.VISCOUS_RATIO`, as for Kelvin–Voigt steps); compared by
+    logarithms, the ratio may be beyond the floats."""
+    materials = scene.materials.values() if isinstance(scene.materials, dict) else (scene.materials,)
+    viscous = [math.log10(m.plastic_viscosity) - math.log10(m.E) for m in materials if m.plastic_viscosity > 0]
+    steps = np.diff((0.0, *scene.history.times))
+    k = int(np.argmin(steps))
+    if viscous and max(viscous) - math.log10(steps[k]) > math.log10(VISCOUS_RATIO):
+        raise SceneError(f"history.times[{k}]", f"a step of Δt = {steps[k]:.3g} against a plastic relaxation time "
+                         f"η_p/E = {power(max(viscous))}: the plastic increment is lost in round-off",
+                         f"take steps of at least {power(max(viscous) - 12)}, or a smaller plastic_viscosity")
 
 
 class PlasticProcess(Process):
@@ -57,7 +77,6 @@ class PlasticProcess(Process):
     def __init__(self, scene: Scene, timings: dict):
         super().__init__(scene, "primal", timings)
         fem = self.fem
-        check_plastic_body(fem)
         with timed(timings, "plastic points"):
             self.points = plastic_points(fem)
             self.coupling = self.points.coupling()

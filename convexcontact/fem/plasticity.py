@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 import skfem as fe
 
-from ..scene.model import Material, SceneError
+from ..scene.model import Material
 from .assembly import FEModel
 
 _R2, _R6 = np.sqrt(0.5), np.sqrt(1.0 / 6.0)
@@ -103,10 +103,3 @@ def material_per_element(fem: FEModel) -> tuple[np.ndarray, np.ndarray]:
         if material.plastic:
             sigma[cells], eta[cells] = material.yield_stress, material.plastic_viscosity
     return sigma, eta
-
-
-def check_plastic_body(fem: FEModel) -> None:
-    """Plane strain or 3-D: plane stress (σ_zz = 0 bends the yield surface of the in-plane stresses) is not built."""
-    if fem.dim == 2 and fem.scene.body.plane != "strain":
-        raise SceneError("body.plane", "plasticity is built for plane strain and 3-D bodies",
-                         "give plane = 'strain' (the default), or drop yield_stress")
