@@ -23,6 +23,7 @@ import scipy.sparse.linalg as spla
 from ..fem.plasticity import PlasticPoints
 from ..formulations.fields import ContactFields
 from ..formulations.primal import carrying
+from ..results.plastic import radial_return
 
 ROUNDS, STEPS, LINE_SEARCH = 5, 12, 12
 """Active-set rounds, Newton steps in each, halvings of a step."""
@@ -38,8 +39,9 @@ def applies(model) -> bool:
 
 
 def tangent(points: PlasticPoints, u_full, old, radius, viscosity) -> tuple[np.ndarray, sp.spmatrix]:
-    """Δα of the radial return at u and its derivative ∂Δα/∂(Πᵀε) per point, block-diagonal:
-    2μ/(2μ + η_p/Δt) [(1 − r/‖s*‖)(I − nnᵀ) + nnᵀ] where the point flows, 0 elsewhere."""
+    """Δα of the radial return at u (:func:`~convexcontact.results.plastic.radial_return`) and its derivative
+    ∂Δα/∂(Πᵀε) per point, block-diagonal: 2μ/(2μ + η_p/Δt) [(1 − r/‖s*‖)(I − nnᵀ) + nnᵀ] where the point flows,
+    0 elsewhere."""
     k = points.components
     trial = (np.repeat(points.shear, k) * (points.deviatoric @ u_full - old)).reshape(-1, k)
     size = np.linalg.norm(trial, axis=1)
@@ -47,12 +49,11 @@ def tangent(points: PlasticPoints, u_full, old, radius, viscosity) -> tuple[np.n
     ratio = np.divide(radius, size, out=np.ones_like(size), where=flowing)
     normal = trial / np.where(size > 0, size, 1.0)[:, None]
     scale = points.shear / (points.shear + viscosity)
-    increment = ((scale * (1.0 - ratio) / points.shear)[:, None] * trial) * flowing[:, None]
     outer = normal[:, :, None] * normal[:, None, :]
     blocks = scale[:, None, None] * ((1.0 - ratio)[:, None, None] * (np.eye(k) - outer) + outer)
     blocks *= flowing[:, None, None]
     count = blocks.shape[0]
-    return increment.ravel(), sp.bsr_matrix((blocks, np.arange(count), np.arange(count + 1)),
+    return radial_return(points, u_full, old, radius, viscosity), sp.bsr_matrix((blocks, np.arange(count), np.arange(count + 1)),
                                             shape=(count * k, count * k)).tocsr()
 
 

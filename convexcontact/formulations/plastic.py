@@ -50,7 +50,7 @@ def plastic(program: ConicProgram, step: PlasticStep):
                  [None, None, sp.csr_matrix((count, count))]], format="csc")
     q = np.concatenate([program.q - coupling @ step.old, step.stiffness * step.old - step.prescribed,
                         step.dissipation])
-    # cone q holds the rows (t_q, Δα_q): slack s = −(t_q, Δα_q)ᵀ, A = −I on those columns in that order
+    # cone q holds the rows (t_q, Δα_q): A = −I on those columns in that order, so the slack b − Ax is (t_q, Δα_q)
     order = np.column_stack([size + count * k + np.arange(count), size + np.arange(count * k).reshape(count, k)])
     cones_A = sp.csr_matrix((-np.ones(order.size), (np.arange(order.size), order.ravel())),
                             shape=(order.size, size + count * (k + 1)))
