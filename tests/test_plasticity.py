@@ -125,6 +125,27 @@ def test_rate_independent_relaxation_stops_at_the_yield_surface_at_once():
     np.testing.assert_allclose(step.max_von_mises, YIELD, rtol=1e-10)
 
 
+@pytest.mark.parametrize("delta", [1e-4, 1e-6, 1e-8])
+def test_the_material_residuals_grow_linearly_with_a_violation(delta):
+    """The exact rate-independent state moved off the law — the deviator pushed δ (the data's stress scale) beyond
+    the yield surface, or the increment turned by an angle δ away from the deviator — scores between δ/2 and 2δ
+    (the turn: in units of the yield radius r), linear in δ as a natural map is, where a product would score δ²."""
+    step = cc.run_history(confined_block("Q1", [1.0], eta=0.0)).steps[0]
+    u = step.displacement / step.fem.scaling.displacement
+    state = step.plastic
+    assert max(state.residuals(u).values()) < 1e-12
+    k = state.points.components
+    outward = state.deviator.reshape(-1, k).copy()
+    outward /= np.linalg.norm(outward, axis=1)[:, None]
+    beyond = dataclasses.replace(state, deviator=state.deviator + delta * outward.ravel())
+    assert delta / 2 < beyond.residuals(u)["yield_condition"] < 2 * delta
+    size = np.linalg.norm(state.increment.reshape(-1, k), axis=1)[0]
+    across = np.zeros(k * state.points.count)
+    across[: k] = np.cross(outward[0], [0.0, 0.0, 1.0] if abs(outward[0, 2]) < 0.9 else [1.0, 0.0, 0.0])
+    turned = dataclasses.replace(state, increment=state.increment + delta * size * across / np.linalg.norm(across))
+    assert delta / 2 < turned.residuals(u)["flow_rule"] / (np.sqrt(2 / 3) * YIELD / step.fem.scaling.pressure) < 2 * delta
+
+
 @pytest.mark.parametrize("eta", [0.5, 0.0])
 def test_perzyna_creep_under_a_held_pressure_follows_backward_euler(eta):
     """Held pressure p: ‖s‖ = 2μ(2p/(√6 M) − α K/M) relaxes to r with τ_c = η_p M / (2μ K) while the top sinks by
