@@ -3,7 +3,7 @@
 The contact side is the elastic history's (:mod:`.history`: the step's loads and obstacle, friction on the slip
 increment, the primal program); :class:`PlasticProcess` carries the plastic strain α and the accumulated plastic
 strain from step to step, and :class:`PlasticStepper` extends each step's program with the plastic points
-(:func:`~convexcontact.formulations.plastic.plastic`), solves it and certifies the contact and the material law.
+(:func:`~convexcontact.formulations.plastic_step.plastic`), solves it and certifies the contact and the material law.
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ from .. import solvers
 from ..conic import ConicSolution
 from ..fem.plasticity import material_per_element, plastic_points
 from ..formulations.fields import ContactFields
-from ..formulations.plastic import PlasticStep, plastic
+from ..formulations.plastic_step import PlasticStep, plastic
 from ..results.certificate import Certificate
-from ..results.plastic import PlasticResult, PlasticState
+from ..results.plastic_state import PlasticResult, PlasticState
 from ..scene.bodies import Bodies
 from ..scene.history import VISCOUS_RATIO, power
 from ..scene.model import Coulomb, Material, Scene, SceneError

@@ -23,7 +23,7 @@ import scipy.sparse.linalg as spla
 from ..fem.plasticity import PlasticPoints
 from ..formulations.fields import ContactFields
 from ..formulations.primal import carrying
-from ..results.plastic import radial_return
+from ..results.plastic_state import radial_return
 
 ROUNDS, STEPS, LINE_SEARCH = 5, 12, 12
 """Active-set rounds, Newton steps in each, halvings of a step."""
@@ -39,7 +39,7 @@ def applies(model) -> bool:
 
 
 def tangent(points: PlasticPoints, u_full, old, radius, viscosity) -> tuple[np.ndarray, sp.spmatrix]:
-    """Δα of the radial return at u (:func:`~convexcontact.results.plastic.radial_return`) and its derivative
+    """Δα of the radial return at u (:func:`~convexcontact.results.plastic_state.radial_return`) and its derivative
     ∂Δα/∂(Πᵀε) per point, block-diagonal: 2μ/(2μ + η_p/Δt) [(1 − r/‖s*‖)(I − nnᵀ) + nnᵀ] where the point flows,
     0 elsewhere."""
     k = points.components

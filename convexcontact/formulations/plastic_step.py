@@ -40,7 +40,7 @@ class PlasticStep:
 
 def plastic(program: ConicProgram, step: PlasticStep):
     """The step's program and the map from its solution to the contact program's (for ``recover``). Δα is read
-    off u afterwards (:func:`~convexcontact.results.plastic.radial_return`): at fixed u the program is separable
+    off u afterwards (:func:`~convexcontact.results.plastic_state.radial_return`): at fixed u the program is separable
     over the points, each one's minimizer in closed form."""
     size, rows, n = program.n_variables, program.n_constraints, step.coupling.shape[0]
     count, k = step.dissipation.size, step.components
