@@ -241,6 +241,10 @@ def commands(argv=None) -> int:
     compare.add_argument("--out", type=Path, default=None, help="folder for the pressure overlay PNG (peer files)")
     compare.add_argument("--overwrite", action="store_true", help="replace a pressures.png already in --out")
     argv = sys.argv[1:] if argv is None else list(argv)
+    options = argv[:argv.index("--")] if "--" in argv else argv
+    dashes = next((word for word in options if word.startswith("--") and word.endswith("=--")), None)
+    if dashes:  # argparse (3.11) reads "--tol=--" as an empty list and passes it on, past every type check
+        parser.error(f"{dashes[:-3]}: expected a value, got '--' (the end of options); give {dashes[:-2]}VALUE")
     if argv[:1] == ["study"] and (len(argv) == 1 or argv[1] in ("-h", "--help")):
         study.print_help()
         print("\neach study has its own options: convexcontact study KIND --help")
