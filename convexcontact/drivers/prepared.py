@@ -24,7 +24,7 @@ from ..formulations import FORMULATIONS, contact_weights
 from ..formulations.dual import stick_guess
 from ..results.certificate import certify
 from ..results.result import ContactResult, contact_nodes, not_unique
-from ..scene.model import (
+from ..scene.description import (
     Coulomb,
     PerPair,
     Scene,
@@ -36,14 +36,7 @@ from ..scene.model import (
     has_friction,
     of_type,
 )
-from .model import (
-    DENSE_NEWTON,
-    MATRIX_FREE,
-    choose_formulation,
-    contact_columns,
-    dense_newton,
-    matrix_free_obstruction,
-)
+from .rules import DENSE_NEWTON, MATRIX_FREE, choose_formulation, contact_columns, dense_newton, matrix_free_obstruction
 from .scales import check_force, check_gap_scale, check_law_scales
 
 LAW_DRIVERS: dict[type, Callable] = {}

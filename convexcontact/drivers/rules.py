@@ -10,7 +10,7 @@ import scipy.sparse as sp
 from .. import solvers
 from ..conic import ConicProgram
 from ..fem.assembly import FEModel
-from ..scene.model import Coulomb, compliance_of
+from ..scene.description import Coulomb, compliance_of
 
 INCOMPRESSIBLE = 1000.0
 """λ/μ (ν ≈ 0.4995) from which "auto" keeps the primal: on the Cattaneo–Mindlin scene the

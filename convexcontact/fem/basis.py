@@ -7,7 +7,7 @@ from functools import cached_property
 import numpy as np
 import skfem as fe
 
-from ..scene.model import SceneError
+from ..scene.description import SceneError
 from ..scene.meshing import ELEMENT_TYPES
 
 CENTROID = (np.array([[1.0 / 3.0], [1.0 / 3.0]]), np.array([0.5]))

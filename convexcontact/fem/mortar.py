@@ -31,9 +31,9 @@ import scipy.sparse as sp
 import skfem as fe
 
 from ..scene.bodies import Pair, Pairs
-from ..scene.model import Contact, SceneError
+from ..scene.description import Contact, SceneError
+from ..scene.meshing import check_boundary
 from .contact import ContactTrace, contact_trace, tangent_frame
-from .mesh import check_boundary
 from .mortar3d import Facets, facets_3d, mortar_3d
 from .scaling import Scaling
 

@@ -16,7 +16,7 @@ import numpy as np
 import skfem as fe
 from scipy.spatial import cKDTree
 
-from ..scene.model import SceneError
+from ..scene.description import SceneError
 
 FACING = 1e-3
 """A master facet faces a slave facet when their normals make more than 90° + 0.06° (a facet seen edge-on

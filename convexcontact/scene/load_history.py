@@ -32,7 +32,7 @@ import numpy as np
 from .checks import SceneError, finite, finite_vector
 
 if TYPE_CHECKING:
-    from .model import Scene
+    from .description import Scene
 
 PATH = re.compile(r"^(?:(?:contact\[(\d+)\]\.)?(obstacle)\.(depth|force|tangential_force|gap)"
                   r"|(dirichlet)\[([^\]]+)\]\.(ux|uy|uz)"

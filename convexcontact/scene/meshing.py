@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import skfem as fe
 
-from .model import Body, Box, MeshFile, Rectangle, SceneError
+from .description import Body, Box, MeshFile, Rectangle, SceneError
 
 ELEMENT_TYPES = {  # (element name, dimension) → (element, meshes it fits, quadrature order)
     ("P1", 2): (fe.ElementTriP1, (fe.MeshTri1,), 1),
