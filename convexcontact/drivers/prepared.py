@@ -1,6 +1,6 @@
 """The prepared model: scene → FE model → formulation, ready for any solver; a timing for every stage.
 
-The drivers build on it: :mod:`.picard` (Coulomb), :mod:`.history` (load histories),
+The drivers build on it: :mod:`.picard` (Coulomb), :mod:`.history_run` (load histories),
 :mod:`.solutions` (every solution); :mod:`.solve` is the entry point that picks one.
 """
 

@@ -1,7 +1,7 @@
 """The entry point: one call that picks the driver a scene needs.
 
-A static scene is prepared (:mod:`.model`) and solved — Coulomb laws through the Picard map of
-:mod:`.picard`; a scene with a history runs it step by step (:mod:`.history`); ``solutions="all"``
+A static scene is prepared (:mod:`.prepared`) and solved — Coulomb laws through the Picard map of
+:mod:`.picard`; a scene with a history runs it step by step (:mod:`.history_run`); ``solutions="all"``
 lists every solution of a Coulomb scene (:mod:`.solutions`).
 """
 
