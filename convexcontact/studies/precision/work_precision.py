@@ -26,7 +26,7 @@ cannot run (OSQP with a 3-D or power cone, the dual with normal compliance) are 
 status ``n/a`` and the reason in ``message``; failed solves are rows too. ::
 
     from convexcontact.scene.library import hertz_punch
-    from convexcontact.studies import work_precision as wp
+    from convexcontact.studies.precision import work_precision as wp
     rows = wp.run(hertz_punch(nx=40))
     print(wp.table(rows)); wp.plot(rows, "wp.png"); wp.write_csv(rows, "wp.csv")
 """
