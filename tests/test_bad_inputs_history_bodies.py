@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 
 import convexcontact as cc
 from convexcontact import cli
-from convexcontact.drivers import history as history_driver
+from convexcontact.drivers import history_run as history_driver
 from convexcontact.drivers import solutions as solutions_driver
-from convexcontact.scene.model import Box
+from convexcontact.scene.description import Box
 
 SURFACES = ("cc.History", "cc.run_history", "cc.HistoryResult", "cc.bodies_scene", "cc.Part", "cc.Pair",
             "cc.bodies_library", "cc.all_solutions", "cc.SolutionSet", "convexcontact run")

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 import convexcontact as cc
 from convexcontact import solvers
 from convexcontact.results.certificate import certify
-from convexcontact.scene.model import Box
+from convexcontact.scene.description import Box
 
 AGREEMENT = 1e3
 """How far two certified answers may differ, in units of their worst residuals: a residual r bounds the

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import convexcontact as cc
-from convexcontact.scene.model import Coulomb
-from convexcontact.studies import stability
+from convexcontact.scene.description import Coulomb
+from convexcontact.studies.precision import stability
 
 ALL_PATHS = tuple(stability.PATHS)
 CLARABEL = ("clarabel/primal", "clarabel/dual", "cvxpy/primal")  # cvxpy's default solver is Clarabel too
