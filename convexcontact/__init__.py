@@ -9,16 +9,15 @@ Build a :class:`Scene`, call :func:`solve`, read the :class:`ContactResult`::
 """
 
 from .conic import ConicProgram, ConicSolution
-from .drivers.history import HistoryResult
-from .drivers.history import run as run_history
-from .drivers.model import Model, prepare
+from .drivers.history_run import HistoryResult
+from .drivers.history_run import run as run_history
+from .drivers.prepared import Model, prepare
 from .drivers.solutions import SolutionSet, all_solutions
 from .drivers.solve import solve
 from .results.result import ContactResult
 from .scene import bodies_library, library
 from .scene.bodies import Pair, Part, bodies_scene
-from .scene.history import History
-from .scene.model import (
+from .scene.description import (
     Body,
     Box,
     Contact,
@@ -35,6 +34,7 @@ from .scene.model import (
     Traction,
     Tresca,
 )
+from .scene.load_history import History
 from .scene.toml import load_scene
 
 __all__ = [

@@ -16,7 +16,7 @@ import convexcontact as cc
 from convexcontact.baselines import return_mapping_history
 from convexcontact.fem.assembly import assemble
 from convexcontact.fem.plasticity import plastic_points
-from convexcontact.scene.model import Box
+from convexcontact.scene.description import Box
 
 E, NU = 1.0, 0.3
 LAME, SHEAR = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (1 + NU)  # λ and 2μ

@@ -17,7 +17,7 @@ import scipy.sparse as sp
 
 from ..fem.assembly import FEModel, assemble
 from ..fem.plasticity import PlasticPoints, material_per_element, plastic_points
-from ..scene.model import Scene, SceneError, of_type
+from ..scene.description import Scene, SceneError, of_type
 from .penalty import check_inputs, newton
 
 

@@ -21,11 +21,11 @@ from ..formulations.plastic_step import PlasticStep, plastic
 from ..results.certificate import Certificate
 from ..results.plastic_state import PlasticResult, PlasticState
 from ..scene.bodies import Bodies
-from ..scene.history import VISCOUS_RATIO, power
-from ..scene.model import Coulomb, Material, Scene, SceneError
+from ..scene.description import Coulomb, Material, Scene, SceneError
+from ..scene.load_history import VISCOUS_RATIO, power
 from . import plastic_polish
-from .history import PROCESSES, Process, keeping_K
-from .model import CERTIFIED, Model, judge, timed
+from .history_run import PROCESSES, Process, keeping_K
+from .prepared import CERTIFIED, Model, judge, timed
 
 CONIC_SOLVERS = ("auto", "clarabel", "cvxpy")
 """The solver paths that take the plastic points' second-order cones."""
@@ -59,7 +59,7 @@ def check_plastic_scene(scene: Scene, formulation: str, solver: str) -> None:
 
 def check_plastic_steps(scene: Scene) -> None:
     """Refuse a step Δt so short against a material's plastic relaxation time η_p/E that the viscous term drowns the
-    elastic one (:data:`~convexcontact.scene.history.VISCOUS_RATIO`, as for Kelvin–Voigt steps); compared by
+    elastic one (:data:`~convexcontact.scene.load_history.VISCOUS_RATIO`, as for Kelvin–Voigt steps); compared by
     logarithms, the ratio may be beyond the floats."""
     materials = scene.materials.values() if isinstance(scene.materials, dict) else (scene.materials,)
     viscous = [math.log10(m.plastic_viscosity) - math.log10(m.E) for m in materials if m.plastic_viscosity > 0]

@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 import skfem as fe
 
-from ..scene.model import Material
+from ..scene.description import Material
 from .assembly import FEModel
 
 _R2, _R6 = np.sqrt(0.5), np.sqrt(1.0 / 6.0)

@@ -31,7 +31,7 @@ def output_folder(directory) -> Path:
 
 
 def save_history(history, directory, formats=FORMATS) -> list[Path]:
-    """Write the chosen outputs of a :class:`~convexcontact.drivers.history.HistoryResult`; return the paths."""
+    """Write the chosen outputs of a :class:`~convexcontact.drivers.history_run.HistoryResult`; return the paths."""
     directory, paths = begin(history, output_folder(directory), formats)
     solved = [(t, s) for t, s in zip(history.times, history.steps) if s.solved]
     if "vtk" in formats and solved:

@@ -12,7 +12,7 @@ import numpy as np
 from matplotlib.collections import PolyCollection
 
 from ..analytic import hertz_plane_strain, hertz_pressure, hertz_sphere
-from ..scene.model import Coulomb, Material, Tresca, field_at_nodes, has_friction
+from ..scene.description import Coulomb, Material, Tresca, field_at_nodes, has_friction
 from .fields_out import vertex_displacement
 
 

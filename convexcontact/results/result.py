@@ -13,7 +13,7 @@ from ..fem.estimate import ContactState, ErrorEstimate, algebraic_error, estimat
 from ..fem.friction import FrictionPoints
 from ..fem.mortar import PairTrace
 from ..formulations.fields import ContactFields
-from ..scene.model import compliance_of
+from ..scene.description import compliance_of
 from .certificate import Certificate, normal_displacement, normal_gap, pair_multipliers
 from .fields_out import element_stress
 
@@ -341,7 +341,7 @@ def not_unique(fem: FEModel, fields: ContactFields, friction: FrictionPoints | N
     the support: reported as 0), nor among Gauss friction points that stick on more points than the
     nodal DOFs they act on (the nodal friction force Gᵀωλ_T stays unique and is what is reported).
     """
-    from ..scene.model import Coulomb, compliance_of
+    from ..scene.description import Coulomb, compliance_of
 
     contact, reasons = fem.contact, {}
     normal = held(contact.N)

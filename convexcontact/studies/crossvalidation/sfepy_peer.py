@@ -8,7 +8,7 @@ each file back through :func:`.peer.compare_peer` (the route any peer's file tak
 error against k: it falls like 1/k until the two discretizations of the contact condition (sfepy's
 Gauss points and current-configuration sphere, our nodes and linearized gap) differ more than the
 penalty does. Each row also compares sfepy with our own solve of the same penalty at the same Gauss
-points (:class:`~convexcontact.scene.model.NormalCompliance` with ``non_penetration = "gauss"``): two
+points (:class:`~convexcontact.scene.description.NormalCompliance` with ``non_penetration = "gauss"``): two
 penalty solvers, cross-validated at every k. ::
 
     convexcontact study sfepy --cells 8 --stiffness 1e0 1e1 1e2 1e3 1e4 --out out/sfepy
@@ -28,11 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..drivers.model import prepare
-from ..fem.mesh import BOUNDARY_NAMES
-from ..results.output import check_new_files
-from ..scene.library import quarter_box
-from ..scene.model import Box, Material, NormalCompliance, Obstacle, Scene, Signorini
+from ...drivers.prepared import prepare
+from ...results.output import check_new_files
+from ...scene.description import Box, Material, NormalCompliance, Obstacle, Scene, Signorini
+from ...scene.library import quarter_box
+from ...scene.meshing import BOUNDARY_NAMES
 from .peer import compare_peer
 from .sweeps import Sweep, plot_sweep, table
 
@@ -183,8 +183,8 @@ OUTPUTS = ("mesh.vtk", "sfepy_k*.vtk", "sfepy_penalty.png")
 def main(argv=None) -> Sweep:
     """``convexcontact study sfepy [--cells N] [--stiffness K …]``: sfepy's penalty sphere at each k against the
     exact answer; sfepy's files and sfepy_penalty.png in --out."""
-    from ..fem.mesh import check_size
-    from .arguments import SECONDS_PER_DOF, check_duration, integer, named, number
+    from ...scene.meshing import check_size
+    from ..arguments import SECONDS_PER_DOF, check_duration, integer, named, number
 
     parser = argparse.ArgumentParser(prog="convexcontact study sfepy", description=main.__doc__)
     parser.add_argument("--cells", type=integer(1, 8), default=8, help="cells per edge of the quarter box (default 8)")

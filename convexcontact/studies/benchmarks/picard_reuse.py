@@ -4,7 +4,7 @@ With reuse: the driver's one solver session (Clarabel keeps its setup, OSQP its
 factorization and warm start; the dual keeps K's factorization and W). Without: every
 step builds and solves a fresh program (formulation + solver setup), as a naive loop would.
 
-    python benchmarks/picard_reuse.py [--sizes 0.01 0.005] [--solvers clarabel osqp]
+    python -m convexcontact.studies.benchmarks.picard_reuse [--sizes 0.01 0.005] [--solvers clarabel osqp]
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ cannot run (OSQP with a 3-D or power cone, the dual with normal compliance) are 
 status ``n/a`` and the reason in ``message``; failed solves are rows too. ::
 
     from convexcontact.scene.library import hertz_punch
-    from convexcontact.studies import work_precision as wp
+    from convexcontact.studies.precision import work_precision as wp
     rows = wp.run(hertz_punch(nx=40))
     print(wp.table(rows)); wp.plot(rows, "wp.png"); wp.write_csv(rows, "wp.csv")
 """
@@ -41,12 +41,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analytic import hertz_plane_strain, hertz_pressure
-from ..drivers.model import prepare
-from ..results.result import ContactResult
-from ..scene.model import Coulomb, Material, NormalCompliance, Scene, SceneError, Signorini, has_friction
-from ..solvers import ConeNotSupported
-from .arguments import SECONDS_PER_DOF, check_duration, number
+from ...analytic import hertz_plane_strain, hertz_pressure
+from ...drivers.prepared import prepare
+from ...results.result import ContactResult
+from ...scene.description import Coulomb, Material, NormalCompliance, Scene, SceneError, Signorini, has_friction
+from ...solvers import ConeNotSupported
+from ..arguments import SECONDS_PER_DOF, check_duration, number
 
 FORMULATIONS = ("primal", "dual")
 SOLVERS = ("clarabel", "osqp", "cvxpy")
@@ -299,7 +299,7 @@ COLORS = {"clarabel": "tab:blue", "osqp": "tab:orange", "cvxpy": "tab:green"}
 
 def plot(rows: Sequence[dict], path, title: str | None = None) -> Path:
     """Log-log error against wall time: marker = method, colour = solver, hollow = dual; the Pareto front as a line."""
-    from ..results.plots import plt, save_figure
+    from ...results.plots import plt, save_figure
 
     data = measured(rows)
     fig, ax = plt.subplots(figsize=(7.5, 5.0))
@@ -334,8 +334,8 @@ PUNCH_H = 0.2
 
 def library_scene(name: str, size: float | None = None) -> Scene:
     """``hertz``: hertz_punch(nx) (closed form); ``punch``: the depth-controlled frictional punch, Tresca s = 0.005."""
-    from ..scene.library import frictional_punch, hertz_punch
-    from ..scene.model import Tresca
+    from ...scene.description import Tresca
+    from ...scene.library import frictional_punch, hertz_punch
 
     if name == "hertz":
         return hertz_punch(nx=int(size or 40))
@@ -347,7 +347,7 @@ def library_scene(name: str, size: float | None = None) -> Scene:
 def library_dofs(name: str, size: float | None, option: str) -> float:
     """The DOFs of :func:`library_scene` (about, for the punch), refusing a size that makes no mesh or one too
     large for this machine's memory, before anything is built."""
-    from ..fem.mesh import check_memory
+    from ...scene.meshing import check_memory
 
     if name == "hertz":
         nx = 40 if size is None else size
@@ -369,8 +369,8 @@ def main(argv=None) -> list[dict]:
     formulation × solver × tolerance × method; NAME.csv, NAME.png and NAME.txt in --out."""
     import argparse
 
-    from .. import solvers as solver_paths
-    from ..results.output import check_new_files
+    from ... import solvers as solver_paths
+    from ...results.output import check_new_files
 
     parser = argparse.ArgumentParser(prog="convexcontact study work-precision", description=main.__doc__)
     parser.add_argument("scene", choices=SCENES)

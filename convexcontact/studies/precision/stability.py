@@ -12,7 +12,7 @@ converged`` with a message, or an input error naming a field). A ``solved`` answ
 large error is a wrong answer reported as solved, the one outcome the suite exists to
 catch. ::
 
-    from convexcontact.studies.stability import run, table
+    from convexcontact.studies.precision.stability import run, table
     print(table(run(quick=True)))
 """
 
@@ -33,10 +33,10 @@ from scipy.optimize import brentq
 
 import convexcontact as cc
 from convexcontact.analytic import hertz_plane_strain, hild_one_triangle_solutions
-from convexcontact.fem.mesh import graded, tensor_mesh
 from convexcontact.results.output import check_new_file
+from convexcontact.scene.description import Coulomb, SceneError
 from convexcontact.scene.library import HERTZ_FORCE, frictional_punch, punch_mesh
-from convexcontact.scene.model import Coulomb, SceneError
+from convexcontact.scene.meshing import graded, tensor_mesh
 
 PATHS = {
     "clarabel/primal": ("clarabel", "primal"),

@@ -35,14 +35,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fem.mesh import build_mesh, check_size
-from ..results.output import check_folder_target
-from ..scene.bodies import Bodies
-from ..scene.checks import of_type
-from ..scene.history import PATH
-from ..scene.history import at as set_load
-from ..scene.model import Box, MeshFile, Rectangle, Scene, SceneError
-from ..solvers import check_name, check_options
+from ...results.output import check_folder_target
+from ...scene.bodies import Bodies
+from ...scene.checks import of_type
+from ...scene.description import Box, MeshFile, Rectangle, Scene, SceneError
+from ...scene.load_history import PATH
+from ...scene.load_history import at as set_load
+from ...scene.meshing import build_mesh, check_size
+from ...solvers import check_name, check_options
 
 LAW_FIELDS = ("friction", "slip_bound", "stiffness", "exponent", "regularization", "relaxation")
 BODY_FIELDS = {Rectangle: ("nx", "ny", "element"), Box: ("cells", "element"), MeshFile: ("element",)}
@@ -178,7 +178,7 @@ def group_of(scene: Scene) -> str:
 
 def run_group(members: list[tuple[dict, Scene]], solver: str, formulation: str) -> list[dict]:
     """Solve the cases of one group on one worker: assemble and condense once, then each case's loads and law."""
-    from ..drivers.model import formulate, prepare
+    from ...drivers.prepared import formulate, prepare
 
     rows, model = [], None
     worker = f"{socket.gethostname()}:{os.getpid()}"
@@ -231,8 +231,8 @@ def resume(table: Path, grid: list[str]) -> tuple[list[str], set[str]]:
 def check_run(solver: str, formulation: str, scheduler: str | None, workers: int | None, out: Path) -> None:
     """Refuse, before any work, a solver, formulation, scheduler, number of workers or output folder that cannot
     serve (the scheduler is asked who it is)."""
-    from ..drivers.model import MATRIX_FREE
-    from ..formulations import FORMULATIONS
+    from ...drivers.rules import MATRIX_FREE
+    from ...formulations import FORMULATIONS
 
     check_name(solver)
     if formulation not in (*FORMULATIONS, MATRIX_FREE, "auto"):
@@ -417,7 +417,7 @@ def as_option(message: str) -> str:
 
 def main(argv=None) -> list[dict]:
     """Solve a scene over a grid of parameters on a Dask cluster; rows in OUT/grid.csv."""
-    from ..scene.toml import load_scene
+    from ...scene.toml import load_scene
 
     parser = argparse.ArgumentParser(prog="convexcontact study grid", description=main.__doc__)
     parser.add_argument("scene", type=Path, help="scene file")

@@ -33,8 +33,8 @@ import scipy.sparse as sp
 import skfem as fe
 from scipy.spatial import cKDTree
 
-from ..results.result import CLOSED_PRESSURE, ContactResult
-from ..scene.checks import of_type
+from ...results.result import CLOSED_PRESSURE, ContactResult
+from ...scene.checks import of_type
 from .compare import mass_matrix, relative, traction_errors
 
 DISPLACEMENT_NAMES = ("displacement", "displacements", "u", "disp", "DISPLACEMENT", "Displacement", "U")
@@ -294,7 +294,7 @@ def plot_pressures(report: dict, path) -> Path:
     """Both pressure curves along Γ_C."""
     import matplotlib.pyplot as plt
 
-    from ..results.plots import save_figure
+    from ...results.plots import save_figure
 
     s, ours, peer = report["pressure_curves"]
     order = np.argsort(s)

@@ -31,7 +31,7 @@ def slabs(cells: int, ratio: float = 1.3):
     """Two slabs of P1 tetrahedra, ``cells`` × ``cells`` hexahedra across (2 cells² triangles) against about
     ``ratio`` times as many per side, one layer deep."""
     import convexcontact as cc
-    from convexcontact.scene.model import Box
+    from convexcontact.scene.description import Box
 
     master = round(ratio * cells)
     parts = [cc.Part("upper", Box(size=(1.0, 1.0, 1 / cells), cells=(cells, cells, 1), origin=(0, 0, 1 / master)),

@@ -1,16 +1,16 @@
-"""Meshes and finite element bases from a scene's body."""
+"""A body's mesh: the built-in rectangles and boxes, mesh files read with meshio, the checks of a user's mesh,
+its named boundaries, and the memory its problem needs (refused before anything is built)."""
 
 from __future__ import annotations
 
-from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 import skfem as fe
 
-from ..scene.model import Body, Box, MeshFile, Rectangle, SceneError
+from .description import Body, Box, MeshFile, Rectangle, SceneError
 
-_ELEMENTS = {  # (element name, dimension) → (element, meshes it fits, quadrature order)
+ELEMENT_TYPES = {  # (element name, dimension) → (element, meshes it fits, quadrature order)
     ("P1", 2): (fe.ElementTriP1, (fe.MeshTri1,), 1),
     ("P2", 2): (fe.ElementTriP2, (fe.MeshTri1, fe.MeshTri2), 2),
     ("Q1", 2): (fe.ElementQuad1, (fe.MeshQuad1,), 2),
@@ -24,12 +24,9 @@ _ELEMENTS = {  # (element name, dimension) → (element, meshes it fits, quadrat
 default 2·maxdeg: the stiffness integrand ∇φ·∇ψ has degree 2(p−1) on simplices and, on
 parallelepipeds, 2p per variable with ∂ lowering one of them — Gauss with p+1 points per
 direction (order 2p) is exact; loads ∫b·v need degree p. So P1: 1 point (on triangles the centroid,
-:data:`CENTROID`: scikit-fem's lowest rule there has 3 points), P2: order 2,
+:data:`~convexcontact.fem.basis.CENTROID`: scikit-fem's lowest rule there has 3 points), P2: order 2,
 Q1: 2×2(×2), Q2: 3×3(×3) points — the default spends 64 points on a Q1 hex, 343 on Q2.
 On distorted quadrilaterals/hexahedra no rule is exact; these are the standard ones."""
-
-CENTROID = (np.array([[1.0 / 3.0], [1.0 / 3.0]]), np.array([0.5]))
-"""The one-point rule of the reference triangle (exact for degree 1): P1's stiffness and loads."""
 
 BOUNDARY_NAMES = {  # per dimension: the (low, high) sides of each axis
     2: (("left", "right"), ("bottom", "top")),
@@ -217,8 +214,8 @@ def check_size(body: Body) -> None:
 
 def check_mesh_size(mesh: fe.Mesh, element: str, source: str) -> fe.Mesh:
     """Refuse a user's mesh whose problem would not fit in memory, before anything is assembled on it."""
-    if (element, mesh.dim()) in _ELEMENTS and isinstance(mesh, _ELEMENTS[element, mesh.dim()][1]):
-        dofs = mesh.dim() * fe.Dofs(mesh, _ELEMENTS[element, mesh.dim()][0]()).N
+    if (element, mesh.dim()) in ELEMENT_TYPES and isinstance(mesh, ELEMENT_TYPES[element, mesh.dim()][1]):
+        dofs = mesh.dim() * fe.Dofs(mesh, ELEMENT_TYPES[element, mesh.dim()][0]()).N
         check_memory(dofs, mesh.dim(), "body.mesh", f"{source}: {mesh.t.shape[1]} cells of {element}",
                      "use a coarser mesh, refined only where contact is")
     return mesh
@@ -370,49 +367,6 @@ def same_topology(new: fe.Mesh, old: fe.Mesh) -> fe.Mesh:
 def scaled(mesh: fe.Mesh, factor: float) -> fe.Mesh:
     """``mesh`` with its coordinates times ``factor``."""
     return same_topology(mesh.scaled([factor] * mesh.dim()), mesh)
-
-
-def vector_basis(mesh: fe.Mesh, element: str, intorder: int | None = None) -> fe.Basis:
-    """Vector-valued basis of ``element`` on ``mesh`` with the quadrature of :data:`_ELEMENTS`
-    (``intorder`` overrides it); refuses mismatched cell types."""
-    dim = mesh.dim()
-    if (element, dim) not in _ELEMENTS:
-        raise SceneError("body.element", f"{element} has no {dim}-D version")
-    element_type, mesh_types, order = _ELEMENTS[element, dim]
-    if not isinstance(mesh, mesh_types):
-        raise SceneError(
-            "body.element",
-            f"{element} does not fit a {type(mesh).__name__} mesh",
-            "use P1/P2 on triangles or tetrahedra and Q1/Q2 on quadrilaterals or hexahedra",
-        )
-    quadrature = CENTROID if (element, dim) == ("P1", 2) and intorder is None else None
-    return VectorBasis(mesh, fe.ElementVector(element_type()), intorder=order if intorder is None else intorder,
-                       quadrature=quadrature)
-
-
-class VectorBasis(fe.CellBasis):
-    """scikit-fem's CellBasis whose shape functions are evaluated at the quadrature points on first use.
-
-    A CellBasis evaluates the values and gradients of all its vector shape functions at every quadrature point
-    when built: 1.1 s and 0.3 GB at 10⁶ DOFs of P1 in 2-D, 4.3 GB for Q1 at 3·10⁵ DOFs in 3-D. The assembly needs
-    only the DOFs and the scalar gradients (:mod:`.stiffness`); what integrates over the whole body with this
-    basis (body forces, stresses) evaluates them then. The constructor is CellBasis's, its last two
-    lines made properties (so that scikit-fem's ``with_elements``, ``split_bases`` … build this class too)."""
-
-    def __init__(self, mesh: fe.Mesh, elem: fe.Element, mapping=None, intorder: int | None = None, elements=None,
-                 quadrature: tuple | None = None, dofs=None, disable_doflocs: bool = False):
-        fe.AbstractBasis.__init__(self, mesh, elem, mapping, intorder, quadrature, mesh.refdom, dofs, disable_doflocs)
-        self.tind = None if elements is None else mesh.normalize_elements(elements)
-        self.nelems = mesh.nelements if elements is None else len(self.tind)
-
-    @cached_property
-    def basis(self) -> list:
-        return [self.elem.gbasis(self.mapping, self.X, j, tind=self.tind) for j in range(self.Nbfun)]
-
-    @cached_property
-    def dx(self) -> np.ndarray:
-        return (np.abs(self.mapping.detDF(self.X, tind=self.tind))
-                * np.broadcast_to(self.W, (self.nelems, self.W.shape[-1])))
 
 
 def check_boundary(mesh: fe.Mesh, name: str, field_name: str) -> np.ndarray:

@@ -3,7 +3,7 @@
 The scene is the sliding block of issue 11: a clamped top presses a block into a rigid plane, then
 drags it out and back (Tresca, or Coulomb with ``--law coulomb``), N steps in all. In one process
 per size the benchmark times (a) one linear elastic solve, K's factorization plus u = K⁻¹f,
-(b) the whole history through :func:`~convexcontact.drivers.history.run` — one assembly, one
+(b) the whole history through :func:`~convexcontact.drivers.history_run.run` — one assembly, one
 condensation, one solver session warm-started from step to step — and (c) the same N steps as N
 independent static solves, each assembled, condensed and solved afresh (the static problem of
 step k with the previous slip is what the history solves; (c) has no memory, so it is a cost
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..results.output import check_new_files
-from .arguments import SECONDS_PER_DOF, check_duration, integer, named, number
+from ...results.output import check_new_files
+from ..arguments import SECONDS_PER_DOF, check_duration, integer, named, number
 
 CSV = "history_bench.csv"
 COLUMNS = ("dofs", "contact_nodes", "steps", "law", "formulation", "status", "linear", "history", "static",
@@ -31,7 +31,7 @@ COLUMNS = ("dofs", "contact_nodes", "steps", "law", "formulation", "status", "li
 def sliding_block(dofs: float, steps: int, law: str):
     """The block ``[0, 4] × [0, 1]`` of about ``dofs`` DOFs (P1), pressed by 0.01 and dragged out and back."""
     import convexcontact as cc
-    from convexcontact.scene.history import History
+    from convexcontact.scene.load_history import History
 
     nx = max(8, 4 * round(np.sqrt(2 * dofs) / 4))  # 2(nx + 1)(nx/4 + 1) ≈ nx²/2 DOFs
     stroke = np.linspace(0.0, 0.02, steps // 2 + 1)
@@ -52,7 +52,7 @@ def case(dofs: float, steps: int, law: str) -> dict:
     import dataclasses
 
     import convexcontact as cc
-    from convexcontact.drivers.history import run
+    from convexcontact.drivers.history_run import run
     from convexcontact.fem.assembly import assemble
     from convexcontact.fem.factorization import factorize
 
@@ -79,7 +79,7 @@ def case(dofs: float, steps: int, law: str) -> dict:
 
 def check_arguments(args) -> None:
     """Sizes, memory, the estimated run time and the output folder, before any case runs."""
-    from ..fem.mesh import check_size
+    from ...scene.meshing import check_size
 
     if min(args.sizes) < 100:
         raise ValueError(f"--sizes: {min(args.sizes):g} DOFs; give at least 100 DOFs each, e.g. --sizes 1e4 1e5")

@@ -25,12 +25,12 @@ import numpy as np
 
 from .. import solvers
 from ..fem.assembly import FEModel, assemble, viscous_stiffness
-from ..fem.mesh import available_memory
 from ..results.result import ContactResult
-from ..scene.history import History
-from ..scene.model import Coulomb, Scene, SceneError, of_type
+from ..scene.description import Coulomb, Scene, SceneError, of_type
+from ..scene.load_history import History
+from ..scene.meshing import available_memory
 from .estimates import LONG_RUN, duration, footprint, reachable
-from .model import CERTIFIED, Model, ProgramSession, check_formulation_name, condensed, formulate, timed
+from .prepared import CERTIFIED, Model, ProgramSession, check_formulation_name, condensed, formulate, timed
 
 
 @dataclass

@@ -26,9 +26,9 @@ import numpy as np
 from scipy.optimize import brentq
 
 import convexcontact as cc
-from convexcontact.drivers.history import run
-from convexcontact.scene.history import History
+from convexcontact.drivers.history_run import run
 from convexcontact.scene.library import frictional_punch, punch_mesh
+from convexcontact.scene.load_history import History
 
 FIRST_DEPTH, LAST_DEPTH = 0.004, 0.004 * 1.25**7
 """The depths of the first and last step (those of docs/history.md's eight steps × 1.25)."""

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..drivers.model import prepare
-from ..results.result import ContactResult
-from ..scene.model import NormalCompliance, Scene, Signorini, has_friction
-from .work_precision import wall_time
+from ...drivers.prepared import prepare
+from ...results.result import ContactResult
+from ...scene.description import NormalCompliance, Scene, Signorini, has_friction
+from ..precision.work_precision import wall_time
 
 
 @dataclasses.dataclass
@@ -107,7 +107,7 @@ def plot_sweep(sweep: Sweep | Sequence[dict], path, title: str | None = None, ex
     """
     if not isinstance(sweep, Sweep):
         sweep = Sweep("parameter", "error", expected_slope, list(sweep))
-    from ..results.plots import plt, save_figure
+    from ...results.plots import plt, save_figure
 
     solved = [r for r in sweep.rows if r["error"] is not None and r["error"] > 0]
     fig, ax = plt.subplots(figsize=(6.0, 4.2))
@@ -143,11 +143,11 @@ def main(argv=None) -> Sweep:
     answer, the fitted slope, a plot."""
     import argparse
 
-    from .. import solvers
-    from ..fem.mesh import check_size
-    from ..results.output import check_folder_target, check_new_file
-    from ..scene.library import hertz_punch, tresca_punch
-    from .arguments import SECONDS_PER_DOF, check_duration, integer, named, number
+    from ... import solvers
+    from ...results.output import check_folder_target, check_new_file
+    from ...scene.library import hertz_punch, tresca_punch
+    from ...scene.meshing import check_size
+    from ..arguments import SECONDS_PER_DOF, check_duration, integer, named, number
 
     parser = argparse.ArgumentParser(prog="convexcontact study sweep", description=main.__doc__)
     parser.add_argument("kind", choices=["penalty", "regularization"])

@@ -14,7 +14,7 @@ import numpy as np
 
 from .checks import SceneError, finite, finite_vector, of_type, positive_integer, sequence_of
 from .expressions import compile_expression
-from .history import History
+from .load_history import History
 
 ELEMENTS = ("P1", "P2", "Q1", "Q2")
 PLANES = ("strain", "stress")
@@ -751,7 +751,7 @@ class Scene:
     tractions: tuple[Traction, ...] = ()
     body_force: tuple[float, float] = (0.0, 0.0)
     name: str = "scene"
-    history: History | None = None  # a load history (scene/history.py); None: one static problem
+    history: History | None = None  # a load history (scene/load_history.py); None: one static problem
 
     def __post_init__(self):
         of_type(self.body, Body, "body", "give cc.Body(geometry, element)")

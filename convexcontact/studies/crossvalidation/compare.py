@@ -37,7 +37,7 @@ import numpy as np
 import skfem as fe
 from skfem.helpers import dot
 
-from ..results.result import CLOSED_PRESSURE, ContactResult
+from ...results.result import CLOSED_PRESSURE, ContactResult
 
 STATUSES = ("open", "closed", "stick", "slip+", "slip-")
 

@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..results.output import check_folder_target, check_new_files
-from .arguments import SECONDS_PER_DOF, check_duration, integer, named, number
+from ...results.output import check_folder_target, check_new_files
+from ..arguments import SECONDS_PER_DOF, check_duration, integer, named, number
 
 LAWS = ("signorini", "tresca", "coulomb")
 SIZES = {2: (1e4, 1e5, 1e6), 3: (1e4, 1e5, 3e5)}
@@ -48,7 +48,7 @@ threads on the shared 2-vCPU machines the dense Cholesky of a 2028² S took 0.7�
 
 
 def law_of(name: str):
-    from ..scene.model import Coulomb, Signorini, Tresca
+    from ...scene.description import Coulomb, Signorini, Tresca
 
     return {"signorini": Signorini(), "tresca": Tresca(slip_bound=0.002), "coulomb": Coulomb(friction=0.3)}[name]
 
@@ -62,8 +62,8 @@ def punch_scene(dim: int, law: str, dofs: float):
     """
     import dataclasses
 
-    from ..scene.library import hertz_punch, punch_3d
-    from ..scene.model import Contact, Obstacle
+    from ...scene.description import Contact, Obstacle
+    from ...scene.library import hertz_punch, punch_3d
 
     if dim == 3:
         return punch_3d(cells=max(2, round((dofs / 3) ** (1 / 3)) - 1), law=law_of(law), element="Q1")
@@ -77,7 +77,7 @@ def two_body_scene(law: str, dofs: float):
     """A stiffer cylindrical punch with its own mesh pressed into an elastic foundation (2-D, mortar:
     :func:`~convexcontact.scene.bodies_library.punch_on_foundation`). Its meshes are graded towards the
     contact, so ``dofs`` sets the cell size h there by the measured fit dofs ≈ 5·10⁴ (0.001/h)^0.86."""
-    from ..scene.bodies_library import punch_on_foundation
+    from ...scene.bodies_library import punch_on_foundation
 
     return punch_on_foundation(0.001 * (5e4 / dofs) ** (1 / 0.86), law=law_of(law))
 
@@ -89,7 +89,7 @@ def scene_of(scenario: str, dim: int, law: str, dofs: float, nodes: float | None
         return punch_scene(dim, law, dofs)
     if scenario == "two-body":
         return two_body_scene(law, dofs)
-    from ..scene.library import whole_face
+    from ...scene.library import whole_face
 
     return whole_face(dim, int(nodes), dofs, law_of(law))
 
@@ -113,10 +113,11 @@ def _rss_mb(key: str) -> float:
 def measure(dim: int, law: str, dofs: float, formulation: str, solver: str, scenario: str = "punch",
             nodes: float | None = None) -> dict:
     """One benchmark case in this process (call it in a fresh one: see :func:`run`)."""
-    from .. import solvers
-    from ..drivers.model import MATRIX_FREE, formulate
-    from ..fem.assembly import assemble
-    from ..fem.factorization import condense, factorize
+    from ... import solvers
+    from ...drivers.prepared import formulate
+    from ...drivers.rules import MATRIX_FREE
+    from ...fem.assembly import assemble
+    from ...fem.factorization import condense, factorize
 
     scene = scene_of(scenario, dim, law, dofs, nodes)
     start = time.perf_counter()
@@ -168,7 +169,7 @@ def run(dim: int, sizes, laws=LAWS, formulation: str = "auto", solver: str = "au
     for dofs, count in ((dofs, count) for dofs in sizes for count in nodes):
         for law in laws:
             case = json.dumps([dim, law, dofs, formulation, solver, scenario, count])
-            done = subprocess.run([sys.executable, "-m", "convexcontact.studies.bench", "--case", case],
+            done = subprocess.run([sys.executable, "-m", "convexcontact.studies.benchmarks.bench", "--case", case],
                                   check=False, capture_output=True, text=True, env=ENVIRONMENT)
             if done.returncode != 0:
                 progress(f"{dim}-D {law} {dofs:.0e}: failed\n{done.stderr.strip()[-2000:]}")
@@ -180,9 +181,9 @@ def run(dim: int, sizes, laws=LAWS, formulation: str = "auto", solver: str = "au
 
 def friction_sweep(dim: int, dofs: float, coefficients, solver: str = "auto", progress=print) -> dict:
     """Coulomb solves for many friction coefficients: independent solves against one model reused
-    through :meth:`~convexcontact.drivers.model.Model.with_law` (assembly, trace, condensation kept)."""
-    from ..drivers.model import prepare
-    from ..scene.model import Coulomb
+    through :meth:`~convexcontact.drivers.prepared.Model.with_law` (assembly, trace, condensation kept)."""
+    from ...drivers.prepared import prepare
+    from ...scene.description import Coulomb
 
     scene = punch_scene(dim, "coulomb", dofs)
     start = time.perf_counter()
@@ -229,7 +230,7 @@ def plot(rows: list, path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..results.plots import save_figure
+    from ...results.plots import save_figure
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for dim, law in sorted({(r["dim"], r["law"]) for r in rows}):
@@ -249,8 +250,8 @@ def plot(rows: list, path) -> Path:
 
 def check_arguments(args) -> None:
     """The solver, formulation, output folder, sizes and the estimated run time, before any case runs."""
-    from .. import solvers
-    from ..fem.mesh import check_memory, check_size
+    from ... import solvers
+    from ...scene.meshing import check_memory, check_size
 
     solvers.check_name(args.solver)
     if args.formulation not in ("auto", "primal", "dual", "dual-matrix-free"):

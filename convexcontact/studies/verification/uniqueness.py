@@ -38,8 +38,8 @@ def triangle(F1: float, F2: float, friction: float, nu: float):
 
 def run(frictions, angles, nu: float = 0.3) -> list[dict]:
     """One row per (F, θ): the number of solutions found and the closed form's."""
-    from ..analytic import hild_one_triangle_solutions
-    from ..drivers.solutions import all_solutions
+    from ...analytic import hild_one_triangle_solutions
+    from ...drivers.solutions import all_solutions
 
     rows = []
     for friction in frictions:
@@ -61,7 +61,7 @@ def plot(rows: list[dict], nu: float, path: Path) -> Path:
     import matplotlib.pyplot as plt
     from matplotlib.colors import ListedColormap
 
-    from ..results.plots import save_figure
+    from ...results.plots import save_figure
 
     frictions = sorted({r["friction"] for r in rows})
     angles = sorted({r["angle"] for r in rows})
@@ -95,8 +95,8 @@ shared 2-vCPU machines."""
 def main(argv=None) -> list[dict]:
     """``convexcontact study uniqueness [--frictions N] [--angles N] …``: count the solutions of Hild's triangle over
     a grid of F and load angles; uniqueness.csv and uniqueness.png in --out."""
-    from ..results.output import check_new_files
-    from .arguments import check_duration, integer, number
+    from ...results.output import check_new_files
+    from ..arguments import check_duration, integer, number
 
     parser = argparse.ArgumentParser(prog="convexcontact study uniqueness", description=main.__doc__)
     parser.add_argument("--frictions", type=integer(2, 61), default=61, help="values of F in [0, --max-friction]")

@@ -25,14 +25,11 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TypeVar
 
 import numpy as np
 
 from .checks import SceneError, finite, finite_vector
-
-if TYPE_CHECKING:
-    from .model import Scene
 
 PATH = re.compile(r"^(?:(?:contact\[(\d+)\]\.)?(obstacle)\.(depth|force|tangential_force|gap)"
                   r"|(dirichlet)\[([^\]]+)\]\.(ux|uy|uz)"
@@ -42,6 +39,9 @@ PATHS = ("obstacle.depth", "obstacle.force", "obstacle.tangential_force", "obsta
          "contact[INDEX].obstacle.depth|gap", "dirichlet[BOUNDARY].ux|uy|uz", "traction[BOUNDARY].pressure|vector",
          "body_force")
 VECTORS = ("vector", "body_force")
+SceneT = TypeVar("SceneT")
+"""A scene (:class:`~convexcontact.scene.description.Scene`), which holds its History: this module reads and replaces
+the scene's fields by name and never imports the dataclass, so that the two modules do not import each other."""
 
 
 @dataclass(frozen=True)
@@ -86,7 +86,7 @@ class History:
     def __len__(self) -> int:
         return len(self.times)
 
-    def check(self, scene: Scene) -> None:
+    def check(self, scene: SceneT) -> None:
         """Every path changes something in ``scene`` (:func:`check_effect`), and every step's value is one the scene
         takes: the fields' own checks are bounds (finite, ≥ 0), so each series' smallest and largest value are
         tried, an error named ``history.PATH[k]``; viscous steps are long enough (:func:`check_steps`)."""
@@ -106,13 +106,13 @@ class History:
                                      f"{self.times[k]:g})") from None
         check_steps(scene, self.times)
 
-    def scene(self, scene: Scene, step: int) -> Scene:
+    def scene(self, scene: SceneT, step: int) -> SceneT:
         """The scene at step ``step`` (0-based) of this history."""
         for path, series in self.values.items():
             scene = at(scene, path, series[step])
         return scene
 
-    def envelope(self, scene: Scene) -> Scene:
+    def envelope(self, scene: SceneT) -> SceneT:
         """The scene with each quantity at its largest magnitude over the history: it sets the units."""
         for path, series in self.values.items():
             magnitudes = np.abs(np.asarray(series, dtype=float)).reshape(len(series), -1).max(axis=1)
@@ -135,7 +135,7 @@ def numbers(series, field_name: str) -> tuple[float, ...]:
     return tuple(finite(v, f"{field_name}[{i}]") for i, v in enumerate(series))
 
 
-def at(scene: Scene, path: str, value) -> Scene:
+def at(scene: SceneT, path: str, value) -> SceneT:
     """``scene`` with the quantity ``path`` set to ``value``; the dataclasses validate the value."""
     index, obstacle, name, dirichlet, where, component, _, loaded, load, body_force = PATH.match(path).groups()
     if index is not None:
@@ -152,7 +152,7 @@ def at(scene: Scene, path: str, value) -> Scene:
     return replace(scene, tractions=set_on(scene.tractions, loaded, load, value, path, "traction"))
 
 
-def check_effect(scene: Scene, path: str) -> None:
+def check_effect(scene: SceneT, path: str) -> None:
     """Refuse an obstacle path that would change nothing in ``scene`` (three identical steps, solved without a
     word), saying why and which path moves what was meant."""
     index, obstacle, name = PATH.match(path).groups()[:3]
@@ -199,7 +199,7 @@ known only to about ε·τ/Δt of the displacement (2e-4 at the bound), and beyo
 (η = 1e200 with Δt = 1e-200 ended "inaccurate" with a certificate of 0)."""
 
 
-def check_steps(scene: Scene, times: tuple[float, ...]) -> None:
+def check_steps(scene: SceneT, times: tuple[float, ...]) -> None:
     """Refuse a viscous step Δt so short against a material's retardation time τ = η/E that K drowns in K_A/Δt
     (:data:`VISCOUS_RATIO`); compared by logarithms, since τ/Δt may be beyond the floats."""
     materials = scene.materials if isinstance(scene.materials, Mapping) else {"material": scene.materials}

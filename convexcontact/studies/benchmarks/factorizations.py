@@ -29,9 +29,9 @@ workers run in another environment (e.g. one with numpy<2 for python-mumps 0.0.2
 
 Examples::
 
-    python benchmarks/factorizations.py --dim 2 --sizes 1e4,1e5 --out 2d.csv
-    python benchmarks/factorizations.py --dim 3 --elem hex --sizes 5e4 --intorder 2
-    python benchmarks/factorizations.py --dim 2 --sizes 1e5 --solvers mumps,mumps-schur \\
+    python convexcontact/studies/benchmarks/factorizations.py --dim 2 --sizes 1e4,1e5 --out 2d.csv
+    python convexcontact/studies/benchmarks/factorizations.py --dim 3 --elem hex --sizes 5e4 --intorder 2
+    python convexcontact/studies/benchmarks/factorizations.py --dim 2 --sizes 1e5 --solvers mumps,mumps-schur \\
         --python /tmp/benchvenv_np1/bin/python
 """
 
