@@ -1,6 +1,6 @@
 """Histories of elasto-viscoplastic bodies (von Mises, Perzyna): each step one conic program (docs/plasticity.md).
 
-The contact side is the elastic history's (:mod:`.history`: the step's loads and obstacle, friction on the slip
+The contact side is the elastic history's (:mod:`.history_run`: the step's loads and obstacle, friction on the slip
 increment, the primal program); :class:`PlasticProcess` carries the plastic strain α and the accumulated plastic
 strain from step to step, and :class:`PlasticStepper` extends each step's program with the plastic points
 (:func:`~convexcontact.formulations.plastic_step.plastic`), solves it and certifies the contact and the material law.
@@ -72,7 +72,7 @@ def check_plastic_steps(scene: Scene) -> None:
 
 
 class PlasticProcess(Process):
-    """:class:`~.history.Process` with the plastic state: α and the accumulated plastic strain at the points."""
+    """:class:`~.history_run.Process` with the plastic state: α and the accumulated plastic strain at the points."""
 
     def __init__(self, scene: Scene, timings: dict):
         super().__init__(scene, "primal", timings)
@@ -160,7 +160,7 @@ class PlasticStepper:
 
 
 def build(scene: Scene, formulation: str, solver: str, options: dict, timings: dict):
-    """The process and stepper of a plastic history (:data:`.history.PROCESSES`)."""
+    """The process and stepper of a plastic history (:data:`.history_run.PROCESSES`)."""
     check_plastic_scene(scene, formulation, solver)
     process = PlasticProcess(scene, timings)
     return process, PlasticStepper(process, solver, options)
