@@ -1,0 +1,493 @@
+"""Exact sensitivities of a certified answer to the scene's parameters, and gradients of objectives by the adjoint.
+
+:func:`sensitivity` gives du/dθ, dλ_N/dθ, dλ_T/dθ and the resultants' derivatives for a parameter θ named by its
+path in the scene (:data:`PARAMETERS`); :func:`gradient` gives dJ/dθ of a linear functional J of the answer (a
+misfit's gradient by the chain rule) for many parameters with one transposed solve. The linear algebra is in
+:mod:`.active_set`; this module reads the answer's active set off the certificate's quantities and the data's
+derivatives off the scene (docs/sensitivity.md).
+
+The data depend on loads, Dirichlet values and the obstacle's depth or gap affinely: their rates are the
+difference of two assemblies at the model's fixed units, exact up to round-off. K is linear in E and in the Lamé
+parameters, whose derivative in ν is taken by a complex step (exact to round-off): dK is assembled once.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, replace
+from types import SimpleNamespace
+
+import numpy as np
+import scipy.sparse as sp
+from skfem.models.elasticity import lame_parameters
+
+from ..fem.assembly import FEModel
+from ..fem.friction import FrictionPoints, friction_points
+from ..fem.mortar import PairTrace
+from ..fem.stiffness import stiffness
+from ..formulations import contact_weights
+from ..results.result import ContactResult, held
+from ..scene.checks import finite
+from ..scene.history import PATH, at, check_effect
+from ..scene.model import Coulomb, Material, Scene, SceneError, Signorini, Tresca, of_type
+from .active_set import (
+    Linearization,
+    NotDifferentiable,
+    Rates,
+    directional,
+    friction_status,
+    linearize,
+    normal_status,
+    right_side,
+)
+from .model import CERTIFIED, field_at_points, frictional_rows
+from .picard import pressure_map
+
+PARAMETERS = ("E", "nu", "materials[NAME].E|nu", "friction (Coulomb)", "slip_bound (Tresca)", "obstacle.depth",
+              "obstacle.gap", "dirichlet[BOUNDARY].ux|uy|uz", "traction[BOUNDARY].pressure",
+              "traction[BOUNDARY].vector[I]", "body_force[I]")
+MATERIAL = re.compile(r"^(?:materials\[([^\]]+)\]\.)?(E|nu)$")
+COMPONENT = re.compile(r"^(.*(?:vector|body_force))(?:\[(\d)\])?$")
+
+STRICT = 1e-8
+"""A contact row or friction point is strictly on one side of its law where the quantity of that side (gap,
+pressure; slip, room below the bound) exceeds this fraction of its scale, or 100 × the certificate's worst
+residual if larger; where neither does, it is degenerate and the derivative one-sided there."""
+
+
+@dataclass
+class Derivative:
+    """Derivatives of the answer's fields along a parameter, in the user's units per unit of the parameter:
+    the full DOF vector, the contact nodes' pressure and friction traction (as in ``result.contact``), and the
+    resultants of :class:`~convexcontact.results.result.ContactResult`."""
+
+    displacement: np.ndarray
+    pressure: np.ndarray
+    friction: np.ndarray | None
+    contact_force: np.ndarray
+    normal_force: float
+    tangential_force: float | None
+
+
+@dataclass
+class Sensitivity:
+    """The answer's derivatives along one parameter.
+
+    ``right`` is the derivative as the parameter grows, ``left`` as it shrinks (lim (x(θ) − x(θ − h))/h); they
+    agree where nothing is degenerate. ``degenerate`` names the contact nodes that graze (gap and pressure both 0)
+    and the friction points at the stick/slip boundary (no slip, traction at the bound): there the derivative is
+    one-sided. A side is None where its complementarity problem has no solution or several (Coulomb may branch):
+    ``message`` says which. ``margin`` is how strictly the other rows hold their side (over their scales): the
+    derivative is that of every perturbation that keeps them there.
+    """
+
+    parameter: str
+    value: float
+    right: Derivative | None
+    left: Derivative | None
+    degenerate: dict[str, np.ndarray]
+    margin: float
+    message: str = ""
+
+    @property
+    def differentiable(self) -> bool:
+        return not any(len(v) for v in self.degenerate.values())
+
+    @property
+    def derivative(self) -> Derivative:
+        """The (two-sided) derivative; a :class:`NotDifferentiable` error where the answer is degenerate."""
+        if not self.differentiable:
+            raise NotDifferentiable(f"{self.parameter}: the answer is not differentiable here ({describe(self)}); "
+                                    "read the one-sided derivatives .right and .left")
+        return self.right
+
+
+def describe(sensitivity: Sensitivity) -> str:
+    return ", ".join(f"{len(v)} {k.replace('_', '/')} ({list(v)[:8]})" for k, v in sensitivity.degenerate.items()
+                     if len(v)) + (f"; {sensitivity.message}" if sensitivity.message else "")
+
+
+@dataclass
+class Point:
+    """The answer in scaled units with the operators of its law, and its active set (:class:`Linearization`)."""
+
+    result: ContactResult
+    C: sp.spmatrix
+    friction: FrictionPoints | None
+    u: np.ndarray
+    pressure: np.ndarray
+    traction: np.ndarray | None
+    bound: np.ndarray | None
+    unit_bound: sp.csr_matrix | None  # Coulomb: ds/dF (F constant) as a map of λ_N
+    linear: Linearization
+    margin: float
+
+    @property
+    def fem(self) -> FEModel:
+        return self.result.fem
+
+
+def check_result(result) -> ContactResult:
+    """The result if its answer can be differentiated here, else an error naming what to change."""
+    of_type(result, ContactResult, "result", "give the ContactResult of cc.solve(scene)")
+    if not result.solved or result.status != "solved":
+        raise ValueError(f"result: status {result.status!r}{', ' + result.message if result.message else ''}: only a "
+                         "solved and certified answer has a derivative — solve it again more tightly (tol) or with "
+                         "another solver")
+    if not result.certificate.passes(CERTIFIED):
+        raise ValueError(f"result: certificate {result.certificate.worst:.1e} > {CERTIFIED:g}: not an answer of the "
+                         "discrete problem, so not one to differentiate — solve more tightly")
+    scene, law = result.scene, result.scene.contact.law
+    if scene.history is not None:
+        raise SceneError("result", "a step of a load history: its derivative depends on the earlier steps, which is "
+                         "not implemented", "differentiate the static scene (scene without history)")
+    if isinstance(result.fem.contact, PairTrace) or not hasattr(scene.contact, "obstacle"):
+        raise SceneError("result", "contact between bodies: not implemented", "differentiate a body on a rigid obstacle")
+    if not isinstance(law, (Signorini, Tresca, Coulomb)) or getattr(law, "compliance", None) is not None:
+        raise SceneError("contact.law", f"{type(law).__name__}: sensitivities are implemented for Signorini, Tresca "
+                         "and Coulomb", "use one of these laws")
+    if law.non_penetration == "gauss" or getattr(law, "quadrature", "nodal") == "gauss":
+        raise SceneError("contact.non_penetration", "contact or friction at Gauss points: their multipliers need not "
+                         "be unique, so neither are their derivatives", "use non_penetration and quadrature 'nodal'")
+    obstacle = scene.contact.obstacle
+    if obstacle.force is not None or obstacle.tangential_force is not None:
+        raise SceneError("obstacle.force", "a force-controlled obstacle: not implemented",
+                         "give the obstacle a depth (displacement control)")
+    if has_viscosity(scene):
+        raise SceneError("materials", "a viscous material: not implemented", "differentiate an elastic body")
+    if isinstance(law, Coulomb) and law.smoothing_radius > 0:
+        raise SceneError("contact.smoothing_radius", "nonlocal Coulomb: not implemented", "use smoothing_radius = 0")
+    return result
+
+
+def has_viscosity(scene: Scene) -> bool:
+    materials = [scene.materials] if isinstance(scene.materials, Material) else list(scene.materials.values())
+    return any(m.viscosity for m in materials)
+
+
+def point_of(result: ContactResult) -> Point:
+    """The answer of ``result`` in scaled units, its law's operators and its active set."""
+    fem, law = result.fem, result.scene.contact.law
+    scaling, contact = fem.scaling, fem.contact
+    C = contact_weights(contact, law.non_penetration)
+    u = result.displacement[fem.free] / scaling.displacement
+    pressure = result.contact.pressure / scaling.pressure
+    u_ref, p_ref = max(np.abs(u).max(initial=0.0), 1.0), max(np.abs(pressure).max(initial=0.0), 1.0)
+    tol = max(STRICT, 100 * result.certificate.worst)
+    A = sp.csr_matrix(C @ contact.N)
+    gap = (weighted_gap(contact, C) - A @ u) / contact.row_weights(C) / u_ref
+    normal = normal_status(gap, pressure / p_ref, held(A), tol)
+    strict = [np.where(normal == "closed", pressure / p_ref, np.where(normal == "open", gap, np.inf))]
+    friction = traction = bound = unit = None
+    arguments = {}
+    if law.__class__ is not Signorini:
+        friction = friction_points(contact, fem.mesh, fem.basis, law.quadrature, law.non_penetration,
+                                   frictional_rows(law, contact))
+        if frictional_rows(law, contact) is not None:
+            raise SceneError("contact.friction", "friction laws per contact pair: not implemented", "use one law")
+        traction = np.asarray(result.contact.friction).reshape(contact.m, -1).T.ravel() / scaling.pressure
+        coupling, fixed = None, np.ones(friction.count, bool)
+        if isinstance(law, Tresca):
+            bound = field_at_points(law.slip_bound, "contact.slip_bound", fem, friction) / scaling.pressure
+        else:
+            unit = pressure_map(SimpleNamespace(law=replace(law, friction=1.0), fem=fem, friction=friction))[2]
+            coupling = pressure_map(SimpleNamespace(law=law, fem=fem, friction=friction))[2]
+            bound = coupling @ np.maximum(pressure, 0.0)
+            moving = np.isin(normal, ("closed", "grazing")).astype(float)
+            fixed = (abs(coupling) @ moving) == 0  # no closed or grazing node under the point: its bound stays 0
+        slip = friction.components(friction.slip(u)) / friction.weights[:, None] / u_ref
+        components = friction.components(traction)
+        epsilon = None if law.regularization is None else law.regularization / scaling.displacement
+        status = friction_status(slip, components / p_ref, bound / p_ref, held(friction.R, friction.dim), fixed, tol,
+                                 smooth=epsilon is not None)
+        room = (bound - np.linalg.norm(components, axis=1)) / p_ref
+        strict.append(np.where(status == "slip", np.linalg.norm(slip, axis=1), np.where(status == "stick", room,
+                                                                                        np.inf)))
+        arguments = {"R": friction.R, "friction": status, "slip": friction.components(friction.slip(u)),
+                     "traction": components, "bound": bound, "coupling": coupling,
+                     "epsilon": None if epsilon is None else epsilon * friction.weights}
+    linear = linearize(fem.K, A, normal, **arguments)
+    margin = float(np.concatenate(strict).min(initial=np.inf))
+    return Point(result, C, friction, u, pressure, traction, bound, unit, linear, margin)
+
+
+def weighted_gap(contact, C) -> np.ndarray:
+    """h = C(g − o_N): the right-hand side of the normal rows A u ≤ h."""
+    return contact.weighted_gap(C) - C @ contact.normal_offset
+
+
+def parameter_value(scene: Scene, parameter) -> float:
+    """The parameter's value in ``scene``, or an error naming the parameters the scene has."""
+    of_type(parameter, str, "parameter", f"name one of {', '.join(PARAMETERS)}")
+    law, material = scene.contact.law, MATERIAL.match(parameter)
+    if material is not None:
+        name, which = material.groups()
+        if name is None and not isinstance(scene.materials, Material):
+            raise SceneError(f"parameter {parameter}", "the scene has several materials",
+                             f"name one: {[f'materials[{k}].{which}' for k in scene.materials]}")
+        if name is not None and (isinstance(scene.materials, Material) or name not in scene.materials):
+            known = [] if isinstance(scene.materials, Material) else list(scene.materials)
+            raise SceneError(f"parameter {parameter}", f"no material {name!r}",
+                             f"use {which!r}" if not known else f"name one of {known}")
+        chosen = scene.materials if name is None else scene.materials[name]
+        return float(getattr(chosen, which))
+    if parameter in ("friction", "slip_bound"):
+        kind = Coulomb if parameter == "friction" else Tresca
+        if not isinstance(law, kind):
+            raise SceneError(f"parameter {parameter}", f"the scene's law is {type(law).__name__}, which has no "
+                             f"{parameter}", "use 'friction' for Coulomb, 'slip_bound' for Tresca")
+        value = getattr(law, parameter)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SceneError(f"parameter {parameter}", f"the law's {parameter} is a field, not one number",
+                             f"give contact.{parameter} as a number to differentiate by it")
+        return float(value)
+    path, index = vector_path(parameter)
+    if PATH.match(path) is None or path.startswith("contact[") or path.endswith(("force", "tangential_force")):
+        raise SceneError(f"parameter {parameter}", "unknown parameter (a force-controlled obstacle is not "
+                         "differentiated)" if PATH.match(path) else "unknown parameter",
+                         f"use one of {', '.join(PARAMETERS)}")
+    value = current(scene, path)
+    try:
+        check_effect(scene, path)
+        at(scene, path, 0.0 if value is None else value)
+    except SceneError as error:
+        raise SceneError(f"parameter {parameter}", str(error).split(": ", 1)[1]) from None
+    if index is None:
+        return float(value or 0.0)
+    if index >= len(value):
+        raise SceneError(f"parameter {parameter}", f"component {index} of a {len(value)}-vector",
+                         f"use {path}[0] … {path}[{len(value) - 1}]")
+    return float(value[index])
+
+
+def vector_path(parameter: str) -> tuple[str, int | None]:
+    """(path, component) of a vector's component (``body_force[1]``), (path, None) otherwise."""
+    vector = COMPONENT.match(parameter)
+    if vector is None:
+        return parameter, None
+    path, index = vector.groups()
+    if index is None:
+        raise SceneError(f"parameter {parameter}", "a vector: name one of its components",
+                         f"use '{parameter}[0]', '{parameter}[1]', ...")
+    return path, int(index)
+
+
+def current(scene: Scene, path: str):
+    """The scene's value of the history path ``path`` (an obstacle's depth not given is 0; None: not in the scene)."""
+    _, obstacle, name, _, where, component, _, loaded, load, body_force = PATH.match(path).groups()
+    if obstacle:
+        return getattr(scene.contact.obstacle, name) or 0.0
+    if body_force:
+        return scene.body_force
+    items = scene.dirichlet if where is not None else scene.tractions
+    matching = [item for item in items if item.boundary == (where if where is not None else loaded)]
+    return getattr(matching[0], component or load) if matching else None
+
+
+def shifted(scene: Scene, parameter: str, value: float) -> Scene:
+    """``scene`` with the load, support or obstacle parameter set to ``value``."""
+    path, index = vector_path(parameter)
+    if index is None:
+        return at(scene, path, value)
+    vector = list(current(scene, path))
+    vector[index] = value
+    return at(scene, path, tuple(vector))
+
+
+def unit_of(fem: FEModel, parameter: str) -> float:
+    """The parameter's natural scale in the model's units (a difference step that is neither round-off nor huge)."""
+    scaling = fem.scaling
+    if parameter.startswith(("obstacle", "dirichlet")):
+        return scaling.displacement
+    if parameter.startswith("body_force"):
+        return scaling.pressure / scaling.length
+    return scaling.pressure
+
+
+def data_rates(point: Point, parameter: str, value: float) -> tuple[Rates, np.ndarray]:
+    """The data's derivatives along ``parameter`` (scaled data per user unit) and the prescribed values' rate
+    (full DOF vector, scaled)."""
+    fem, law = point.fem, point.fem.scene.contact.law
+    zeros = np.zeros(fem.prescribed.size)
+    offsets = None if point.friction is None else np.zeros(point.friction.R.shape[0])
+    if MATERIAL.match(parameter):
+        u_full = fem.full(point.u)
+        return Rates(-(stiffness_rate(fem, parameter) @ u_full)[fem.free], np.zeros(point.C.shape[0]), offsets), zeros
+    if parameter == "slip_bound":
+        return Rates(np.zeros(fem.n_free), np.zeros(point.C.shape[0]), offsets,
+                     np.full(point.friction.count, 1.0 / fem.scaling.pressure)), zeros
+    if parameter == "friction":
+        return Rates(np.zeros(fem.n_free), np.zeros(point.C.shape[0]), offsets,
+                     point.unit_bound @ np.maximum(point.pressure, 0.0)), zeros
+    step = max(abs(value), unit_of(fem, parameter))
+    sides = [fem.at(shifted(fem.scene, parameter, value + sign * step)) for sign in (1.0, -1.0)]
+    rate = [(a - b) / (2 * step) for a, b in [(sides[0].f, sides[1].f),
+                                              (weighted_gap(sides[0].contact, point.C),
+                                               weighted_gap(sides[1].contact, point.C)),
+                                              (sides[0].prescribed, sides[1].prescribed)]]
+    if point.friction is not None:
+        ends = [friction_points(side.contact, fem.mesh, fem.basis, law.quadrature, law.non_penetration).offset
+                for side in sides]
+        offsets = (ends[0] - ends[1]) / (2 * step)
+    return Rates(rate[0], rate[1], offsets), rate[2]
+
+
+def stiffness_rate(fem: FEModel, parameter: str) -> sp.csr_matrix:
+    """dK/dθ (full DOFs, scaled) for θ = E or ν of the material named: K is linear in the Lamé parameters, whose
+    derivatives come from a complex step of (E, ν) ↦ (λ, μ), plane stress included (exact to round-off)."""
+    name, which = MATERIAL.match(parameter).groups()
+    scene, scaling = fem.scene, fem.scaling
+    material = scene.materials if name is None else scene.materials[name]
+    cells = slice(None) if name is None else fem.mesh.subdomains[name]
+    step = 1e-30 * (material.E if which == "E" else 1.0)
+    E = material.E + (1j * step if which == "E" else 0.0)
+    nu = material.nu + (1j * step if which == "nu" else 0.0)
+    lam, mu = lame_parameters(E / scaling.stress, nu)
+    if scene.body.plane == "stress" and fem.dim == 2:
+        lam = 2.0 * lam * mu / (lam + 2.0 * mu)
+    rates = [np.zeros(fem.mesh.t.shape[1]) for _ in range(2)]
+    for rate, part in zip(rates, (lam, mu)):
+        rate[cells] = np.imag(part) / step
+    return stiffness(fem.basis, tuple(rates))
+
+
+def resultant_maps(point: Point) -> tuple[np.ndarray, np.ndarray | None]:
+    """The contact force on the body (d-vector, scaled) as linear maps of λ_N and of λ_T: the nodal forces of
+    :func:`~convexcontact.results.result.contact_nodes`, summed."""
+    contact = point.fem.contact
+    normal = -np.asarray(sp.csr_matrix(point.C).T @ contact.normals).T  # −Σ_i (Cᵀλ_N)_i n_i
+    if point.friction is None:
+        return normal, None
+    along = np.hstack([t.T for t in contact.frame])  # d × m(d − 1), component-major like T
+    return normal, np.asarray((sp.csr_matrix(contact.T) @ point.friction.R.T).T @ along.T).T
+
+
+def mean_frame(fem: FEModel) -> tuple[np.ndarray, np.ndarray]:
+    """The unit mean normal and mean tangent of Γ_C along which the result's normal and tangential forces act."""
+    contact = fem.contact
+    normal, tangent = contact.weights @ contact.normals, contact.weights @ contact.tangents
+    return normal / np.linalg.norm(normal), tangent / np.linalg.norm(tangent)
+
+
+def derivative_of(point: Point, x: np.ndarray, prescribed: np.ndarray) -> Derivative:
+    """The fields of the solution x = (du, dλ_N, dλ_T) of the derivative system, in user units."""
+    fem = point.fem
+    scaling, n, r = fem.scaling, fem.n_free, point.C.shape[0]
+    displacement = prescribed.copy()
+    displacement[fem.free] = x[:n]
+    pressure = fem.contact.nodal_pressure(point.C, x[n:n + r])
+    normal_map, tangential_map = resultant_maps(point)
+    force = normal_map @ x[n:n + r]
+    friction = None
+    if point.friction is not None:
+        traction = x[n + r:]
+        force = force + tangential_map @ traction
+        friction = point.friction.nodal_traction(fem.contact, traction) * scaling.pressure
+    mean_normal, mean_tangent = mean_frame(fem)
+    force = force * scaling.force
+    return Derivative(displacement * scaling.displacement, pressure * scaling.pressure, friction, force,
+                      float(-force @ mean_normal), None if friction is None else float(force @ mean_tangent))
+
+
+def sensitivity(result: ContactResult, parameter: str | list[str]) -> Sensitivity | dict[str, Sensitivity]:
+    """Derivatives of ``result``'s answer along ``parameter`` (a name of :data:`PARAMETERS`, or a list of them:
+    a dict back, all from one factorization). Where the answer is degenerate, the one-sided derivatives."""
+    result = check_result(result)
+    names = [parameter] if isinstance(parameter, str) else parameter
+    if not isinstance(names, (list, tuple)) or not names:
+        raise SceneError("parameter", f"expected a name or a list of names, got {parameter!r:.60}",
+                         f"name one of {', '.join(PARAMETERS)}")
+    values = {name: parameter_value(result.scene, name) for name in names}
+    point = point_of(result)
+    out = {name: along(point, name, value) for name, value in values.items()}
+    return out[parameter] if isinstance(parameter, str) else out
+
+
+def along(point: Point, parameter: str, value: float) -> Sensitivity:
+    """The :class:`Sensitivity` of the answer at ``point`` along one parameter."""
+    rates, prescribed = data_rates(point, parameter, value)
+    linear, sides, message = point.linear, {}, []
+    for sign, side in ((1.0, "right"), (-1.0, "left")):
+        x = directional(linear, rates, sign)
+        if x is None:
+            message.append(f"the {side} derivative's complementarity problem on the degenerate rows has no "
+                           "solution or several (the answer may branch there)")
+        sides[side] = None if x is None else derivative_of(point, sign * x, prescribed)
+    degenerate = {"grazing": np.flatnonzero(linear.normal == "grazing")}
+    if linear.friction is not None:
+        degenerate["stick_slip"] = np.flatnonzero(linear.friction == "boundary")
+    return Sensitivity(parameter, value, sides["right"], sides["left"], degenerate, point.margin, "; ".join(message))
+
+
+def gradient(result: ContactResult, parameters: list[str], *, displacement=None, pressure=None, friction=None,
+             contact_force=None, normal_force: float = 0.0, tangential_force: float = 0.0) -> dict[str, float]:
+    """dJ/dθ for every parameter of ``parameters`` by one adjoint solve, where
+    J = ⟨displacement, u⟩ + ⟨pressure, λ_N⟩ + ⟨friction, λ_T⟩ + ⟨contact_force, F⟩ + normal_force·P + tangential_force·Q
+    in the result's user units (for a nonlinear objective give its partial derivatives at the answer).
+
+    Refused where the answer is degenerate (its derivative is one-sided there: :func:`sensitivity`)."""
+    result = check_result(result)
+    if isinstance(parameters, str) or not isinstance(parameters, (list, tuple)) or not parameters:
+        raise SceneError("parameters", f"expected a list of names, got {parameters!r:.60}",
+                         f"give e.g. ['friction', 'E'] from {', '.join(PARAMETERS)}")
+    values = {name: parameter_value(result.scene, name) for name in parameters}
+    fem = result.fem
+    weights = objective_weights(result, displacement, pressure, friction, contact_force, normal_force,
+                                tangential_force)
+    point = point_of(result)
+    linear = point.linear
+    if linear.degenerate:
+        raise NotDifferentiable(f"result: {int((linear.normal == 'grazing').sum())} grazing nodes and "
+                                f"{0 if linear.friction is None else int((linear.friction == 'boundary').sum())} "
+                                "friction points at the stick/slip boundary make the answer one-sided: no gradient. "
+                                "Use cc.sensitivity for the one-sided derivatives, or move the parameters off this "
+                                "point")
+    adjoint = adjoint_vector(point, weights)
+    out = {}
+    for name, value in values.items():
+        rates, prescribed = data_rates(point, name, value)
+        explicit = weights["displacement"] @ (prescribed * fem.scaling.displacement)  # prescribed DOFs' share
+        out[name] = float(adjoint @ right_side(linear, rates) + explicit)
+    return out
+
+
+def objective_weights(result: ContactResult, displacement, pressure, friction, contact_force, normal_force,
+                      tangential_force) -> dict:
+    """The objective's weights as arrays of the answer's shapes (zeros where not given), each checked by name."""
+    fem = result.fem
+    contact = fem.contact
+    shapes = {"displacement": (fem.prescribed.size,), "pressure": (contact.m,), "contact_force": (fem.dim,),
+              "friction": None if result.contact.friction is None else result.contact.friction.shape}
+    given = {"displacement": displacement, "pressure": pressure, "friction": friction, "contact_force": contact_force}
+    weights = {}
+    for name, value in given.items():
+        shape = shapes[name]
+        if value is None:
+            weights[name] = None if shape is None else np.zeros(shape)
+            continue
+        if shape is None:
+            raise ValueError(f"{name}: the result has no friction traction (a frictionless law)", "drop it")
+        array = np.asarray(value, dtype=float) if not isinstance(value, str) else None
+        if array is None or array.shape != shape or not np.isfinite(array).all():
+            raise ValueError(f"{name}: expected {shape} finite numbers (dJ/d{name} at the answer, user units), got "
+                             f"{value!r:.60} — give an array of shape {shape}")
+        weights[name] = array
+    for name, value in (("normal_force", normal_force), ("tangential_force", tangential_force)):
+        weights[name] = finite(value, name, "give dJ/d(force) at the answer as a number")
+    return weights
+
+
+def adjoint_vector(point: Point, weights: dict) -> np.ndarray:
+    """y = M⁻ᵀ g: g the objective's gradient over the derivative system's unknowns (du, dλ_N, dλ_T), scaled."""
+    fem = point.fem
+    scaling = fem.scaling
+    normal_map, tangential_map = resultant_maps(point)
+    mean_normal, mean_tangent = mean_frame(fem)
+    force = (weights["contact_force"] - weights["normal_force"] * mean_normal
+             + weights["tangential_force"] * mean_tangent) * scaling.force
+    parts = [weights["displacement"][fem.free] * scaling.displacement,
+             weights["pressure"] * scaling.pressure + normal_map.T @ force]
+    if point.friction is not None:
+        traction = weights["friction"].reshape(fem.contact.m, -1).T.ravel() * scaling.pressure
+        parts.append(traction + tangential_map.T @ force)
+    return point.linear.solver.solve(np.concatenate(parts), trans="T")
