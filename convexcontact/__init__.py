@@ -12,6 +12,7 @@ from .conic import ConicProgram, ConicSolution
 from .drivers.history import HistoryResult
 from .drivers.history import run as run_history
 from .drivers.model import Model, prepare
+from .drivers.sensitivity import gradient, sensitivity, with_parameter
 from .drivers.solutions import SolutionSet, all_solutions
 from .drivers.solve import solve
 from .results.result import ContactResult
@@ -41,6 +42,7 @@ __all__ = [
     "Body", "Box", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Coulomb", "Dirichlet", "History",
     "HistoryResult", "Material", "MeshFile", "Model", "NormalCompliance", "Obstacle", "Pair", "Part", "Rectangle",
     "Scene", "SceneError", "Signorini", "SolutionSet", "Traction", "Tresca", "all_solutions", "bodies_library",
-    "bodies_scene", "library", "load_scene", "prepare", "run_history", "solve",
+    "bodies_scene", "gradient", "library", "load_scene", "prepare", "run_history", "sensitivity", "solve",
+    "with_parameter",
 ]
 __version__ = "0.1.0"

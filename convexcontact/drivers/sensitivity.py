@@ -284,6 +284,20 @@ def current(scene: Scene, path: str):
     return getattr(matching[0], component or load) if matching else None
 
 
+def with_parameter(scene: Scene, parameter: str, value: float) -> Scene:
+    """``scene`` with ``parameter`` (:data:`PARAMETERS`) set to ``value``: a finite difference's or a fit's scene."""
+    parameter_value(scene, parameter)
+    material = MATERIAL.match(parameter)
+    if material is not None:
+        name, which = material.groups()
+        if name is None:
+            return replace(scene, materials=replace(scene.materials, **{which: value}))
+        return replace(scene, materials={**scene.materials, name: replace(scene.materials[name], **{which: value})})
+    if parameter in ("friction", "slip_bound"):
+        return scene.with_law(replace(scene.contact.law, **{parameter: value}))
+    return shifted(scene, parameter, value)
+
+
 def shifted(scene: Scene, parameter: str, value: float) -> Scene:
     """``scene`` with the load, support or obstacle parameter set to ``value``."""
     path, index = vector_path(parameter)

@@ -1,0 +1,161 @@
+"""Exact sensitivities (docs/sensitivity.md): central finite differences of whole solves where the active set
+holds, one-sided differences across a change of status, the adjoint against the forward derivatives."""
+
+import numpy as np
+import pytest
+
+import convexcontact as cc
+from convexcontact.drivers.active_set import NotDifferentiable
+
+TIGHT = {"formulation": "dual", "solver": "newton-cg"}
+"""Answers polished to round-off (certificates ≤ 1e-13), so that differences of solves are derivatives to 1e-8."""
+
+
+def block(law, ux=0.02, uy=-0.01, nx=8, pressure=0.001):
+    """A 2 × 1 block pressed on a flat rigid foundation by its top, moved sideways by ux, pushed from the right."""
+    return cc.Scene(name="block", body=cc.Body(cc.Rectangle(width=2.0, height=1.0, nx=nx, ny=nx // 2)),
+                    materials=cc.Material(E=1.0, nu=0.3), dirichlet=(cc.Dirichlet("top", ux=ux, uy=uy),),
+                    tractions=(cc.Traction("right", pressure=pressure),),
+                    contact=cc.Contact("bottom", cc.Obstacle("flat", gap=0.0), law))
+
+
+def box(law):
+    """A 2 × 1 × 1 box of Q1 cells pressed down and moved along x and y: every contact point slips obliquely
+    (the projector term of 3-D friction)."""
+    return cc.Scene(name="box", body=cc.Body(cc.Box(size=(2.0, 1.0, 1.0), cells=(4, 2, 2)), element="Q1"),
+                    materials=cc.Material(E=1.0, nu=0.3),
+                    dirichlet=(cc.Dirichlet("top", ux=0.02, uy=0.01, uz=-0.01),),
+                    contact=cc.Contact("bottom", cc.Obstacle("flat", gap=0.0), law))
+
+
+def fields(result, derivative=None) -> np.ndarray:
+    """Displacement, pressure, friction and resultants of a result (or of a Derivative) in one vector."""
+    source = derivative or result
+    friction = source.friction if derivative else result.contact.friction
+    pressure = source.pressure if derivative else result.contact.pressure
+    return np.concatenate([source.displacement, pressure, np.ravel(friction if friction is not None else []),
+                           np.atleast_1d(source.contact_force)])
+
+
+def central(scene, parameter, value, step):
+    """(x(θ + h) − x(θ − h)) / 2h of whole tight solves."""
+    ends = [cc.solve(cc.with_parameter(scene, parameter, value + sign * step), **TIGHT) for sign in (1, -1)]
+    assert all(end.certificate.worst < 1e-12 for end in ends)
+    return (fields(ends[0]) - fields(ends[1])) / (2 * step)
+
+
+def assert_agrees(scene, parameters, rel=1e-6):
+    """The sensitivity of every parameter equals the central difference of solves within ``rel`` of its scale."""
+    result = cc.solve(scene, **TIGHT)
+    assert result.certificate.worst < 1e-12
+    found = cc.sensitivity(result, parameters)
+    for parameter, sensitivity in found.items():
+        assert sensitivity.differentiable and sensitivity.margin > 1e-4
+        exact = fields(result, sensitivity.derivative)
+        difference = central(scene, parameter, sensitivity.value, 1e-4 * max(abs(sensitivity.value), 0.01))
+        assert np.abs(exact - difference).max() <= rel * np.abs(difference).max(), parameter
+    return result, found
+
+
+def test_signorini_2d_agrees_with_finite_differences():
+    assert_agrees(block(cc.Signorini()), ["dirichlet[top].uy", "E", "nu", "obstacle.gap", "traction[right].pressure"])
+
+
+def test_tresca_2d_agrees_with_finite_differences():
+    result, found = assert_agrees(block(cc.Tresca(slip_bound=0.004)), ["dirichlet[top].ux", "slip_bound", "E"])
+    slipping = np.char.startswith(result.contact.status.astype(str), "slip")
+    # every slipping node's traction is the bound: its derivative along the bound is the sign of the traction
+    assert np.allclose(found["slip_bound"].derivative.friction[slipping], np.sign(result.contact.friction[slipping]))
+
+
+def test_coulomb_2d_differentiates_the_coulomb_law():
+    """s = μ λ_N of the same answer: dλ_T = d(μ λ_N) at slipping nodes, including μ's own term."""
+    result, found = assert_agrees(block(cc.Coulomb(friction=0.3)), ["friction", "dirichlet[top].uy", "nu"])
+    derivative = found["friction"].derivative
+    sign = np.sign(result.contact.friction)
+    assert np.allclose(np.abs(derivative.friction), np.abs(result.contact.pressure + 0.3 * derivative.pressure),
+                       rtol=1e-9)
+    assert np.all(sign != 0)
+
+
+def test_tresca_punch_partial_contact_along_depth():
+    """A parabolic punch with Tresca friction: a closed zone, open nodes, stick and slip, along the depth."""
+    assert_agrees(cc.library.tresca_punch(nx=16), ["obstacle.depth", "slip_bound", "E"])
+
+
+@pytest.mark.parametrize("law, parameters", [(cc.Tresca(slip_bound=0.004), ["dirichlet[top].ux", "slip_bound"]),
+                                             (cc.Coulomb(friction=0.3), ["dirichlet[top].uy", "friction"])])
+def test_3d_oblique_slip_agrees_with_finite_differences(law, parameters):
+    result, _ = assert_agrees(box(law), parameters)
+    assert set(result.contact.status) == {"slip"}
+
+
+def test_grazing_contact_gives_both_one_sided_derivatives():
+    """A block touching its foundation without load (every node grazing): lifting the top opens every node
+    (right derivative: no force), pressing closes them (left: the closed block's stiffness). One-sided
+    differences of solves are these derivatives; the central difference lies between them."""
+    scene = block(cc.Signorini(), ux=0.0, uy=0.0, pressure=0.0)
+    result = cc.solve(scene, **TIGHT)
+    found = cc.sensitivity(result, "dirichlet[top].uy")
+    assert list(found.degenerate["grazing"]) == list(range(result.fem.contact.m))
+    with pytest.raises(NotDifferentiable, match="grazing"):
+        found.derivative
+    step = 1e-4
+    up, down = (cc.solve(cc.with_parameter(scene, "dirichlet[top].uy", sign * step), **TIGHT) for sign in (1, -1))
+    assert found.right.normal_force == pytest.approx(0.0, abs=1e-12)
+    assert found.left.normal_force < -1.0  # pressing: the force grows as uy decreases
+    for side, difference in ((found.right, fields(up) - fields(result)), (found.left, fields(result) - fields(down))):
+        assert np.abs(fields(result, side) - difference / step).max() <= 1e-8 * np.abs(difference / step).max()
+    middle = (up.normal_force - down.normal_force) / (2 * step)
+    assert found.left.normal_force < middle < found.right.normal_force
+
+
+def test_stick_slip_boundary_gives_both_one_sided_derivatives():
+    """Tresca with the bound set to the largest sticking traction: that node sits at the stick/slip boundary.
+    A larger bound changes nothing (right derivative 0); a smaller one lets it slip (left derivative)."""
+    sticking = cc.solve(block(cc.Tresca(slip_bound=1.0), ux=0.002), **TIGHT)
+    assert set(sticking.contact.status) == {"stick"}
+    bound = float(np.abs(sticking.contact.friction).max())
+    scene = block(cc.Tresca(slip_bound=bound), ux=0.002)
+    result = cc.solve(scene, **TIGHT)
+    found = cc.sensitivity(result, ["slip_bound", "dirichlet[top].ux"])
+    edge = int(np.argmax(np.abs(sticking.contact.friction)))
+    assert [list(s.degenerate["stick_slip"]) for s in found.values()] == [[edge], [edge]]
+    assert np.abs(fields(result, found["slip_bound"].right)).max() == 0.0
+    step = 1e-6 * bound
+    below = cc.solve(cc.with_parameter(scene, "slip_bound", bound - step), **TIGHT)
+    assert below.contact.status[edge].startswith("slip")
+    difference = (fields(result) - fields(below)) / step
+    assert np.abs(fields(result, found["slip_bound"].left) - difference).max() <= 1e-6 * np.abs(difference).max()
+    # along ux the node slips either way, but at different rates: both one-sided derivatives, each a difference
+    sliding = found["dirichlet[top].ux"]
+    for sign, side in ((1, sliding.right), (-1, sliding.left)):
+        moved = cc.solve(cc.with_parameter(scene, "dirichlet[top].ux", 0.002 + sign * 1e-6), **TIGHT)
+        difference = sign * (fields(moved) - fields(result)) / 1e-6
+        assert np.abs(fields(result, side) - difference).max() <= 1e-6 * np.abs(difference).max()
+    assert sliding.right.tangential_force != pytest.approx(sliding.left.tangential_force, rel=1e-3)
+
+
+def test_adjoint_gradient_is_the_forward_derivatives_contracted():
+    """One transposed solve gives dJ/dθ of every parameter: J weighs displacements, pressures, friction and
+    the resultants at once."""
+    result = cc.solve(block(cc.Coulomb(friction=0.3)), **TIGHT)
+    rng = np.random.default_rng(1)
+    weights = {"displacement": rng.standard_normal(result.displacement.size),
+               "pressure": rng.standard_normal(result.contact.pressure.size),
+               "friction": rng.standard_normal(result.contact.friction.shape),
+               "contact_force": rng.standard_normal(2), "normal_force": 0.7, "tangential_force": -1.3}
+    parameters = ["friction", "E", "nu", "dirichlet[top].ux", "dirichlet[top].uy", "traction[right].pressure"]
+    gradient = cc.gradient(result, parameters, **weights)
+    for parameter, sensitivity in cc.sensitivity(result, parameters).items():
+        d = sensitivity.derivative
+        forward = (weights["displacement"] @ d.displacement + weights["pressure"] @ d.pressure
+                   + np.sum(weights["friction"] * d.friction) + weights["contact_force"] @ d.contact_force
+                   + 0.7 * d.normal_force - 1.3 * d.tangential_force)
+        assert gradient[parameter] == pytest.approx(forward, rel=1e-9, abs=1e-12 * np.abs(forward)), parameter
+
+
+def test_adjoint_is_refused_at_a_degenerate_answer():
+    result = cc.solve(block(cc.Signorini(), ux=0.0, uy=0.0, pressure=0.0), **TIGHT)
+    with pytest.raises(NotDifferentiable, match="result: 9 grazing nodes.*cc.sensitivity"):
+        cc.gradient(result, ["E"], normal_force=1.0)
