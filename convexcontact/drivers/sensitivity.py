@@ -216,58 +216,59 @@ def weighted_gap(contact, C) -> np.ndarray:
     return contact.weighted_gap(C) - C @ contact.normal_offset
 
 
-def parameter_value(scene: Scene, parameter) -> float:
-    """The parameter's value in ``scene``, or an error naming the parameters the scene has."""
-    of_type(parameter, str, "parameter", f"name one of {', '.join(PARAMETERS)}")
+def parameter_value(scene: Scene, parameter, field: str = "parameter") -> float:
+    """The parameter's value in ``scene``, or an error (named ``field``) naming the parameters the scene has."""
+    of_type(parameter, str, field, f"name one of {', '.join(PARAMETERS)}")
     law, material = scene.contact.law, MATERIAL.match(parameter)
     if material is not None:
         name, which = material.groups()
         if name is None and not isinstance(scene.materials, Material):
-            raise SceneError(f"parameter {parameter}", "the scene has several materials",
+            raise SceneError(field, f"{parameter!r}: the scene has several materials",
                              f"name one: {[f'materials[{k}].{which}' for k in scene.materials]}")
         if name is not None and (isinstance(scene.materials, Material) or name not in scene.materials):
             known = [] if isinstance(scene.materials, Material) else list(scene.materials)
-            raise SceneError(f"parameter {parameter}", f"no material {name!r}",
+            raise SceneError(field, f"{parameter!r}: no material {name!r}",
                              f"use {which!r}" if not known else f"name one of {known}")
         chosen = scene.materials if name is None else scene.materials[name]
         return float(getattr(chosen, which))
     if parameter in ("friction", "slip_bound"):
         kind = Coulomb if parameter == "friction" else Tresca
         if not isinstance(law, kind):
-            raise SceneError(f"parameter {parameter}", f"the scene's law is {type(law).__name__}, which has no "
-                             f"{parameter}", "use 'friction' for Coulomb, 'slip_bound' for Tresca")
+            own = {Coulomb: "use 'friction'", Tresca: "use 'slip_bound'"}.get(
+                type(law), "a frictionless law has neither: name a load, support, obstacle or material parameter")
+            raise SceneError(field, f"{parameter!r}: the scene's law is {type(law).__name__}, which has no "
+                             f"{parameter}", own)
         value = getattr(law, parameter)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise SceneError(f"parameter {parameter}", f"the law's {parameter} is a field, not one number",
+            raise SceneError(field, f"{parameter!r}: the law's {parameter} is a field, not one number",
                              f"give contact.{parameter} as a number to differentiate by it")
         return float(value)
-    path, index = vector_path(parameter)
-    if PATH.match(path) is None or path.startswith("contact[") or path.endswith(("force", "tangential_force")):
-        raise SceneError(f"parameter {parameter}", "unknown parameter (a force-controlled obstacle is not "
-                         "differentiated)" if PATH.match(path) else "unknown parameter",
-                         f"use one of {', '.join(PARAMETERS)}")
+    path, index = vector_path(parameter, field)
+    if PATH.match(path) is None or path.startswith("contact[") or path.startswith("obstacle.") and path.endswith("force"):
+        problem = "not differentiated here (a force-controlled obstacle)" if PATH.match(path) else "unknown parameter"
+        raise SceneError(field, f"{parameter!r}: {problem}", f"use one of {', '.join(PARAMETERS)}")
     value = current(scene, path)
     try:
         check_effect(scene, path)
         at(scene, path, 0.0 if value is None else value)
     except SceneError as error:
-        raise SceneError(f"parameter {parameter}", str(error).split(": ", 1)[1]) from None
+        raise SceneError(field, f"{parameter!r}: {str(error).split(': ', 1)[1]}") from None
     if index is None:
         return float(value or 0.0)
     if index >= len(value):
-        raise SceneError(f"parameter {parameter}", f"component {index} of a {len(value)}-vector",
+        raise SceneError(field, f"{parameter!r}: component {index} of a {len(value)}-vector",
                          f"use {path}[0] … {path}[{len(value) - 1}]")
     return float(value[index])
 
 
-def vector_path(parameter: str) -> tuple[str, int | None]:
+def vector_path(parameter: str, field: str = "parameter") -> tuple[str, int | None]:
     """(path, component) of a vector's component (``body_force[1]``), (path, None) otherwise."""
     vector = COMPONENT.match(parameter)
     if vector is None:
         return parameter, None
     path, index = vector.groups()
     if index is None:
-        raise SceneError(f"parameter {parameter}", "a vector: name one of its components",
+        raise SceneError(field, f"{parameter!r}: a vector: name one of its components",
                          f"use '{parameter}[0]', '{parameter}[1]', ...")
     return path, int(index)
 
@@ -286,7 +287,9 @@ def current(scene: Scene, path: str):
 
 def with_parameter(scene: Scene, parameter: str, value: float) -> Scene:
     """``scene`` with ``parameter`` (:data:`PARAMETERS`) set to ``value``: a finite difference's or a fit's scene."""
+    of_type(scene, Scene, "scene", "give the cc.Scene the parameter belongs to")
     parameter_value(scene, parameter)
+    value = finite(value, "value", f"give {parameter}'s new value as a number")
     material = MATERIAL.match(parameter)
     if material is not None:
         name, which = material.groups()
@@ -411,7 +414,8 @@ def sensitivity(result: ContactResult, parameter: str | list[str]) -> Sensitivit
     if not isinstance(names, (list, tuple)) or not names:
         raise SceneError("parameter", f"expected a name or a list of names, got {parameter!r:.60}",
                          f"name one of {', '.join(PARAMETERS)}")
-    values = {name: parameter_value(result.scene, name) for name in names}
+    values = {name: parameter_value(result.scene, name, "parameter" if isinstance(parameter, str) else
+                                    f"parameter[{i}]") for i, name in enumerate(names)}
     point = point_of(result)
     out = {name: along(point, name, value) for name, value in values.items()}
     return out[parameter] if isinstance(parameter, str) else out
@@ -444,7 +448,7 @@ def gradient(result: ContactResult, parameters: list[str], *, displacement=None,
     if isinstance(parameters, str) or not isinstance(parameters, (list, tuple)) or not parameters:
         raise SceneError("parameters", f"expected a list of names, got {parameters!r:.60}",
                          f"give e.g. ['friction', 'E'] from {', '.join(PARAMETERS)}")
-    values = {name: parameter_value(result.scene, name) for name in parameters}
+    values = {name: parameter_value(result.scene, name, f"parameters[{i}]") for i, name in enumerate(parameters)}
     fem = result.fem
     weights = objective_weights(result, displacement, pressure, friction, contact_force, normal_force,
                                 tangential_force)
@@ -480,7 +484,7 @@ def objective_weights(result: ContactResult, displacement, pressure, friction, c
             weights[name] = None if shape is None else np.zeros(shape)
             continue
         if shape is None:
-            raise ValueError(f"{name}: the result has no friction traction (a frictionless law)", "drop it")
+            raise ValueError(f"{name}: the result has no friction traction (a frictionless law) — drop it")
         array = np.asarray(value, dtype=float) if not isinstance(value, str) else None
         if array is None or array.shape != shape or not np.isfinite(array).all():
             raise ValueError(f"{name}: expected {shape} finite numbers (dJ/d{name} at the answer, user units), got "
