@@ -159,3 +159,19 @@ def test_adjoint_is_refused_at_a_degenerate_answer():
     result = cc.solve(block(cc.Signorini(), ux=0.0, uy=0.0, pressure=0.0), **TIGHT)
     with pytest.raises(NotDifferentiable, match="result: 9 grazing nodes.*cc.sensitivity"):
         cc.gradient(result, ["E"], normal_force=1.0)
+
+
+def test_identify_friction_example_recovers_the_truth_within_the_noise():
+    """examples/identify_friction.py: μ and E from 8 noisy forces, by L-BFGS-B on the adjoint gradient, each
+    within three Gauss–Newton standard errors of the truth, the errors a few per cent."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "identify_friction.py"
+    spec = importlib.util.spec_from_file_location("identify_friction", path)
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    estimate, errors, fit, _ = example.main(points=4, nx=6)
+    assert fit.success
+    for name, truth in example.TRUTH.items():
+        assert abs(estimate[name] - truth) <= 3 * errors[name] and errors[name] <= 0.03 * truth, name
