@@ -38,8 +38,10 @@ def result():
     ("body_force", r"^parameter: 'body_force': a vector: name one of its components — use 'body_force\[0\]'"),
     ("body_force[5]", r"^parameter: 'body_force\[5\]': component 5 of a 2-vector — use body_force\[0\] … "),
     ("materials[steel].E", r"^parameter: 'materials\[steel\].E': no material 'steel' — use 'E'"),
-    ("obstacle.force", r"^parameter: 'obstacle.force': not differentiated here \(a force-controlled obstacle\)"),
-    ("contact[0].obstacle.depth", r"^parameter: 'contact\[0\].obstacle.depth': not differentiated here"),
+    ("obstacle.force", (r"^parameter: 'obstacle.force': the obstacle is not pressed by a force .* — give the scene's "
+                       r"obstacle a force")),
+    ("contact[0].obstacle.depth", (r"^parameter: 'contact\[0\].obstacle.depth': not differentiated here \(contacts of "
+                                  r"several bodies\)")),
     (["E", "bar"], r"^parameter\[1\]: 'bar': unknown parameter"),
 ])
 def test_bad_parameters_are_refused(result, parameter, message):
@@ -85,8 +87,8 @@ def test_a_failing_certificate_is_refused(result):
     (block(cc.NormalCompliance(stiffness=100.0)), (r"^contact.law: NormalCompliance: sensitivities are implemented for "
                                                   r"Signorini, Tresca and Coulomb — use one of these laws")),
     (block(cc.Signorini(non_penetration="gauss")), r"^contact.non_penetration: contact or friction at Gauss points"),
-    (cc.library.hertz_punch(nx=8), (r"^obstacle.force: a force-controlled obstacle: not implemented — give the "
-                                   r"obstacle a depth")),
+    (cc.bodies_library.patch_pair(slave_cells=3, master_cells=4), (r"^result: contact between bodies: not "
+                                                                   r"implemented — differentiate a body on a rigid")),
     (block(cc.Coulomb(friction=0.3, smoothing_radius=0.2)), r"^contact.smoothing_radius: nonlocal Coulomb"),
 ])
 def test_scenes_not_differentiated_are_refused(scene, message):
@@ -108,12 +110,18 @@ def test_a_history_step_is_refused():
                                r"units\), got .* — give an array of shape \(5,\)")),
     ({"displacement": np.full(30, np.nan)}, r"^displacement: expected \(30,\) finite numbers"),
     ({"contact_force": "up"}, r"^contact_force: expected \(2,\) finite numbers"),
-    ({"normal_force": float("nan")}, r"^normal_force: got nan — give dJ/d\(force\) at the answer as a number"),
+    ({"normal_force": float("nan")}, r"^normal_force: got nan — give dJ/dnormal_force at the answer as a number"),
     ({"tangential_force": "1"}, r"^tangential_force: expected a number"),
 ])
 def test_bad_objective_weights_are_refused(result, weights, message):
     with pytest.raises(ValueError, match=message):
         cc.gradient(result, ["E"], **weights)
+
+
+def test_obstacle_motion_weights_need_force_control(result):
+    with pytest.raises(ValueError, match=r"^obstacle_advance: the obstacle's motion is given \(no force control\), "
+                                         r"not an unknown of the answer — drop it"):
+        cc.gradient(result, ["E"], obstacle_advance=1.0)
 
 
 def test_friction_weights_need_friction():

@@ -1,6 +1,8 @@
 """Exact sensitivities (docs/sensitivity.md): central finite differences of whole solves where the active set
 holds, one-sided differences across a change of status, the adjoint against the forward derivatives."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -33,26 +35,27 @@ def fields(result, derivative=None) -> np.ndarray:
     source = derivative or result
     friction = source.friction if derivative else result.contact.friction
     pressure = source.pressure if derivative else result.contact.pressure
+    motions = [source.obstacle_advance or 0.0, source.obstacle_shift or 0.0]
     return np.concatenate([source.displacement, pressure, np.ravel(friction if friction is not None else []),
-                           np.atleast_1d(source.contact_force)])
+                           motions, np.atleast_1d(source.contact_force)])
 
 
-def central(scene, parameter, value, step):
+def central(scene, parameter, value, step, options=TIGHT):
     """(x(θ + h) − x(θ − h)) / 2h of whole tight solves."""
-    ends = [cc.solve(cc.with_parameter(scene, parameter, value + sign * step), **TIGHT) for sign in (1, -1)]
+    ends = [cc.solve(cc.with_parameter(scene, parameter, value + sign * step), **options) for sign in (1, -1)]
     assert all(end.certificate.worst < 1e-12 for end in ends)
     return (fields(ends[0]) - fields(ends[1])) / (2 * step)
 
 
-def assert_agrees(scene, parameters, rel=1e-6):
+def assert_agrees(scene, parameters, rel=1e-6, options=TIGHT):
     """The sensitivity of every parameter equals the central difference of solves within ``rel`` of its scale."""
-    result = cc.solve(scene, **TIGHT)
+    result = cc.solve(scene, **options)
     assert result.certificate.worst < 1e-12
     found = cc.sensitivity(result, parameters)
     for parameter, sensitivity in found.items():
         assert sensitivity.differentiable and sensitivity.margin > 1e-4
         exact = fields(result, sensitivity.derivative)
-        difference = central(scene, parameter, sensitivity.value, 1e-4 * max(abs(sensitivity.value), 0.01))
+        difference = central(scene, parameter, sensitivity.value, 1e-4 * max(abs(sensitivity.value), 0.01), options)
         assert np.abs(exact - difference).max() <= rel * np.abs(difference).max(), parameter
     return result, found
 
@@ -81,6 +84,21 @@ def test_coulomb_2d_differentiates_the_coulomb_law():
 def test_tresca_punch_partial_contact_along_depth():
     """A parabolic punch with Tresca friction: a closed zone, open nodes, stick and slip, along the depth."""
     assert_agrees(cc.library.tresca_punch(nx=16), ["obstacle.depth", "slip_bound", "E"])
+
+
+def test_force_controlled_punch_pulled_sideways():
+    """Hertz's punch pressed by P and pulled by Q (Tresca): the obstacle's advance and shift are unknowns, whose
+    derivatives along P, Q and E agree with differences too."""
+    law = cc.Tresca(slip_bound=0.002)
+    punch = cc.Obstacle("parabolic", radius=1.0, force=0.0086307, tangential_force=0.001)
+    scene = dataclasses.replace(cc.library.hertz_punch(nx=16, law=law), contact=cc.Contact("top", punch, law))
+    result, found = assert_agrees(scene, ["obstacle.force", "obstacle.tangential_force", "E"],
+                                  options={"formulation": "dual", "solver": "clarabel"})
+    # the resultants are the loads: dP/dP = 1, dQ/dQ = 1 (Q along the mean tangent, pulling the body)
+    assert found["obstacle.force"].derivative.normal_force == pytest.approx(1.0, rel=1e-9)
+    assert abs(found["obstacle.tangential_force"].derivative.tangential_force) == pytest.approx(1.0, rel=1e-9)
+    advance = cc.gradient(result, ["obstacle.force", "E"], obstacle_advance=1.0)
+    assert advance["E"] == pytest.approx(found["E"].derivative.obstacle_advance, rel=1e-9)
 
 
 @pytest.mark.parametrize("law, parameters", [(cc.Tresca(slip_bound=0.004), ["dirichlet[top].ux", "slip_bound"]),

@@ -44,7 +44,7 @@ from .model import CERTIFIED, field_at_points, frictional_rows
 from .picard import pressure_map
 
 PARAMETERS = ("E", "nu", "materials[NAME].E|nu", "friction (Coulomb)", "slip_bound (Tresca)", "obstacle.depth",
-              "obstacle.gap", "dirichlet[BOUNDARY].ux|uy|uz", "traction[BOUNDARY].pressure",
+              "obstacle.gap", "obstacle.force", "obstacle.tangential_force", "dirichlet[BOUNDARY].ux|uy|uz", "traction[BOUNDARY].pressure",
               "traction[BOUNDARY].vector[I]", "body_force[I]")
 MATERIAL = re.compile(r"^(?:materials\[([^\]]+)\]\.)?(E|nu)$")
 COMPONENT = re.compile(r"^(.*(?:vector|body_force))(?:\[(\d)\])?$")
@@ -67,6 +67,8 @@ class Derivative:
     contact_force: np.ndarray
     normal_force: float
     tangential_force: float | None
+    obstacle_advance: float | None = None  # force control: the obstacle's unknown motions
+    obstacle_shift: float | None = None
 
 
 @dataclass
@@ -121,6 +123,7 @@ class Point:
     unit_bound: sp.csr_matrix | None  # Coulomb: ds/dF (F constant) as a map of λ_N
     linear: Linearization
     margin: float
+    obstacle: int = 0  # the force-controlled obstacle's unknowns after u (advance, then shift): 0, 1 or 2
 
     @property
     def fem(self) -> FEModel:
@@ -149,10 +152,6 @@ def check_result(result) -> ContactResult:
     if law.non_penetration == "gauss" or getattr(law, "quadrature", "nodal") == "gauss":
         raise SceneError("contact.non_penetration", "contact or friction at Gauss points: their multipliers need not "
                          "be unique, so neither are their derivatives", "use non_penetration and quadrature 'nodal'")
-    obstacle = scene.contact.obstacle
-    if obstacle.force is not None or obstacle.tangential_force is not None:
-        raise SceneError("obstacle.force", "a force-controlled obstacle: not implemented",
-                         "give the obstacle a depth (displacement control)")
     if has_viscosity(scene):
         raise SceneError("materials", "a viscous material: not implemented", "differentiate an elastic body")
     if isinstance(law, Coulomb) and law.smoothing_radius > 0:
@@ -170,21 +169,22 @@ def point_of(result: ContactResult) -> Point:
     fem, law = result.fem, result.scene.contact.law
     scaling, contact = fem.scaling, fem.contact
     C = contact_weights(contact, law.non_penetration)
-    u = result.displacement[fem.free] / scaling.displacement
+    friction = None
+    if law.__class__ is not Signorini:
+        if frictional_rows(law, contact) is not None:
+            raise SceneError("contact.friction", "friction laws per contact pair: not implemented", "use one law")
+        friction = friction_points(contact, fem.mesh, fem.basis, law.quadrature, law.non_penetration)
+    K, A, R, obstacle = with_obstacle(result, C, friction)
+    u = np.concatenate([result.displacement[fem.free] / scaling.displacement, obstacle])
     pressure = result.contact.pressure / scaling.pressure
     u_ref, p_ref = max(np.abs(u).max(initial=0.0), 1.0), max(np.abs(pressure).max(initial=0.0), 1.0)
     tol = max(STRICT, 100 * result.certificate.worst)
-    A = sp.csr_matrix(C @ contact.N)
     gap = (weighted_gap(contact, C) - A @ u) / contact.row_weights(C) / u_ref
     normal = normal_status(gap, pressure / p_ref, held(A), tol)
     strict = [np.where(normal == "closed", pressure / p_ref, np.where(normal == "open", gap, np.inf))]
-    friction = traction = bound = unit = None
+    traction = bound = unit = None
     arguments = {}
-    if law.__class__ is not Signorini:
-        friction = friction_points(contact, fem.mesh, fem.basis, law.quadrature, law.non_penetration,
-                                   frictional_rows(law, contact))
-        if frictional_rows(law, contact) is not None:
-            raise SceneError("contact.friction", "friction laws per contact pair: not implemented", "use one law")
+    if friction is not None:
         traction = np.asarray(result.contact.friction).reshape(contact.m, -1).T.ravel() / scaling.pressure
         coupling, fixed = None, np.ones(friction.count, bool)
         if isinstance(law, Tresca):
@@ -195,7 +195,8 @@ def point_of(result: ContactResult) -> Point:
             bound = coupling @ np.maximum(pressure, 0.0)
             moving = np.isin(normal, ("closed", "grazing")).astype(float)
             fixed = (abs(coupling) @ moving) == 0  # no closed or grazing node under the point: its bound stays 0
-        slip = friction.components(friction.slip(u)) / friction.weights[:, None] / u_ref
+        weighted = friction.components(R @ u + friction.offset)
+        slip = weighted / friction.weights[:, None] / u_ref
         components = friction.components(traction)
         epsilon = None if law.regularization is None else law.regularization / scaling.displacement
         status = friction_status(slip, components / p_ref, bound / p_ref, held(friction.R, friction.dim), fixed, tol,
@@ -203,12 +204,37 @@ def point_of(result: ContactResult) -> Point:
         room = (bound - np.linalg.norm(components, axis=1)) / p_ref
         strict.append(np.where(status == "slip", np.linalg.norm(slip, axis=1), np.where(status == "stick", room,
                                                                                         np.inf)))
-        arguments = {"R": friction.R, "friction": status, "slip": friction.components(friction.slip(u)),
-                     "traction": components, "bound": bound, "coupling": coupling,
-                     "epsilon": None if epsilon is None else epsilon * friction.weights}
-    linear = linearize(fem.K, A, normal, **arguments)
+        arguments = {"R": R, "friction": status, "slip": weighted, "traction": components, "bound": bound,
+                     "coupling": coupling, "epsilon": None if epsilon is None else epsilon * friction.weights}
+    linear = linearize(K, A, normal, **arguments)
     margin = float(np.concatenate(strict).min(initial=np.inf))
-    return Point(result, C, friction, u, pressure, traction, bound, unit, linear, margin)
+    return Point(result, C, friction, u, pressure, traction, bound, unit, linear, margin, obstacle.size)
+
+
+def with_obstacle(result: ContactResult, C: sp.spmatrix, friction: FrictionPoints | None):
+    """K, A = C N and R with the force-controlled obstacle's unknowns appended as columns (its advance δ_N closes
+    the gaps by C c δ_N, its shift δ_T moves the slip by −coupling δ_T; no stiffness: their equations are the
+    force balances), and their values in the answer (scaled). As in :mod:`~convexcontact.formulations.primal`."""
+    fem = result.fem
+    contact, scaling = fem.contact, fem.scaling
+    rows = friction.R.shape[0] if friction is not None else 0
+    normal, tangential, values = [], [], []
+    if contact.obstacle_coupling is not None:
+        normal.append(C @ contact.obstacle_coupling)
+        tangential.append(np.zeros(rows))
+        values.append(result.obstacle_advance / scaling.displacement)
+    if contact.tangential_coupling is not None:
+        normal.append(np.zeros(C.shape[0]))
+        tangential.append(-friction.coupling)
+        values.append(result.obstacle_shift / scaling.displacement)
+
+    def widened(matrix, columns):
+        return sp.csr_matrix(sp.hstack([matrix, sp.csr_matrix(np.column_stack(columns))])) if columns else \
+            sp.csr_matrix(matrix)
+
+    K = sp.block_diag([fem.K, sp.csr_matrix((len(values), len(values)))], format="csr")
+    return (K, widened(C @ contact.N, normal), None if friction is None else widened(friction.R, tangential),
+            np.array(values, dtype=float))
 
 
 def weighted_gap(contact, C) -> np.ndarray:
@@ -244,10 +270,14 @@ def parameter_value(scene: Scene, parameter, field: str = "parameter") -> float:
                              f"give contact.{parameter} as a number to differentiate by it")
         return float(value)
     path, index = vector_path(parameter, field)
-    if PATH.match(path) is None or path.startswith("contact[") or path.startswith("obstacle.") and path.endswith("force"):
-        problem = "not differentiated here (a force-controlled obstacle)" if PATH.match(path) else "unknown parameter"
+    if PATH.match(path) is None or path.startswith("contact["):
+        problem = "not differentiated here (contacts of several bodies)" if PATH.match(path) else "unknown parameter"
         raise SceneError(field, f"{parameter!r}: {problem}", f"use one of {', '.join(PARAMETERS)}")
     value = current(scene, path)
+    if path.startswith("obstacle.") and path.endswith("force") and value is None:
+        raise SceneError(field, f"{parameter!r}: the obstacle is not pressed by a force (its {path} is not given), "
+                         "so the force is no parameter of this scene", "give the scene's obstacle a force to "
+                         "differentiate by it, or differentiate by 'obstacle.depth'")
     try:
         check_effect(scene, path)
         at(scene, path, 0.0 if value is None else value)
@@ -277,7 +307,8 @@ def current(scene: Scene, path: str):
     """The scene's value of the history path ``path`` (an obstacle's depth not given is 0; None: not in the scene)."""
     _, obstacle, name, _, where, component, _, loaded, load, body_force = PATH.match(path).groups()
     if obstacle:
-        return getattr(scene.contact.obstacle, name) or 0.0
+        given = getattr(scene.contact.obstacle, name)
+        return 0.0 if given is None and name in ("depth", "gap") else given
     if body_force:
         return scene.body_force
     items = scene.dirichlet if where is not None else scene.tractions
@@ -314,6 +345,8 @@ def shifted(scene: Scene, parameter: str, value: float) -> Scene:
 def unit_of(fem: FEModel, parameter: str) -> float:
     """The parameter's natural scale in the model's units (a difference step that is neither round-off nor huge)."""
     scaling = fem.scaling
+    if parameter.startswith("obstacle.") and parameter.endswith("force"):
+        return scaling.force
     if parameter.startswith(("obstacle", "dirichlet")):
         return scaling.displacement
     if parameter.startswith("body_force"):
@@ -325,28 +358,37 @@ def data_rates(point: Point, parameter: str, value: float) -> tuple[Rates, np.nd
     """The data's derivatives along ``parameter`` (scaled data per user unit) and the prescribed values' rate
     (full DOF vector, scaled)."""
     fem, law = point.fem, point.fem.scene.contact.law
-    zeros = np.zeros(fem.prescribed.size)
-    offsets = None if point.friction is None else np.zeros(point.friction.R.shape[0])
+    n = fem.n_free
+    prescribed, gap = np.zeros(fem.prescribed.size), np.zeros(point.C.shape[0])
+    force, offsets = np.zeros(n + point.obstacle), None if point.friction is None else np.zeros(point.friction.R.shape[0])
     if MATERIAL.match(parameter):
-        u_full = fem.full(point.u)
-        return Rates(-(stiffness_rate(fem, parameter) @ u_full)[fem.free], np.zeros(point.C.shape[0]), offsets), zeros
+        force[:n] = -(stiffness_rate(fem, parameter) @ fem.full(point.u[:n]))[fem.free]
+        return Rates(force, gap, offsets), prescribed
     if parameter == "slip_bound":
-        return Rates(np.zeros(fem.n_free), np.zeros(point.C.shape[0]), offsets,
-                     np.full(point.friction.count, 1.0 / fem.scaling.pressure)), zeros
+        return Rates(force, gap, offsets, np.full(point.friction.count, 1.0 / fem.scaling.pressure)), prescribed
     if parameter == "friction":
-        return Rates(np.zeros(fem.n_free), np.zeros(point.C.shape[0]), offsets,
-                     point.unit_bound @ np.maximum(point.pressure, 0.0)), zeros
+        return Rates(force, gap, offsets, point.unit_bound @ np.maximum(point.pressure, 0.0)), prescribed
+    # the data are affine in these parameters: a forward difference is exact to round-off (and keeps a force ≥ 0)
     step = max(abs(value), unit_of(fem, parameter))
-    sides = [fem.at(shifted(fem.scene, parameter, value + sign * step)) for sign in (1.0, -1.0)]
-    rate = [(a - b) / (2 * step) for a, b in [(sides[0].f, sides[1].f),
-                                              (weighted_gap(sides[0].contact, point.C),
-                                               weighted_gap(sides[1].contact, point.C)),
-                                              (sides[0].prescribed, sides[1].prescribed)]]
+    sides = [fem.at(shifted(fem.scene, parameter, value + step)), fem]
+
+    def rate(quantity):
+        return (quantity(sides[0]) - quantity(sides[1])) / step
+
+    force = np.concatenate([rate(lambda side: side.f), rate(lambda side: obstacle_forces(side.contact))])
     if point.friction is not None:
-        ends = [friction_points(side.contact, fem.mesh, fem.basis, law.quadrature, law.non_penetration).offset
-                for side in sides]
-        offsets = (ends[0] - ends[1]) / (2 * step)
-    return Rates(rate[0], rate[1], offsets), rate[2]
+        offsets = rate(lambda side: friction_points(side.contact, fem.mesh, fem.basis, law.quadrature,
+                                                    law.non_penetration).offset)
+    return Rates(force, rate(lambda side: weighted_gap(side.contact, point.C)), offsets), \
+        rate(lambda side: side.prescribed)
+
+
+def obstacle_forces(contact) -> np.ndarray:
+    """The force-controlled obstacle's loads (P, then Q; scaled) on its unknowns, as :func:`with_obstacle` orders
+    them."""
+    return np.array([force for force, coupling in ((contact.obstacle_force, contact.obstacle_coupling),
+                                                   (contact.obstacle_tangential_force, contact.tangential_coupling))
+                     if coupling is not None])
 
 
 def stiffness_rate(fem: FEModel, parameter: str) -> sp.csr_matrix:
@@ -387,11 +429,13 @@ def mean_frame(fem: FEModel) -> tuple[np.ndarray, np.ndarray]:
 
 
 def derivative_of(point: Point, x: np.ndarray, prescribed: np.ndarray) -> Derivative:
-    """The fields of the solution x = (du, dλ_N, dλ_T) of the derivative system, in user units."""
+    """The fields of the solution x = (du, dδ, dλ_N, dλ_T) of the derivative system, in user units."""
     fem = point.fem
     scaling, n, r = fem.scaling, fem.n_free, point.C.shape[0]
     displacement = prescribed.copy()
     displacement[fem.free] = x[:n]
+    obstacle = dict(zip(obstacle_names(fem.contact), x[n:n + point.obstacle] * scaling.displacement))
+    n += point.obstacle
     pressure = fem.contact.nodal_pressure(point.C, x[n:n + r])
     normal_map, tangential_map = resultant_maps(point)
     force = normal_map @ x[n:n + r]
@@ -403,7 +447,14 @@ def derivative_of(point: Point, x: np.ndarray, prescribed: np.ndarray) -> Deriva
     mean_normal, mean_tangent = mean_frame(fem)
     force = force * scaling.force
     return Derivative(displacement * scaling.displacement, pressure * scaling.pressure, friction, force,
-                      float(-force @ mean_normal), None if friction is None else float(force @ mean_tangent))
+                      float(-force @ mean_normal), None if friction is None else float(force @ mean_tangent),
+                      obstacle.get("obstacle_advance"), obstacle.get("obstacle_shift"))
+
+
+def obstacle_names(contact) -> list[str]:
+    """The force-controlled obstacle's unknowns, in the order of :func:`with_obstacle`."""
+    return [name for name, coupling in (("obstacle_advance", contact.obstacle_coupling),
+                                        ("obstacle_shift", contact.tangential_coupling)) if coupling is not None]
 
 
 def sensitivity(result: ContactResult, parameter: str | list[str]) -> Sensitivity | dict[str, Sensitivity]:
@@ -438,10 +489,13 @@ def along(point: Point, parameter: str, value: float) -> Sensitivity:
 
 
 def gradient(result: ContactResult, parameters: list[str], *, displacement=None, pressure=None, friction=None,
-             contact_force=None, normal_force: float = 0.0, tangential_force: float = 0.0) -> dict[str, float]:
+             contact_force=None, normal_force: float = 0.0, tangential_force: float = 0.0,
+             obstacle_advance: float = 0.0, obstacle_shift: float = 0.0) -> dict[str, float]:
     """dJ/dθ for every parameter of ``parameters`` by one adjoint solve, where
     J = ⟨displacement, u⟩ + ⟨pressure, λ_N⟩ + ⟨friction, λ_T⟩ + ⟨contact_force, F⟩ + normal_force·P + tangential_force·Q
-    in the result's user units (for a nonlinear objective give its partial derivatives at the answer).
+      + obstacle_advance·δ_N + obstacle_shift·δ_T
+    in the result's user units (for a nonlinear objective give its partial derivatives at the answer; the obstacle's
+    motions are those of force control).
 
     Refused where the answer is degenerate (its derivative is one-sided there: :func:`sensitivity`)."""
     result = check_result(result)
@@ -451,7 +505,7 @@ def gradient(result: ContactResult, parameters: list[str], *, displacement=None,
     values = {name: parameter_value(result.scene, name, f"parameters[{i}]") for i, name in enumerate(parameters)}
     fem = result.fem
     weights = objective_weights(result, displacement, pressure, friction, contact_force, normal_force,
-                                tangential_force)
+                                tangential_force, obstacle_advance, obstacle_shift)
     point = point_of(result)
     linear = point.linear
     if linear.degenerate:
@@ -470,7 +524,7 @@ def gradient(result: ContactResult, parameters: list[str], *, displacement=None,
 
 
 def objective_weights(result: ContactResult, displacement, pressure, friction, contact_force, normal_force,
-                      tangential_force) -> dict:
+                      tangential_force, obstacle_advance=0.0, obstacle_shift=0.0) -> dict:
     """The objective's weights as arrays of the answer's shapes (zeros where not given), each checked by name."""
     fem = result.fem
     contact = fem.contact
@@ -490,8 +544,12 @@ def objective_weights(result: ContactResult, displacement, pressure, friction, c
             raise ValueError(f"{name}: expected {shape} finite numbers (dJ/d{name} at the answer, user units), got "
                              f"{value!r:.60} — give an array of shape {shape}")
         weights[name] = array
-    for name, value in (("normal_force", normal_force), ("tangential_force", tangential_force)):
-        weights[name] = finite(value, name, "give dJ/d(force) at the answer as a number")
+    for name, value in (("normal_force", normal_force), ("tangential_force", tangential_force),
+                        ("obstacle_advance", obstacle_advance), ("obstacle_shift", obstacle_shift)):
+        weights[name] = finite(value, name, f"give dJ/d{name} at the answer as a number")
+        if name.startswith("obstacle") and weights[name] != 0 and getattr(result, name) is None:
+            raise ValueError(f"{name}: the obstacle's motion is given (no force control), not an unknown of the "
+                             "answer — drop it (its derivative is 0)")
     return weights
 
 
@@ -503,7 +561,8 @@ def adjoint_vector(point: Point, weights: dict) -> np.ndarray:
     mean_normal, mean_tangent = mean_frame(fem)
     force = (weights["contact_force"] - weights["normal_force"] * mean_normal
              + weights["tangential_force"] * mean_tangent) * scaling.force
-    parts = [weights["displacement"][fem.free] * scaling.displacement,
+    motions = [weights[name] * scaling.displacement for name in obstacle_names(fem.contact)]
+    parts = [weights["displacement"][fem.free] * scaling.displacement, motions,
              weights["pressure"] * scaling.pressure + normal_map.T @ force]
     if point.friction is not None:
         traction = weights["friction"].reshape(fem.contact.m, -1).T.ravel() * scaling.pressure
