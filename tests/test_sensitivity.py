@@ -64,8 +64,12 @@ def test_signorini_2d_agrees_with_finite_differences():
     assert_agrees(block(cc.Signorini()), ["dirichlet[top].uy", "E", "nu", "obstacle.gap", "traction[right].pressure"])
 
 
-def test_tresca_2d_agrees_with_finite_differences():
-    result, found = assert_agrees(block(cc.Tresca(slip_bound=0.004)), ["dirichlet[top].ux", "slip_bound", "E"])
+@pytest.mark.parametrize("non_penetration", ["nodal", "weak"])
+def test_tresca_2d_agrees_with_finite_differences(non_penetration):
+    """Node-wise contact and Hild's weak form (C = M, R = M T: rows coupling neighbouring nodes)."""
+    law = cc.Tresca(slip_bound=0.004, non_penetration=non_penetration)
+    result, found = assert_agrees(block(law), ["dirichlet[top].ux", "slip_bound", "E"],
+                                  options={"formulation": "dual", "solver": "clarabel"})
     slipping = np.char.startswith(result.contact.status.astype(str), "slip")
     # every slipping node's traction is the bound: its derivative along the bound is the sign of the traction
     assert np.allclose(found["slip_bound"].derivative.friction[slipping], np.sign(result.contact.friction[slipping]))
@@ -152,6 +156,34 @@ def test_stick_slip_boundary_gives_both_one_sided_derivatives():
         difference = sign * (fields(moved) - fields(result)) / 1e-6
         assert np.abs(fields(result, side) - difference).max() <= 1e-6 * np.abs(difference).max()
     assert sliding.right.tangential_force != pytest.approx(sliding.left.tangential_force, rel=1e-3)
+
+
+def oblique_box(law):
+    return dataclasses.replace(box(law), dirichlet=(cc.Dirichlet("top", ux=0.002, uy=0.001, uz=-0.01),))
+
+
+@pytest.mark.parametrize("scene, bound", [(lambda law: block(law, ux=0.002), "friction"),
+                                          (oblique_box, "slip_bound")])
+def test_the_bound_at_the_largest_sticking_traction(scene, bound):
+    """2-D Coulomb (the unsymmetric coupling s = μ λ_N) and 3-D Tresca (the disc's rim: one row switches) with the
+    bound at the largest sticking traction: a larger bound changes nothing, a smaller one lets that node slip,
+    both one-sided derivatives equal one-sided differences of solves."""
+    law = cc.Coulomb if bound == "friction" else cc.Tresca
+    sticking = cc.solve(scene(law(**{bound: 10.0})), **TIGHT)
+    assert set(sticking.contact.status) == {"stick"}
+    strength = np.linalg.norm(np.reshape(sticking.contact.friction, (sticking.fem.contact.m, -1)), axis=1)
+    if bound == "friction":
+        strength = strength / sticking.contact.pressure
+    value, edge = float(strength.max()), int(np.argmax(strength))
+    at_edge = scene(law(**{bound: value}))
+    result = cc.solve(at_edge, **TIGHT)
+    found = cc.sensitivity(result, bound)
+    assert list(found.degenerate["stick_slip"]) == [edge]
+    assert np.abs(fields(result, found.right)).max() <= 1e-9 * np.abs(fields(result, found.left)).max()
+    below = cc.solve(cc.with_parameter(at_edge, bound, value * (1 - 1e-6)), **TIGHT)
+    assert below.contact.status[edge].startswith("slip")
+    difference = (fields(result) - fields(below)) / (value * 1e-6)
+    assert np.abs(fields(result, found.left) - difference).max() <= 1e-6 * np.abs(difference).max()
 
 
 def test_adjoint_gradient_is_the_forward_derivatives_contracted():
