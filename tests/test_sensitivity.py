@@ -225,3 +225,21 @@ def test_identify_friction_example_recovers_the_truth_within_the_noise():
     assert fit.success
     for name, truth in example.TRUTH.items():
         assert abs(estimate[name] - truth) <= 3 * errors[name] and errors[name] <= 0.03 * truth, name
+
+
+def test_the_degenerate_rows_complementarity_problem():
+    """Every branch tried (≤ 12 rows) and Murty's pivoting find the one solution of an SPD problem; a problem with
+    two solutions (w = 0, z = 1 and w = 1, z = 0) or none gives None, never one of them."""
+    from convexcontact.drivers.active_set import complementary, pivoting
+
+    rng = np.random.default_rng(0)
+    for size in (3, 8, 15):
+        for _ in range(20):
+            B = rng.standard_normal((size, size))
+            Q, q = B @ B.T + 0.1 * np.eye(size), rng.standard_normal(size)
+            w = complementary(Q, q)
+            z = q + Q @ w
+            assert w.min() >= 0 and z.min() >= -1e-10 and abs(w @ z) <= 1e-10
+            assert np.allclose(pivoting(Q, q), w)
+    assert complementary(np.array([[-1.0]]), np.array([1.0])) is None
+    assert complementary(np.array([[-1.0]]), np.array([-1.0])) is None

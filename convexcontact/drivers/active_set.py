@@ -252,41 +252,52 @@ def complementary(Q: np.ndarray, q: np.ndarray) -> np.ndarray | None:
     found = []
     for size in range(q.size + 1):
         for branch in itertools.combinations(range(q.size), size):
-            chosen = list(branch)
-            w = np.zeros(q.size)
-            try:
-                w[chosen] = np.linalg.solve(Q[np.ix_(chosen, chosen)], -q[chosen]) if chosen else 0.0
-            except np.linalg.LinAlgError:
+            w = branch_slack(Q, q, np.isin(np.arange(q.size), branch))
+            if w is None or not solves(Q, q, w):
                 continue
-            new = solves(Q, q, w) and not any(np.abs(w - other).max() <= 1e-7 * tolerance(Q, q, w) / 1e-9
-                                               for other in found)
-            if new:
+            if not any(np.abs(w - other).max() <= ROUNDOFF * slack_scale(Q, q, w, other) for other in found):
                 found.append(np.maximum(w, 0.0))
     return found[0] if len(found) == 1 else None
 
 
-def tolerance(Q: np.ndarray, q: np.ndarray, w: np.ndarray) -> float:
-    """Round-off of z = q + Q w: 1e-9 of the larger of its terms."""
-    return 1e-9 * max(np.abs(q).max(initial=0.0), np.abs(Q).max(initial=0.0) * np.abs(w).max(initial=0.0), 1e-300)
+ROUNDOFF = 1e-9
+"""Relative round-off of the degenerate rows' small dense systems: what a sign or a difference is judged against."""
+
+
+def branch_slack(Q: np.ndarray, q: np.ndarray, basis: np.ndarray) -> np.ndarray | None:
+    """w with z_basis = 0 (w positive there) and w = 0 elsewhere; None where that block is singular."""
+    w = np.zeros(q.size)
+    if basis.any():
+        try:
+            w[basis] = np.linalg.solve(Q[np.ix_(basis, basis)], -q[basis])
+        except np.linalg.LinAlgError:
+            return None
+    return w
+
+
+def slack_scale(Q: np.ndarray, q: np.ndarray, *slacks: np.ndarray) -> float:
+    """The size of a slack: its own, or what q asks of Q."""
+    return max(*(np.abs(w).max(initial=0.0) for w in slacks), np.abs(q).max(initial=0.0)
+               / max(np.abs(Q).max(initial=0.0), 1e-300), 1e-300)
 
 
 def solves(Q: np.ndarray, q: np.ndarray, w: np.ndarray) -> bool:
-    """Whether w ≥ 0 and q + Q w ≥ 0 within round-off (complementarity holds by construction)."""
-    tol = tolerance(Q, q, w)
-    return w.min(initial=0.0) >= -tol and (q + Q @ w).min(initial=0.0) >= -tol
+    """Whether w ≥ 0 and z = q + Q w ≥ 0 within round-off (complementarity holds by construction)."""
+    z_scale = max(np.abs(q).max(initial=0.0), np.abs(Q).max(initial=0.0) * np.abs(w).max(initial=0.0), 1e-300)
+    return (w.min(initial=0.0) >= -ROUNDOFF * slack_scale(Q, q, w)
+            and (q + Q @ w).min(initial=0.0) >= -ROUNDOFF * z_scale)
 
 
 def pivoting(Q: np.ndarray, q: np.ndarray) -> np.ndarray | None:
     """Murty's least-index principal pivoting: finite for a P-matrix Q; None if it does not end."""
     basis = np.zeros(q.size, bool)  # w_i basic (z_i = 0)
     for _ in range(PIVOTS):
-        w = np.zeros(q.size)
-        chosen = np.flatnonzero(basis)
-        if chosen.size:
-            w[chosen] = np.linalg.solve(Q[np.ix_(chosen, chosen)], -q[chosen])
-        tol = tolerance(Q, q, w)
-        bad = np.flatnonzero(np.where(basis, w < -tol, q + Q @ w < -tol))
-        if bad.size == 0:
+        w = branch_slack(Q, q, basis)
+        if w is None:
+            return None
+        if solves(Q, q, w):
             return np.maximum(w, 0.0)
+        z, tol = q + Q @ w, ROUNDOFF * slack_scale(Q, q, w)
+        bad = np.flatnonzero(np.where(basis, w < -tol, z < -tol * np.abs(Q).max(initial=1.0)))
         basis[bad[0]] = ~basis[bad[0]]
     return None
