@@ -75,7 +75,14 @@ def test_tresca_2d_agrees_with_finite_differences(non_penetration):
     assert np.allclose(found["slip_bound"].derivative.friction[slipping], np.sign(result.contact.friction[slipping]))
 
 
-def test_coulomb_2d_differentiates_the_coulomb_law():
+@pytest.fixture(params=["condensed", "sparse"])
+def system(request, monkeypatch):
+    """The derivative system condensed onto the contact DOFs (the default from 2·10⁴ DOFs), or over every DOF."""
+    monkeypatch.setattr(f"convexcontact.drivers.sensitivity.{'CONDENSED_DOFS' if request.param == 'condensed' else 'CONDENSED'}", 0)
+    return request.param
+
+
+def test_coulomb_2d_differentiates_the_coulomb_law(system):
     """s = μ λ_N of the same answer: dλ_T = d(μ λ_N) at slipping nodes, including μ's own term."""
     result, found = assert_agrees(block(cc.Coulomb(friction=0.3)), ["friction", "dirichlet[top].uy", "nu"])
     derivative = found["friction"].derivative
@@ -90,7 +97,7 @@ def test_tresca_punch_partial_contact_along_depth():
     assert_agrees(cc.library.tresca_punch(nx=16), ["obstacle.depth", "slip_bound", "E"])
 
 
-def test_force_controlled_punch_pulled_sideways():
+def test_force_controlled_punch_pulled_sideways(system):
     """Hertz's punch pressed by P and pulled by Q (Tresca): the obstacle's advance and shift are unknowns, whose
     derivatives along P, Q and E agree with differences too."""
     law = cc.Tresca(slip_bound=0.002)
@@ -107,7 +114,7 @@ def test_force_controlled_punch_pulled_sideways():
 
 @pytest.mark.parametrize("law, parameters", [(cc.Tresca(slip_bound=0.004), ["dirichlet[top].ux", "slip_bound"]),
                                              (cc.Coulomb(friction=0.3), ["dirichlet[top].uy", "friction"])])
-def test_3d_oblique_slip_agrees_with_finite_differences(law, parameters):
+def test_3d_oblique_slip_agrees_with_finite_differences(law, parameters, system):
     result, _ = assert_agrees(box(law), parameters)
     assert set(result.contact.status) == {"slip"}
 
@@ -186,7 +193,7 @@ def test_the_bound_at_the_largest_sticking_traction(scene, bound):
     assert np.abs(fields(result, found.left) - difference).max() <= 1e-6 * np.abs(difference).max()
 
 
-def test_adjoint_gradient_is_the_forward_derivatives_contracted():
+def test_adjoint_gradient_is_the_forward_derivatives_contracted(system):
     """One transposed solve gives dJ/dθ of every parameter: J weighs displacements, pressures, friction and
     the resultants at once."""
     result = cc.solve(block(cc.Coulomb(friction=0.3)), **TIGHT)
