@@ -22,6 +22,18 @@ def block(law=None, **scene):
                     **scene)
 
 
+def stack():
+    """A block on a block on a rigid foundation: two contacts."""
+    from convexcontact.scene.bodies import Pair, Part, bodies_scene
+
+    material = cc.Material(E=1.0, nu=0.3)
+    parts = [Part("upper", cc.Rectangle(1.0, 0.5, 2, 1, origin=(0.0, 1.0)), material, "P1"),
+             Part("lower", cc.Rectangle(1.0, 1.0, 2, 2), material, "P1")]
+    return bodies_scene(parts, [Pair("upper.bottom", master="lower.top"), cc.Contact("lower.bottom", cc.Obstacle())],
+                        dirichlet=[cc.Dirichlet("lower.left", ux=0.0), cc.Dirichlet("upper.left", ux=0.0)],
+                        tractions=[cc.Traction("upper.top", pressure=0.01)], name="stack")
+
+
 @pytest.fixture(scope="module")
 def result():
     return cc.solve(block())
@@ -87,8 +99,7 @@ def test_a_failing_certificate_is_refused(result):
     (block(cc.NormalCompliance(stiffness=100.0)), (r"^contact.law: NormalCompliance: sensitivities are implemented for "
                                                   r"Signorini, Tresca and Coulomb — use one of these laws")),
     (block(cc.Signorini(non_penetration="gauss")), r"^contact.non_penetration: contact or friction at Gauss points"),
-    (cc.bodies_library.patch_pair(slave_cells=3, master_cells=4), (r"^result: contact between bodies: not "
-                                                                   r"implemented — differentiate a body on a rigid")),
+    (stack(), r"^result: several contacts in one scene: not implemented — differentiate one pair of bodies"),
     (block(cc.Coulomb(friction=0.3, smoothing_radius=0.2)), r"^contact.smoothing_radius: nonlocal Coulomb"),
 ])
 def test_scenes_not_differentiated_are_refused(scene, message):

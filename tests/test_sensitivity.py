@@ -165,6 +165,27 @@ def test_stick_slip_boundary_gives_both_one_sided_derivatives():
     assert sliding.right.tangential_force != pytest.approx(sliding.left.tangential_force, rel=1e-3)
 
 
+def two_blocks(law):
+    """A block (E = 1) pressed on another (E = 2, ν = 0.25, clamped below) and moved sideways: mortar contact."""
+    from convexcontact.scene.bodies import Pair, Part
+
+    parts = [Part("upper", cc.Rectangle(1.0, 0.5, 4, 2, origin=(0.0, 1.0)), cc.Material(E=1.0, nu=0.3), "P1"),
+             Part("lower", cc.Rectangle(1.0, 1.0, 5, 5), cc.Material(E=2.0, nu=0.25), "P1")]
+    return cc.bodies_scene(parts, Pair("upper.bottom", master="lower.top", law=law), name="two_blocks",
+                           dirichlet=[cc.Dirichlet("lower.bottom", ux=0.0, uy=0.0),
+                                      cc.Dirichlet("upper.top", ux=0.01, uy=-0.01)])
+
+
+@pytest.mark.parametrize("law, parameters, options", [
+    (cc.Tresca(slip_bound=0.003), ["dirichlet[upper.top].ux", "slip_bound", "materials[upper].nu"],
+     {"formulation": "primal", "solver": "clarabel"}),
+    (cc.Coulomb(friction=0.2), ["friction", "dirichlet[upper.top].uy", "materials[lower].E"], TIGHT)])
+def test_two_bodies_agree_with_finite_differences(law, parameters, options):
+    """Two bodies in mortar contact (rows over both bodies' DOFs), each body's own material a parameter."""
+    result, _ = assert_agrees(two_blocks(law), parameters, options=options)
+    assert {"stick", "slip+"} <= set(result.contact.status)
+
+
 def oblique_box(law):
     return dataclasses.replace(box(law), dirichlet=(cc.Dirichlet("top", ux=0.002, uy=0.001, uz=-0.01),))
 

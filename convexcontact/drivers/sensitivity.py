@@ -28,6 +28,7 @@ from ..fem.mortar import PairTrace
 from ..fem.stiffness import stiffness
 from ..formulations import contact_weights
 from ..results.result import ContactResult, held
+from ..scene.bodies import Pairs
 from ..scene.checks import finite
 from ..scene.history import PATH, at, check_effect
 from ..scene.model import Coulomb, Material, Scene, SceneError, Signorini, Tresca, of_type
@@ -146,8 +147,9 @@ def check_result(result) -> ContactResult:
     if scene.history is not None:
         raise SceneError("result", "a step of a load history: its derivative depends on the earlier steps, which is "
                          "not implemented", "differentiate the static scene (scene without history)")
-    if isinstance(result.fem.contact, PairTrace) or not hasattr(scene.contact, "obstacle"):
-        raise SceneError("result", "contact between bodies: not implemented", "differentiate a body on a rigid obstacle")
+    if isinstance(scene.contact, Pairs):
+        raise SceneError("result", "several contacts in one scene: not implemented",
+                         "differentiate one pair of bodies, or a body on one rigid obstacle")
     if not isinstance(law, (Signorini, Tresca, Coulomb)) or getattr(law, "compliance", None) is not None:
         raise SceneError("contact.law", f"{type(law).__name__}: sensitivities are implemented for Signorini, Tresca "
                          "and Coulomb", "use one of these laws")
@@ -462,11 +464,27 @@ def resultant_maps(point: Point) -> tuple[np.ndarray, np.ndarray | None]:
     """The contact force on the body (d-vector, scaled) as linear maps of λ_N and of λ_T: the nodal forces of
     :func:`~convexcontact.results.result.contact_nodes`, summed."""
     contact = point.fem.contact
+    if isinstance(contact, PairTrace):  # the slave's nodal forces, from N and T over both bodies' DOFs
+        return pair_resultant_maps(contact, point.C, point.friction)
     normal = -np.asarray(sp.csr_matrix(point.C).T @ contact.normals).T  # −Σ_i (Cᵀλ_N)_i n_i
     if point.friction is None:
         return normal, None
     along = np.hstack([t.T for t in contact.frame])  # d × m(d − 1), component-major like T
     return normal, np.asarray((sp.csr_matrix(contact.T) @ point.friction.R.T).T @ along.T).T
+
+
+def pair_resultant_maps(contact: PairTrace, C: sp.spmatrix, friction: FrictionPoints | None):
+    """:func:`resultant_maps` of a pair of bodies: the forces of :meth:`PairTrace.forces` on the slave's DOFs,
+    summed per component (−N_fullᵀCᵀλ_N + T_fullᵀ(w·λ_T), as :func:`~convexcontact.results.certificate.pair_multipliers`
+    weighs them)."""
+    summing = sp.csr_matrix((np.ones(contact.dofs.size), (np.tile(np.arange(contact.dim), contact.m),
+                                                          contact.dofs.ravel())),
+                            shape=(contact.dim, contact.N_full.shape[1]))
+    normal = -(summing @ contact.N_full.T @ sp.csr_matrix(C).T).toarray()
+    if friction is None:
+        return normal, None
+    weights = np.tile(friction.weights, friction.dim)
+    return normal, (summing @ contact.T_full.T).toarray() * weights
 
 
 def mean_frame(fem: FEModel) -> tuple[np.ndarray, np.ndarray]:
