@@ -6,7 +6,7 @@ misfit's gradient by the chain rule) for many parameters with one transposed sol
 :mod:`.active_set`; this module reads the answer's active set off the certificate's quantities and the data's
 derivatives off the scene (docs/sensitivity.md).
 
-The data depend on loads, Dirichlet values and the obstacle's depth or gap affinely: their rates are the
+The data depend on loads, Dirichlet values and the obstacle's depth, gap or forces affinely: their rates are the
 difference of two assemblies at the model's fixed units, exact up to round-off. K is linear in E and in the Lamé
 parameters, whose derivative in ν is taken by a complex step (exact to round-off): dK is assembled once.
 """
@@ -46,8 +46,8 @@ from .model import CERTIFIED, contact_columns, field_at_points, frictional_rows
 from .picard import pressure_map
 
 PARAMETERS = ("E", "nu", "materials[NAME].E|nu", "friction (Coulomb)", "slip_bound (Tresca)", "obstacle.depth",
-              "obstacle.gap", "obstacle.force", "obstacle.tangential_force", "dirichlet[BOUNDARY].ux|uy|uz", "traction[BOUNDARY].pressure",
-              "traction[BOUNDARY].vector[I]", "body_force[I]")
+              "obstacle.gap", "obstacle.force", "obstacle.tangential_force", "dirichlet[BOUNDARY].ux|uy|uz",
+              "traction[BOUNDARY].pressure", "traction[BOUNDARY].vector[I]", "body_force[I]")
 MATERIAL = re.compile(r"^(?:materials\[([^\]]+)\]\.)?(E|nu)$")
 COMPONENT = re.compile(r"^(.*(?:vector|body_force))(?:\[(\d)\])?$")
 
@@ -118,10 +118,8 @@ class Point:
     result: ContactResult
     C: sp.spmatrix
     friction: FrictionPoints | None
-    u: np.ndarray
+    u: np.ndarray  # free DOFs, then the force-controlled obstacle's motions
     pressure: np.ndarray
-    traction: np.ndarray | None
-    bound: np.ndarray | None
     unit_bound: sp.csr_matrix | None  # Coulomb: ds/dF (F constant) as a map of λ_N
     linear: Linearization
     margin: float
@@ -186,30 +184,11 @@ def point_of(result: ContactResult) -> Point:
     gap = (weighted_gap(contact, C) - A @ u) / contact.row_weights(C) / u_ref
     normal = normal_status(gap, pressure / p_ref, held(A), tol)
     strict = [np.where(normal == "closed", pressure / p_ref, np.where(normal == "open", gap, np.inf))]
-    traction = bound = unit = None
-    arguments = {}
+    unit, arguments = None, {}
     if friction is not None:
-        traction = np.asarray(result.contact.friction).reshape(contact.m, -1).T.ravel() / scaling.pressure
-        coupling, fixed = None, np.ones(friction.count, bool)
-        if isinstance(law, Tresca):
-            bound = field_at_points(law.slip_bound, "contact.slip_bound", fem, friction) / scaling.pressure
-        else:
-            unit = pressure_map(SimpleNamespace(law=replace(law, friction=1.0), fem=fem, friction=friction))[2]
-            coupling = pressure_map(SimpleNamespace(law=law, fem=fem, friction=friction))[2]
-            bound = coupling @ np.maximum(pressure, 0.0)
-            moving = np.isin(normal, ("closed", "grazing")).astype(float)
-            fixed = (abs(coupling) @ moving) == 0  # no closed or grazing node under the point: its bound stays 0
-        weighted = friction.components(R @ u + friction.offset)
-        slip = weighted / friction.weights[:, None] / u_ref
-        components = friction.components(traction)
-        epsilon = None if law.regularization is None else law.regularization / scaling.displacement
-        status = friction_status(slip, components / p_ref, bound / p_ref, held(friction.R, friction.dim), fixed, tol,
-                                 smooth=epsilon is not None)
-        room = (bound - np.linalg.norm(components, axis=1)) / p_ref
-        strict.append(np.where(status == "slip", np.linalg.norm(slip, axis=1), np.where(status == "stick", room,
-                                                                                        np.inf)))
-        arguments = {"R": R, "friction": status, "slip": weighted, "traction": components, "bound": bound,
-                     "coupling": coupling, "epsilon": None if epsilon is None else epsilon * friction.weights}
+        unit, arguments, room = friction_state(result, friction, R @ u + friction.offset, normal, (u_ref, p_ref), tol)
+        arguments["R"] = R
+        strict.append(room)
     condensation, kept = condensed(fem, obstacle.size)
     if condensation is not None:  # the derivative system on the contact DOFs, K replaced by its Schur complement
         K = sp.block_diag([sp.csr_matrix(condensation.S), sp.csr_matrix((obstacle.size,) * 2)], format="csr")
@@ -218,7 +197,7 @@ def point_of(result: ContactResult) -> Point:
             arguments["R"] = arguments["R"][:, kept]
     linear = linearize(K, A, normal, **arguments)
     margin = float(np.concatenate(strict).min(initial=np.inf))
-    return Point(result, C, friction, u, pressure, traction, bound, unit, linear, margin, obstacle.size, condensation)
+    return Point(result, C, friction, u, pressure, unit, linear, margin, obstacle.size, condensation)
 
 
 CONDENSED = 3000
@@ -256,6 +235,35 @@ def expanded(point: Point, x: np.ndarray, force: np.ndarray) -> np.ndarray:
         return x
     n, kept = point.fem.n_free, point.condensation.C.size
     return np.concatenate([point.condensation.lift(x[:kept], force[:n]), x[kept:]])
+
+
+def friction_state(result: ContactResult, friction: FrictionPoints, weighted: np.ndarray, normal: np.ndarray,
+                   refs: tuple[float, float], tol: float):
+    """The friction points' part of :func:`linearize`'s arguments from the answer's weighted slip and traction,
+    the map ds/dμ of a Coulomb law (None for Tresca), and how strictly each point holds its side."""
+    fem, law = result.fem, result.scene.contact.law
+    scaling, (u_ref, p_ref) = fem.scaling, refs
+    traction = friction.components(np.asarray(result.contact.friction).reshape(fem.contact.m, -1).T.ravel()
+                                   / scaling.pressure)
+    coupling, unit, fixed = None, None, np.ones(friction.count, bool)
+    if isinstance(law, Tresca):
+        bound = field_at_points(law.slip_bound, "contact.slip_bound", fem, friction) / scaling.pressure
+    else:  # s = μ λ_N at the answer: the Coulomb law itself
+        unit = pressure_map(SimpleNamespace(law=replace(law, friction=1.0), fem=fem, friction=friction))[2]
+        coupling = pressure_map(SimpleNamespace(law=law, fem=fem, friction=friction))[2]
+        bound = coupling @ np.maximum(result.contact.pressure / scaling.pressure, 0.0)
+        moving = np.isin(normal, ("closed", "grazing")).astype(float)
+        fixed = (abs(coupling) @ moving) == 0  # no closed or grazing node under the point: its bound stays 0
+    weighted = friction.components(weighted)
+    slip = weighted / friction.weights[:, None] / u_ref
+    epsilon = None if law.regularization is None else law.regularization / scaling.displacement
+    status = friction_status(slip, traction / p_ref, bound / p_ref, held(friction.R, friction.dim), fixed, tol,
+                             smooth=epsilon is not None)
+    room = (bound - np.linalg.norm(traction, axis=1)) / p_ref
+    strict = np.where(status == "slip", np.linalg.norm(slip, axis=1), np.where(status == "stick", room, np.inf))
+    arguments = {"R": None, "friction": status, "slip": weighted, "traction": traction, "bound": bound,
+                 "coupling": coupling, "epsilon": None if epsilon is None else epsilon * friction.weights}
+    return unit, arguments, strict
 
 
 def with_obstacle(result: ContactResult, C: sp.spmatrix, friction: FrictionPoints | None):
