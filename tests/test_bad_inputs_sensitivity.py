@@ -109,11 +109,34 @@ def test_scenes_not_differentiated_are_refused(scene, message):
         cc.sensitivity(answer, "E")
 
 
-def test_a_history_step_is_refused():
+@pytest.fixture(scope="module")
+def steps():
     history = cc.History(times=[1.0, 2.0], values={"dirichlet[top].ux": [0.005, 0.01]})
-    steps = cc.solve(block(history=history))
-    with pytest.raises(cc.SceneError, match=r"^result: a step of a load history.*differentiate the static scene"):
+    return cc.solve(block(history=history))
+
+
+def test_a_history_step_alone_is_refused(steps):
+    with pytest.raises(cc.SceneError, match=r"^result: a step of a load history: its derivative depends on the "
+                                            r"earlier steps — give the whole HistoryResult to cc.sensitivity"):
         cc.sensitivity(steps.steps[-1], "E")
+
+
+def test_a_parameter_the_history_sets_is_refused(steps):
+    with pytest.raises(cc.SceneError, match=r"^parameter: 'dirichlet\[top\].ux': the history sets it at every step "
+                                            r"\(history.dirichlet\[top\].ux\) — differentiate by a parameter"):
+        cc.sensitivity(steps, "dirichlet[top].ux")
+
+
+def test_an_unfinished_history_is_refused(steps):
+    spoiled = dataclasses.replace(steps, steps=steps.steps[:1])
+    with pytest.raises(ValueError, match=r"^result: the history's status is 'failed'.*solve it again more tightly"):
+        cc.sensitivity(spoiled, "E")
+
+
+def test_the_gradient_of_a_history_is_refused(steps):
+    with pytest.raises(cc.SceneError, match=r"^result: a load history: the adjoint through its steps is not "
+                                            r"implemented — contract the forward derivatives"):
+        cc.gradient(steps, ["E"], normal_force=1.0)
 
 
 @pytest.mark.parametrize("weights, message", [

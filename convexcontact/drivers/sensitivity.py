@@ -42,6 +42,7 @@ from .active_set import (
     normal_status,
     right_side,
 )
+from .history import HistoryResult
 from .model import CERTIFIED, contact_columns, field_at_points, frictional_rows
 from .picard import pressure_map
 
@@ -131,8 +132,9 @@ class Point:
         return self.result.fem
 
 
-def check_result(result) -> ContactResult:
-    """The result if its answer can be differentiated here, else an error naming what to change."""
+def check_result(result, in_history: bool = False) -> ContactResult:
+    """The result if its answer can be differentiated here, else an error naming what to change (``in_history``:
+    a step of a history, differentiated with the steps before it)."""
     of_type(result, ContactResult, "result", "give the ContactResult of cc.solve(scene)")
     if not result.solved or result.status != "solved":
         raise ValueError(f"result: status {result.status!r}{', ' + result.message if result.message else ''}: only a "
@@ -142,9 +144,9 @@ def check_result(result) -> ContactResult:
         raise ValueError(f"result: certificate {result.certificate.worst:.1e} > {CERTIFIED:g}: not an answer of the "
                          "discrete problem, so not one to differentiate — solve more tightly")
     scene, law = result.scene, result.scene.contact.law
-    if scene.history is not None:
-        raise SceneError("result", "a step of a load history: its derivative depends on the earlier steps, which is "
-                         "not implemented", "differentiate the static scene (scene without history)")
+    if scene.history is not None and not in_history:
+        raise SceneError("result", "a step of a load history: its derivative depends on the earlier steps",
+                         "give the whole HistoryResult to cc.sensitivity")
     if isinstance(scene.contact, Pairs):
         raise SceneError("result", "several contacts in one scene: not implemented",
                          "differentiate one pair of bodies, or a body on one rigid obstacle")
@@ -409,26 +411,27 @@ def unit_of(fem: FEModel, parameter: str) -> float:
     return scaling.pressure
 
 
-def data_rates(point: Point, parameter: str, value: float) -> tuple[Rates, np.ndarray]:
-    """The data's derivatives along ``parameter`` (scaled data per user unit) and the prescribed values' rate
-    (full DOF vector, scaled)."""
+def data_rates(point: Point, parameter: str, value: float) -> tuple[Rates, np.ndarray, np.ndarray | None]:
+    """The data's derivatives along ``parameter`` (scaled data per user unit), the prescribed values' rate (full DOF
+    vector, scaled) and the rate of the tangential offset at the contact nodes (None: 0; a history carries it)."""
     fem, law = point.fem, point.fem.scene.contact.law
     n = fem.n_free
     prescribed, gap = np.zeros(fem.prescribed.size), np.zeros(point.C.shape[0])
     force, offsets = np.zeros(n + point.obstacle), None if point.friction is None else np.zeros(point.friction.R.shape[0])
     if parameter == "E" and isinstance(fem.scene.materials, Material):  # K is linear in E: dK/dE = K/E
         force[:n] = -(fem.K_full @ fem.full(point.u[:n]))[fem.free] / value
-        return Rates(force, gap, offsets), prescribed
+        return Rates(force, gap, offsets), prescribed, None
     if MATERIAL.match(parameter):
         force[:n] = -(stiffness_rate(fem, parameter) @ fem.full(point.u[:n]))[fem.free]
-        return Rates(force, gap, offsets), prescribed
+        return Rates(force, gap, offsets), prescribed, None
     if parameter == "slip_bound":
-        return Rates(force, gap, offsets, np.full(point.friction.count, 1.0 / fem.scaling.pressure)), prescribed
+        return Rates(force, gap, offsets, np.full(point.friction.count, 1.0 / fem.scaling.pressure)), prescribed, None
     if parameter == "friction":
-        return Rates(force, gap, offsets, point.unit_bound @ np.maximum(point.pressure, 0.0)), prescribed
-    # the data are affine in these parameters: a forward difference is exact to round-off (and keeps a force ≥ 0)
+        return Rates(force, gap, offsets, point.unit_bound @ np.maximum(point.pressure, 0.0)), prescribed, None
+    # the data are affine in these parameters: a forward difference is exact to round-off (and keeps a force ≥ 0);
+    # both sides assembled anew (a history step's own trace has its tangential offset shifted by the last slip)
     step = max(abs(value), unit_of(fem, parameter))
-    sides = [fem.at(shifted(fem.scene, parameter, value + step)), fem]
+    sides = [fem.at(shifted(fem.scene, parameter, value + step)), fem.at(fem.scene)]
 
     def rate(quantity):
         return (quantity(sides[0]) - quantity(sides[1])) / step
@@ -437,8 +440,8 @@ def data_rates(point: Point, parameter: str, value: float) -> tuple[Rates, np.nd
     if point.friction is not None:
         offsets = rate(lambda side: friction_points(side.contact, fem.mesh, fem.basis, law.quadrature,
                                                     law.non_penetration).offset)
-    return Rates(force, rate(lambda side: weighted_gap(side.contact, point.C)), offsets), \
-        rate(lambda side: side.prescribed)
+    return (Rates(force, rate(lambda side: weighted_gap(side.contact, point.C)), offsets),
+            rate(lambda side: side.prescribed), rate(lambda side: side.contact.tangent_offset))
 
 
 def obstacle_forces(contact) -> np.ndarray:
@@ -531,36 +534,97 @@ def obstacle_names(contact) -> list[str]:
                                         ("obstacle_shift", contact.tangential_coupling)) if coupling is not None]
 
 
-def sensitivity(result: ContactResult, parameter: str | list[str]) -> Sensitivity | dict[str, Sensitivity]:
+def sensitivity(result, parameter: str | list[str]):
     """Derivatives of ``result``'s answer along ``parameter`` (a name of :data:`PARAMETERS`, or a list of them:
-    a dict back, all from one factorization). Where the answer is degenerate, the one-sided derivatives."""
-    result = check_result(result)
+    a dict back, all from one factorization). Where the answer is degenerate, the one-sided derivatives.
+
+    ``result``: a :class:`ContactResult`, or a :class:`~convexcontact.drivers.history.HistoryResult`: then a list
+    of one :class:`Sensitivity` per step (per parameter), each step's slip carrying the earlier steps' derivatives."""
     names = [parameter] if isinstance(parameter, str) else parameter
     if not isinstance(names, (list, tuple)) or not names:
         raise SceneError("parameter", f"expected a name or a list of names, got {parameter!r:.60}",
                          f"name one of {', '.join(PARAMETERS)}")
-    values = {name: parameter_value(result.scene, name, "parameter" if isinstance(parameter, str) else
-                                    f"parameter[{i}]") for i, name in enumerate(names)}
-    point = point_of(result)
-    out = {name: along(point, name, value) for name, value in values.items()}
+    fields = ["parameter" if isinstance(parameter, str) else f"parameter[{i}]" for i in range(len(names))]
+    if isinstance(result, HistoryResult):
+        out = history_sensitivity(result, names, fields)
+    else:
+        result = check_result(result)
+        values = {name: parameter_value(result.scene, name, field) for name, field in zip(names, fields)}
+        point = point_of(result)
+        out = {name: along(point, name, value)[0] for name, value in values.items()}
     return out[parameter] if isinstance(parameter, str) else out
 
 
-def along(point: Point, parameter: str, value: float) -> Sensitivity:
-    """The :class:`Sensitivity` of the answer at ``point`` along one parameter."""
-    rates, prescribed = data_rates(point, parameter, value)
-    linear, sides, message = point.linear, {}, []
+def along(point: Point, parameter: str, value: float, previous: dict | None = None) -> tuple[Sensitivity, dict]:
+    """The :class:`Sensitivity` of the answer at ``point`` along one parameter, and the rate of the slip at the
+    contact nodes for each direction (what the next step of a history measures its slip from). ``previous``: that
+    of the step before, per direction (a history step's tangential offset is minus that slip)."""
+    rates, prescribed, tangent = data_rates(point, parameter, value)
+    linear, sides, message, slips = point.linear, {}, [], {}
     for sign, side in ((1.0, "right"), (-1.0, "left")):
-        x = directional(linear, reduced(point, rates), sign)
+        directed = Rates(sign * rates.force, sign * rates.gap, None if rates.offset is None else sign * rates.offset,
+                         None if rates.bound is None else sign * rates.bound)
+        if previous is not None and previous.get(sign) is not None:
+            directed.offset = directed.offset - weighted_slip_rate(point, previous[sign])
+        x = directional(linear, reduced(point, directed), 1.0)
         if x is None:
             message.append(f"the {side} derivative's complementarity problem on the degenerate rows has no "
                            "solution or several (the answer may branch there)")
-        sides[side] = None if x is None else derivative_of(point, sign * expanded(point, x, sign * rates.force),
-                                                           prescribed)
+            sides[side], slips[sign] = None, None
+            continue
+        x = expanded(point, x, directed.force)
+        sides[side] = derivative_of(point, sign * x, prescribed)
+        slips[sign] = slip_rate(point, x, None if tangent is None else sign * tangent)
     degenerate = {"grazing": np.flatnonzero(linear.normal == "grazing")}
     if linear.friction is not None:
         degenerate["stick_slip"] = np.flatnonzero(linear.friction == "boundary")
-    return Sensitivity(parameter, value, sides["right"], sides["left"], degenerate, point.margin, "; ".join(message))
+    sensitivity = Sensitivity(parameter, value, sides["right"], sides["left"], degenerate, point.margin,
+                              "; ".join(message))
+    return sensitivity, slips
+
+
+def slip_rate(point: Point, x: np.ndarray, tangent: np.ndarray | None) -> np.ndarray | None:
+    """The rate of the slip at the contact nodes, T du + d(offset) − coupling dδ_T (scaled; as the history's
+    :meth:`~convexcontact.drivers.history.State.advance` measures the slip), None without friction."""
+    contact = point.fem.contact
+    if point.friction is None:
+        return None
+    rate = contact.T @ x[:point.fem.n_free] + (0.0 if tangent is None else tangent)
+    if contact.tangential_coupling is not None:
+        rate = rate - contact.tangential_coupling * x[point.fem.n_free + point.obstacle - 1]
+    return rate
+
+
+def weighted_slip_rate(point: Point, slip: np.ndarray) -> np.ndarray:
+    """The friction points' weighted offset of a slip at the contact nodes (as the offset is weighted)."""
+    law, fem = point.fem.scene.contact.law, point.fem
+    shifted_trace = replace(fem.contact, tangent_offset=slip)
+    return friction_points(shifted_trace, fem.mesh, fem.basis, law.quadrature, law.non_penetration).offset
+
+
+def history_sensitivity(history, names: list[str], fields: list[str]) -> dict[str, list[Sensitivity]]:
+    """The sensitivities of every step of a load history, each step's slip rate carried to the next (forward
+    mode, per direction); parameters the history sets at each step are refused."""
+    scene = history.scene
+    if has_viscosity(scene):
+        raise SceneError("materials", "a viscous material: not implemented", "differentiate an elastic body")
+    if history.status != "solved":
+        raise ValueError(f"result: the history's status is {history.status!r} ({history.message}): only a history "
+                         "solved and certified at every step has a derivative — solve it again more tightly")
+    values = {}
+    for name, field in zip(names, fields):
+        path = vector_path(name, field)[0]
+        if path in scene.history.values:
+            raise SceneError(field, f"{name!r}: the history sets it at every step (history.{path})",
+                             "differentiate by a parameter the history does not name")
+        values[name] = parameter_value(scene, name, field)
+    out, previous = {name: [] for name in names}, dict.fromkeys(names)
+    for step in history.steps:
+        point = point_of(check_result(step, in_history=True))
+        for name, value in values.items():
+            sensitivity, previous[name] = along(point, name, value, previous[name])
+            out[name].append(sensitivity)
+    return out
 
 
 def gradient(result: ContactResult, parameters: list[str], *, displacement=None, pressure=None, friction=None,
@@ -573,6 +637,9 @@ def gradient(result: ContactResult, parameters: list[str], *, displacement=None,
     motions are those of force control).
 
     Refused where the answer is degenerate (its derivative is one-sided there: :func:`sensitivity`)."""
+    if isinstance(result, HistoryResult):
+        raise SceneError("result", "a load history: the adjoint through its steps is not implemented",
+                         "contract the forward derivatives of cc.sensitivity(history, parameters) instead")
     result = check_result(result)
     if isinstance(parameters, str) or not isinstance(parameters, (list, tuple)) or not parameters:
         raise SceneError("parameters", f"expected a list of names, got {parameters!r:.60}",
@@ -592,7 +659,7 @@ def gradient(result: ContactResult, parameters: list[str], *, displacement=None,
     adjoint, interior = adjoint_vector(point, weights)
     out = {}
     for name, value in values.items():
-        rates, prescribed = data_rates(point, name, value)
+        rates, prescribed, _ = data_rates(point, name, value)
         explicit = weights["displacement"] @ (prescribed * fem.scaling.displacement)  # prescribed DOFs' share
         out[name] = float(adjoint @ right_side(linear, reduced(point, rates)) + interior @ rates.force[:fem.n_free]
                           + explicit)
