@@ -100,7 +100,6 @@ def test_a_failing_certificate_is_refused(result):
                                                   r"Signorini, Tresca and Coulomb — use one of these laws")),
     (block(cc.Signorini(non_penetration="gauss")), r"^contact.non_penetration: contact or friction at Gauss points"),
     (stack(), r"^result: several contacts in one scene: not implemented — differentiate one pair of bodies"),
-    (block(cc.Coulomb(friction=0.3, smoothing_radius=0.2)), r"^contact.smoothing_radius: nonlocal Coulomb"),
 ])
 def test_scenes_not_differentiated_are_refused(scene, message):
     answer = cc.solve(scene)

@@ -92,6 +92,14 @@ def test_coulomb_2d_differentiates_the_coulomb_law(system):
     assert np.all(sign != 0)
 
 
+def test_nonlocal_coulomb_differentiates_its_mollified_law():
+    """s = μ G S λ_N (S the mollifier of the pressure, Oden–Duvaut): an open edge node slips under the smoothed
+    pressure of its neighbours."""
+    result, _ = assert_agrees(block(cc.Coulomb(friction=0.3, smoothing_radius=0.3), nx=12),
+                              ["friction", "dirichlet[top].uy"])
+    assert result.contact.status[0] == "open"
+
+
 def test_tresca_punch_partial_contact_along_depth():
     """A parabolic punch with Tresca friction: a closed zone, open nodes, stick and slip, along the depth."""
     assert_agrees(cc.library.tresca_punch(nx=16), ["obstacle.depth", "slip_bound", "E"])

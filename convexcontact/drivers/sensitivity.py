@@ -158,8 +158,6 @@ def check_result(result, in_history: bool = False) -> ContactResult:
                          "be unique, so neither are their derivatives", "use non_penetration and quadrature 'nodal'")
     if has_viscosity(scene):
         raise SceneError("materials", "a viscous material: not implemented", "differentiate an elastic body")
-    if isinstance(law, Coulomb) and law.smoothing_radius > 0:
-        raise SceneError("contact.smoothing_radius", "nonlocal Coulomb: not implemented", "use smoothing_radius = 0")
     return result
 
 
