@@ -44,6 +44,8 @@ def result():
     (3, r"^parameter: expected a name or a list of names, got 3 — name one of E, nu"),
     ([], r"^parameter: expected a name or a list of names"),
     ("friction", r"^parameter: 'friction': the scene's law is Tresca, which has no friction — use 'slip_bound'$"),
+    ("stiffness", (r"^parameter: 'stiffness': the scene's law \(Tresca\) has no normal compliance — give the law a "
+                  r"NormalCompliance")),
     ("traction[left].pressure", (r"^parameter: 'traction\[left\].pressure': the scene has no \[\[traction\]\] "
                                 r"pressure on 'left' — add a \[\[traction\]\]")),
     ("dirichlet[top].uz", r"^parameter: 'dirichlet\[top\].uz': the scene has no \[\[dirichlet\]\] uz on 'top'"),
@@ -96,8 +98,8 @@ def test_a_failing_certificate_is_refused(result):
 
 
 @pytest.mark.parametrize("scene, message", [
-    (block(cc.NormalCompliance(stiffness=100.0)), (r"^contact.law: NormalCompliance: sensitivities are implemented for "
-                                                  r"Signorini, Tresca and Coulomb — use one of these laws")),
+    (block(cc.NormalCompliance(stiffness=100.0, non_penetration="gauss")),
+     r"^contact.non_penetration: contact or friction at Gauss points"),
     (block(cc.Signorini(non_penetration="gauss")), r"^contact.non_penetration: contact or friction at Gauss points"),
     (stack(), r"^result: several contacts in one scene: not implemented — differentiate one pair of bodies"),
 ])

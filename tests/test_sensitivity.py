@@ -100,6 +100,14 @@ def test_nonlocal_coulomb_differentiates_its_mollified_law():
     assert result.contact.status[0] == "open"
 
 
+@pytest.mark.parametrize("law, parameters", [
+    (cc.NormalCompliance(stiffness=5.0), ["stiffness", "dirichlet[top].uy", "E"]),
+    (cc.Tresca(slip_bound=0.004, compliance=cc.NormalCompliance(stiffness=5.0)), ["stiffness", "slip_bound"])])
+def test_normal_compliance_along_its_stiffness(law, parameters):
+    """The penalty law λ = c_N e (p = 1): its rows keep A du − (w/c_N) dλ = dh, and dλ/dc_N = e at fixed u."""
+    assert_agrees(block(law), parameters, options={"formulation": "primal", "solver": "clarabel"})
+
+
 def test_tresca_punch_partial_contact_along_depth():
     """A parabolic punch with Tresca friction: a closed zone, open nodes, stick and slip, along the depth."""
     assert_agrees(cc.library.tresca_punch(nx=16), ["obstacle.depth", "slip_bound", "E"])

@@ -57,6 +57,7 @@ class Linearization:
     direction: np.ndarray | None
     frames: sp.csr_matrix | None
     along: sp.csr_matrix | None
+    flexibility: np.ndarray  # φ of the closed rows (normal compliance; 0 for Signorini)
     matrix: sp.csc_matrix
     slack: sp.csr_matrix  # E: the degenerate rows' slack columns (N × d)
     edge: sp.csr_matrix  # Ψ: the degenerate rows' complementary quantities (d × N)
@@ -104,12 +105,13 @@ def friction_status(slip: np.ndarray, traction: np.ndarray, bound: np.ndarray, h
 def linearize(K: sp.spmatrix, A: sp.spmatrix, normal: np.ndarray, R: sp.spmatrix | None = None,
               friction: np.ndarray | None = None, slip: np.ndarray | None = None, traction: np.ndarray | None = None,
               bound: np.ndarray | None = None, coupling: sp.spmatrix | None = None,
-              epsilon: np.ndarray | None = None) -> Linearization:
+              epsilon: np.ndarray | None = None, flexibility: np.ndarray | None = None) -> Linearization:
     """The derivative system at the active set ``normal``, ``friction`` (see :class:`Linearization`), factorized.
 
     ``slip`` v and ``traction`` λ_T are (points × c) in the units of R u; ``bound`` s; ``coupling`` L of
     Coulomb's s = L λ_N; ``epsilon`` the points' ε ω_k of the regularized law |v|_ε = sqrt(‖v‖² + ε²ω²)
-    (None: exact).
+    (None: exact); ``flexibility`` φ_i of normal compliance, whose closed rows keep A_i du − φ_i dλ_i = dh_i
+    (φ = w/(c p e^(p−1)) for λ = c e^p; None: 0, Signorini).
     """
     if friction is not None and (friction == "zero").any():
         raise NotDifferentiable(f"{(friction == 'zero').sum()} friction points have zero bound and zero slip, "
@@ -117,8 +119,9 @@ def linearize(K: sp.spmatrix, A: sp.spmatrix, normal: np.ndarray, R: sp.spmatrix
     n, r = K.shape[0], A.shape[0]
     closed = np.isin(normal, ("closed", "grazing"))
     grazing = np.flatnonzero(normal == "grazing")
+    yielding = np.zeros(r) if flexibility is None else np.where(closed, flexibility, 0.0)
     blocks = [[sp.csr_matrix(K), sp.csr_matrix(A.T)],
-              [sp.diags(closed.astype(float)) @ A, sp.diags((~closed).astype(float))]]
+              [sp.diags(closed.astype(float)) @ A, sp.diags((~closed).astype(float) - yielding)]]
     slack_rows = list(n + grazing)
     edge_columns, edge_values, edge_rows = list(n + grazing), [1.0] * grazing.size, list(range(grazing.size))
     direction = frames = along = None
@@ -156,7 +159,8 @@ def linearize(K: sp.spmatrix, A: sp.spmatrix, normal: np.ndarray, R: sp.spmatrix
     except RuntimeError as error:  # "Factor is exactly singular"
         raise NotDifferentiable(f"the active set's linear system is singular ({error}): its multipliers are not "
                                 "unique (more active rows than they can hold apart)") from None
-    return Linearization(n, normal, friction, direction, frames, along, matrix, slack, sp.csr_matrix(edge), solver)
+    return Linearization(n, normal, friction, direction, frames, along, yielding, matrix, slack, sp.csr_matrix(edge),
+                         solver)
 
 
 def point_frames(friction: np.ndarray, slip: np.ndarray, traction: np.ndarray, bound: np.ndarray,

@@ -31,7 +31,18 @@ from ..results.result import ContactResult, held
 from ..scene.bodies import Pairs
 from ..scene.checks import finite
 from ..scene.history import PATH, at, check_effect
-from ..scene.model import Coulomb, Material, Scene, SceneError, Signorini, Tresca, of_type
+from ..scene.model import (
+    Coulomb,
+    Material,
+    NormalCompliance,
+    Scene,
+    SceneError,
+    Signorini,
+    Tresca,
+    compliance_of,
+    has_friction,
+    of_type,
+)
 from .active_set import (
     Linearization,
     NotDifferentiable,
@@ -46,7 +57,8 @@ from .history import HistoryResult
 from .model import CERTIFIED, contact_columns, field_at_points, frictional_rows
 from .picard import pressure_map
 
-PARAMETERS = ("E", "nu", "materials[NAME].E|nu", "friction (Coulomb)", "slip_bound (Tresca)", "obstacle.depth",
+PARAMETERS = ("E", "nu", "materials[NAME].E|nu", "friction (Coulomb)", "slip_bound (Tresca)",
+              "stiffness (normal compliance)", "obstacle.depth",
               "obstacle.gap", "obstacle.force", "obstacle.tangential_force", "dirichlet[BOUNDARY].ux|uy|uz",
               "traction[BOUNDARY].pressure", "traction[BOUNDARY].vector[I]", "body_force[I]")
 MATERIAL = re.compile(r"^(?:materials\[([^\]]+)\]\.)?(E|nu)$")
@@ -150,9 +162,9 @@ def check_result(result, in_history: bool = False) -> ContactResult:
     if isinstance(scene.contact, Pairs):
         raise SceneError("result", "several contacts in one scene: not implemented",
                          "differentiate one pair of bodies, or a body on one rigid obstacle")
-    if not isinstance(law, (Signorini, Tresca, Coulomb)) or getattr(law, "compliance", None) is not None:
-        raise SceneError("contact.law", f"{type(law).__name__}: sensitivities are implemented for Signorini, Tresca "
-                         "and Coulomb", "use one of these laws")
+    if not isinstance(law, (Signorini, NormalCompliance, Tresca, Coulomb)):
+        raise SceneError("contact.law", f"{type(law).__name__}: sensitivities are implemented for Signorini, normal "
+                         "compliance, Tresca and Coulomb", "use one of these laws")
     if law.non_penetration == "gauss" or getattr(law, "quadrature", "nodal") == "gauss":
         raise SceneError("contact.non_penetration", "contact or friction at Gauss points: their multipliers need not "
                          "be unique, so neither are their derivatives", "use non_penetration and quadrature 'nodal'")
@@ -172,7 +184,7 @@ def point_of(result: ContactResult) -> Point:
     scaling, contact = fem.scaling, fem.contact
     C = contact_weights(contact, law.non_penetration)
     friction = None
-    if law.__class__ is not Signorini:
+    if has_friction(law):
         if frictional_rows(law, contact) is not None:
             raise SceneError("contact.friction", "friction laws per contact pair: not implemented", "use one law")
         friction = friction_points(contact, fem.mesh, fem.basis, law.quadrature, law.non_penetration)
@@ -183,11 +195,14 @@ def point_of(result: ContactResult) -> Point:
     tol = max(STRICT, 100 * result.certificate.worst)
     gap = (weighted_gap(contact, C) - A @ u) / contact.row_weights(C) / u_ref
     normal = normal_status(gap, pressure / p_ref, held(A), tol)
-    strict = [np.where(normal == "closed", pressure / p_ref, np.where(normal == "open", gap, np.inf))]
     unit, arguments = None, {}
+    if compliance_of(law) is not None:
+        normal, arguments["flexibility"] = compliant(normal, gap * u_ref, contact.row_weights(C),
+                                                     result_compliance(fem, law))
+    strict = [np.where(normal == "closed", pressure / p_ref, np.where(normal == "open", gap, np.inf))]
     if friction is not None:
-        unit, arguments, room = friction_state(result, friction, R @ u + friction.offset, normal, (u_ref, p_ref), tol)
-        arguments["R"] = R
+        unit, state, room = friction_state(result, friction, R @ u + friction.offset, normal, (u_ref, p_ref), tol)
+        arguments.update(state, R=R)
         strict.append(room)
     condensation, kept = condensed(fem, obstacle.size)
     if condensation is not None:  # the derivative system on the contact DOFs, K replaced by its Schur complement
@@ -266,6 +281,25 @@ def friction_state(result: ContactResult, friction: FrictionPoints, weighted: np
     return unit, arguments, strict
 
 
+def result_compliance(fem: FEModel, law) -> tuple[float, float]:
+    """(c_N, p) of the law's normal compliance in scaled units, as the model scales them."""
+    compliance = compliance_of(law)
+    return compliance.stiffness * fem.scaling.displacement**compliance.exponent / fem.scaling.pressure, \
+        compliance.exponent
+
+
+def compliant(normal: np.ndarray, gap: np.ndarray, weights: np.ndarray, compliance: tuple[float, float]):
+    """Normal compliance λ = c e^p, e = −gap the excess: the rows' statuses (a grazing row of p > 1 has a zero
+    derivative: open) and their flexibility φ = w/(c p e^(p−1)) (:func:`linearize`)."""
+    stiffness, exponent = compliance
+    excess = np.maximum(-gap, 0.0)
+    if exponent > 1:
+        normal = np.where(normal == "grazing", "open", normal)
+    rate = stiffness * exponent * excess ** (exponent - 1)
+    flexibility = np.divide(weights, rate, out=np.zeros_like(weights), where=rate > 0)
+    return normal, flexibility
+
+
 def with_obstacle(result: ContactResult, C: sp.spmatrix, friction: FrictionPoints | None):
     """K, A = C N and R with the force-controlled obstacle's unknowns appended as columns (its advance δ_N closes
     the gaps by C c δ_N, its shift δ_T moves the slip by −coupling δ_T; no stiffness: their equations are the
@@ -312,6 +346,11 @@ def parameter_value(scene: Scene, parameter, field: str = "parameter") -> float:
                              f"use {which!r}" if not known else f"name one of {known}")
         chosen = scene.materials if name is None else scene.materials[name]
         return float(getattr(chosen, which))
+    if parameter == "stiffness":
+        if compliance_of(law) is None:
+            raise SceneError(field, f"{parameter!r}: the scene's law ({type(law).__name__}) has no normal compliance",
+                             "give the law a NormalCompliance (alone, or as Tresca's or Coulomb's compliance)")
+        return compliance_of(law).stiffness
     if parameter in ("friction", "slip_bound"):
         kind = Coulomb if parameter == "friction" else Tresca
         if not isinstance(law, kind):
@@ -384,6 +423,11 @@ def with_parameter(scene: Scene, parameter: str, value: float) -> Scene:
         return replace(scene, materials={**scene.materials, name: replace(scene.materials[name], **{which: value})})
     if parameter in ("friction", "slip_bound"):
         return scene.with_law(replace(scene.contact.law, **{parameter: value}))
+    if parameter == "stiffness":
+        law = scene.contact.law
+        if isinstance(law, NormalCompliance):
+            return scene.with_law(replace(law, stiffness=value))
+        return scene.with_law(replace(law, compliance=replace(law.compliance, stiffness=value)))
     return shifted(scene, parameter, value)
 
 
@@ -424,6 +468,8 @@ def data_rates(point: Point, parameter: str, value: float) -> tuple[Rates, np.nd
         return Rates(force, gap, offsets), prescribed, None
     if parameter == "slip_bound":
         return Rates(force, gap, offsets, np.full(point.friction.count, 1.0 / fem.scaling.pressure)), prescribed, None
+    if parameter == "stiffness":  # λ = c e^p: A du − φ dλ = dh − φ e^p dc = dh − φ λ dc/c on the compliant rows
+        return Rates(force, -point.linear.flexibility * point.pressure / value, offsets), prescribed, None
     if parameter == "friction":
         return Rates(force, gap, offsets, point.unit_bound @ np.maximum(point.pressure, 0.0)), prescribed, None
     # the data are affine in these parameters: a forward difference is exact to round-off (and keeps a force ≥ 0);
