@@ -12,7 +12,8 @@ from .conic import ConicProgram, ConicSolution
 from .drivers.history import HistoryResult
 from .drivers.history import run as run_history
 from .drivers.model import Model, prepare
-from .drivers.sensitivity import gradient, sensitivity, with_parameter
+from .drivers.parameters import with_parameter
+from .drivers.sensitivity import gradient, sensitivity
 from .drivers.solutions import SolutionSet, all_solutions
 from .drivers.solve import solve
 from .results.result import ContactResult

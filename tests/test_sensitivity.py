@@ -78,7 +78,7 @@ def test_tresca_2d_agrees_with_finite_differences(non_penetration):
 @pytest.fixture(params=["condensed", "sparse"])
 def system(request, monkeypatch):
     """The derivative system condensed onto the contact DOFs (the default from 2·10⁴ DOFs), or over every DOF."""
-    monkeypatch.setattr(f"convexcontact.drivers.sensitivity.{'CONDENSED_DOFS' if request.param == 'condensed' else 'CONDENSED'}", 0)
+    monkeypatch.setattr(f"convexcontact.drivers.linearized.{'CONDENSED_DOFS' if request.param == 'condensed' else 'CONDENSED'}", 0)
     return request.param
 
 
