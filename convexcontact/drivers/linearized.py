@@ -43,8 +43,6 @@ from .model import CERTIFIED, contact_columns, field_at_points, frictional_rows
 from .picard import pressure_map
 
 STRICT = 1e-8
-
-
 """A contact row or friction point is strictly on one side of its law where the quantity of that side (gap,
 pressure; slip, room below the bound) exceeds this fraction of its scale, or 100 × the certificate's worst
 residual if larger; where neither does, it is degenerate and the derivative one-sided there."""
@@ -142,15 +140,11 @@ def point_of(result: ContactResult) -> Point:
 
 
 CONDENSED = 3000
-
-
 """Most contact DOFs onto which the derivative system is condensed (a dense Schur complement of K, as the dual's
 W): beyond, the sparse system over every DOF is factorized instead (SuperLU)..."""
 
 
 CONDENSED_DOFS = 20000
-
-
 """... and the fewest free DOFs: below, SuperLU on the whole system was faster (10⁴ DOFs, 101 contact nodes:
 0.18 s against 0.56 s for PARDISO's Schur complement; 4·10⁴ DOFs, 201 nodes: 1.10 s against 0.78 s)."""
 

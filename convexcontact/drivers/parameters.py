@@ -29,9 +29,7 @@ from ..scene.model import (
     compliance_of,
     of_type,
 )
-from .active_set import (
-    Rates,
-)
+from .active_set import Rates
 from .linearized import Point, weighted_gap
 
 PARAMETERS = ("E", "nu", "materials[NAME].E|nu", "friction (Coulomb)", "slip_bound (Tresca)",
