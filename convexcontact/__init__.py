@@ -11,7 +11,9 @@ Build a :class:`Scene`, call :func:`solve`, read the :class:`ContactResult`::
 from .conic import ConicProgram, ConicSolution
 from .drivers.history_run import HistoryResult
 from .drivers.history_run import run as run_history
+from .drivers.parameters import with_parameter
 from .drivers.prepared import Model, prepare
+from .drivers.sensitivity import gradient, sensitivity
 from .drivers.solutions import SolutionSet, all_solutions
 from .drivers.solve import solve
 from .results.result import ContactResult
@@ -41,6 +43,7 @@ __all__ = [
     "Body", "Box", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Coulomb", "Dirichlet", "History",
     "HistoryResult", "Material", "MeshFile", "Model", "NormalCompliance", "Obstacle", "Pair", "Part", "Rectangle",
     "Scene", "SceneError", "Signorini", "SolutionSet", "Traction", "Tresca", "all_solutions", "bodies_library",
-    "bodies_scene", "library", "load_scene", "prepare", "run_history", "solve",
+    "bodies_scene", "gradient", "library", "load_scene", "prepare", "run_history", "sensitivity", "solve",
+    "with_parameter",
 ]
 __version__ = "0.1.0"
