@@ -10,8 +10,8 @@ from pathlib import Path
 from . import solvers
 from .drivers.solve import solve
 from .results.output import check_new_file, check_new_files, staged, write_text
+from .scene.description import SceneError
 from .scene.library import hertz_punch
-from .scene.model import SceneError
 from .studies import arguments
 
 
@@ -120,7 +120,7 @@ def check_outputs(out: Path | None, json_file: Path | None, overwrite: bool, out
 
 def report(result, out: Path | None, json_file: Path | None) -> int:
     """Print ``result``, write its files (each output whole or not at all) and return the exit code."""
-    from .drivers.history import HistoryResult
+    from .drivers.history_run import HistoryResult
     from .drivers.solutions import SolutionSet
 
     print(history_table(result) if isinstance(result, HistoryResult) else solutions_table(result)
@@ -135,9 +135,9 @@ def report(result, out: Path | None, json_file: Path | None) -> int:
 def compare_scene(args) -> dict | None:
     """The exact answer of the scene file against a peer's output file (``convexcontact compare SCENE PEER``):
     the outputs, the scene and the peer's file are checked before the solve; None when the solve has no answer."""
-    from .fem.mesh import build_mesh
+    from .scene.meshing import build_mesh
     from .scene.toml import load_scene
-    from .studies.peer import check_dimension, peer_errors, plot_pressures, read_peer
+    from .studies.crossvalidation.peer import check_dimension, peer_errors, plot_pressures, read_peer
 
     check_outputs(args.out, None, args.overwrite, ("pressures.png",))
     scene = load_scene(args.reference)
@@ -161,7 +161,7 @@ def compare_scene(args) -> dict | None:
 
 def compare_summaries(args) -> dict:
     """Two summary.json files (``convexcontact compare A.json B.json``); the options of a peer file are refused."""
-    from .studies.compare import compare_files
+    from .studies.crossvalidation.compare import compare_files
 
     for option, value in (("--displacement", args.displacement), ("--pressure", args.pressure), ("--out", args.out)):
         if value is not None:
@@ -243,6 +243,10 @@ def commands(argv=None) -> int:
     compare.add_argument("--out", type=Path, default=None, help="folder for the pressure overlay PNG (peer files)")
     compare.add_argument("--overwrite", action="store_true", help="replace a pressures.png already in --out")
     argv = sys.argv[1:] if argv is None else list(argv)
+    options = argv[:argv.index("--")] if "--" in argv else argv
+    dashes = next((word for word in options if word.startswith("--") and word.endswith("=--")), None)
+    if dashes:  # argparse (3.11) reads "--tol=--" as an empty list and passes it on, past every type check
+        parser.error(f"{dashes[:-3]}: expected a value, got '--' (the end of options); give {dashes[:-2]}VALUE")
     if argv[:1] == ["study"] and (len(argv) == 1 or argv[1] in ("-h", "--help")):
         study.print_help()
         print("\neach study has its own options: convexcontact study KIND --help")
@@ -252,14 +256,17 @@ def commands(argv=None) -> int:
 
         return fclib_main(argv[1:])
     if argv[:1] == ["bench"]:  # its options (--dim …) belong to its own parser
-        from .studies import bench, history_bench
+        from .studies.benchmarks import bench, history_bench
 
         history = any(word == "--history" or word.startswith("--history=") for word in argv)
         rows = (history_bench if history else bench).main(argv[1:])  # bad input: argparse's exit 2
         return 0 if rows else 1  # every case failed (each said why)
     args = parser.parse_args(argv)
     if args.command == "study":
-        from .studies import grid, sfepy_peer, stability, sweeps, uniqueness, work_precision
+        from .studies.crossvalidation import sfepy_peer, sweeps
+        from .studies.parameters import grid
+        from .studies.precision import stability, work_precision
+        from .studies.verification import uniqueness
 
         studies = {"work-precision": work_precision, "sweep": sweeps, "stability": stability, "uniqueness": uniqueness,
                    "grid": grid, "sfepy": sfepy_peer}
@@ -273,7 +280,7 @@ def commands(argv=None) -> int:
             return 1
         return 1 if failed_all(found) else 0  # every case failed (each said why)
     if args.command == "compare":
-        from .studies.compare import format_report
+        from .studies.crossvalidation.compare import format_report
 
         try:
             report = compare_scene(args) if args.reference.suffix.lower() == ".toml" else compare_summaries(args)
@@ -349,7 +356,7 @@ def run_command(args) -> int:
         check_outputs(args.out, args.json, args.overwrite)
         solvers.check_name(args.solver)
         if args.command == "demo":
-            from .fem.mesh import check_size
+            from .scene.meshing import check_size
 
             scene = hertz_punch(nx=args.nx)
             with arguments.named("--nx"):

@@ -13,8 +13,8 @@ import dataclasses
 import numpy as np
 
 import convexcontact as cc
+from convexcontact.scene.description import Coulomb
 from convexcontact.scene.library import HERTZ_FORCE, frictional_punch, punch_mesh
-from convexcontact.scene.model import Coulomb
 
 
 def scene(h: float, ratio: float, friction: float = 0.6) -> cc.Scene:

@@ -8,8 +8,8 @@ import argparse
 import numpy as np
 
 import convexcontact as cc
+from convexcontact.scene.description import Coulomb
 from convexcontact.scene.library import frictional_punch
-from convexcontact.scene.model import Coulomb
 
 
 def main(h: float = 0.01, out: str = "out/nonlocal"):

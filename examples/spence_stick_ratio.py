@@ -3,7 +3,7 @@
 A rigid cylinder (R = 1) pressed into a clamped block (ν = 0.3, Q1, h over |x| < 0.15) with Coulomb
 friction, the depth × λ per step from 0.004 to 0.019: c/a averaged over the upper half of the depths,
 beside the half-plane's self-similar value (a flat punch solved by boundary elements, no step at all;
-convexcontact/studies/spence.py says why). Prints the table, writes spence.csv and spence.png.
+convexcontact/studies/verification/spence.py says why). Prints the table, writes spence.csv and spence.png.
 
     python examples/spence_stick_ratio.py                 # F 0.2 0.4 0.6, λ 1.25 1.06, the 4-wide block (~1 min)
     python examples/spence_stick_ratio.py --full          # λ 1.25 … 1.03, widths 1 3 10 30, h 0.00125 (~15 min)
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from convexcontact.studies.spence import dundurs_beta, half_plane_stick_ratio, indentation
+from convexcontact.studies.verification.spence import dundurs_beta, half_plane_stick_ratio, indentation
 
 NU = 0.3
 FULL = {"step_ratios": [1.25, 1.12, 1.06, 1.03], "widths": [10.0, 1.0, 3.0, 30.0], "h": 0.00125}

@@ -8,11 +8,12 @@ import skfem as fe
 
 import convexcontact as cc
 from convexcontact.analytic import hertz_sphere
-from convexcontact.fem.mesh import tensor_mesh, vector_basis
+from convexcontact.fem.basis import vector_basis
 from convexcontact.fem.stiffness import stiffness
+from convexcontact.scene.description import Box
 from convexcontact.scene.library import HERTZ_SPHERE_FORCE, punch_3d
 from convexcontact.scene.library import hertz_sphere as hertz_scene
-from convexcontact.scene.model import Box
+from convexcontact.scene.meshing import tensor_mesh
 from convexcontact.solvers import ConeNotSupported
 
 
@@ -217,7 +218,7 @@ def test_toml_box_scene_is_the_library_scene():
 def test_a_stalled_interior_point_is_retried_until_it_solves():
     """A sheared 3-D Tresca block (found by the fuzz suite): Clarabel stalls at 1e-12 and 1e-11 and solves at
     1e-10; the primal's answer then agrees with the polished dual's."""
-    from convexcontact.scene.model import Box
+    from convexcontact.scene.description import Box
 
     scene = cc.Scene(name="sheared", body=cc.Body(Box(size=(1.0, 1.0, 0.5), cells=(3, 3, 3),
                                                       origin=(-0.5, -0.5, 0.0)), "P1"),

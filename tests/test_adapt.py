@@ -1,4 +1,4 @@
-"""Adaptive against uniform refinement on the flat punch (convexcontact.studies.refinement): true errors against
+"""Adaptive against uniform refinement on the flat punch (convexcontact.studies.precision.refinement): true errors against
 references two levels finer."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from test_estimate import flat_punch
 
-from convexcontact.studies import refinement, work_precision
+from convexcontact.studies.precision import refinement, work_precision
 
 
 @pytest.fixture(scope="module")

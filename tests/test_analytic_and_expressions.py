@@ -12,8 +12,8 @@ from convexcontact.analytic import (
     hild_one_triangle_solutions,
     lame_plane_strain,
 )
+from convexcontact.scene.description import SceneError
 from convexcontact.scene.expressions import compile_expression
-from convexcontact.scene.model import SceneError
 
 FIELD = "obstacle.expression"
 E, NU, LENGTH = 2.0, 0.3, 1.5

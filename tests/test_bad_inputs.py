@@ -83,7 +83,7 @@ def test_the_python_api_checks_types_where_values_enter(build, field, fix):
 ])
 def test_solver_options_are_checked_before_any_work(solver, options, field, monkeypatch):
     """Refused before the scene is assembled (assembling here would fail the test)."""
-    monkeypatch.setattr("convexcontact.drivers.model.assemble", lambda scene: pytest.fail("assembled"))
+    monkeypatch.setattr("convexcontact.drivers.prepared.assemble", lambda scene: pytest.fail("assembled"))
     with pytest.raises(ValueError) as error:
         cc.solve(BASE, solver, **options)
     assert str(error.value).startswith(field), str(error.value)
@@ -133,7 +133,7 @@ def test_no_bad_iteration_limit_reaches_a_solver(max_iter):
 
 def test_a_failing_cvxpy_solve_is_a_failed_result():
     """cvxpy's SolverError is a result with status failed and the solver's words, like the other paths."""
-    from convexcontact.scene.model import Box
+    from convexcontact.scene.description import Box
 
     # Clarabel stalls on this 3-D Tresca block at 1e-12 (found by the fuzz suite); asked for that tol, cvxpy raises
     block = cc.Scene(name="block", body=cc.Body(Box(size=(1.0, 1.0, 0.5), cells=(3, 3, 3), origin=(-0.5, -0.5, 0.0)),
@@ -263,8 +263,8 @@ def test_a_broken_mesh_is_named_with_the_fix(mesh, problem):
 
 
 def graded_builtins():
-    from convexcontact.fem.mesh import build_mesh
-    from convexcontact.scene.model import Box
+    from convexcontact.scene.description import Box
+    from convexcontact.scene.meshing import build_mesh
 
     for element in ("P1", "P2", "Q1", "Q2"):
         yield build_mesh(cc.Body(cc.Rectangle(nx=4, ny=3, grading=(6.0, 6.0)), element))
@@ -283,7 +283,7 @@ SOUND = [
 def test_every_sound_mesh_passes_the_checks(mesh):
     """scikit-fem numbers simplices in either orientation and keeps quadratic meshes' edge nodes outside t:
     none of that is a defect."""
-    from convexcontact.fem.mesh import check_mesh
+    from convexcontact.scene.meshing import check_mesh
 
     assert check_mesh(mesh, "sound") is mesh
 
@@ -291,7 +291,7 @@ def test_every_sound_mesh_passes_the_checks(mesh):
 def test_a_quadratic_mesh_file_is_read_whole(tmp_path):
     path = tmp_path / "disk.msh"
     fe.MeshTri2.init_circle(1).save(path, file_format="gmsh22")
-    from convexcontact.fem.mesh import build_mesh
+    from convexcontact.scene.meshing import build_mesh
 
     assert type(build_mesh(cc.Body(cc.MeshFile(path), "P2"))).__name__ == "MeshTri2"
 
@@ -312,7 +312,7 @@ def test_a_mesh_too_large_for_the_machine_is_refused_before_it_is_built():
 
 
 def test_a_users_mesh_too_large_is_refused_before_assembly(monkeypatch):
-    monkeypatch.setattr("convexcontact.fem.mesh.available_memory", lambda: 1e5)
+    monkeypatch.setattr("convexcontact.scene.meshing.available_memory", lambda: 1e5)
     monkeypatch.setattr("convexcontact.fem.assembly.vector_basis", lambda *args: pytest.fail("assembled"))
     with pytest.raises(cc.SceneError, match=r"18 cells of P1 make about 32 DOFs, .* use a coarser mesh") as error:
         cc.prepare(on(square()))
@@ -409,10 +409,10 @@ def test_the_command_line_gives_a_clear_error_and_its_code(arguments, code, text
 def test_the_memory_estimate_knows_a_flat_block_from_a_cube(monkeypatch):
     """3-D fill grows with the largest separator: a flat 1.1·10⁶-DOF block fits in 23 GiB (measured: issue 12's
     whole-face bench), a cube of fewer DOFs does not."""
-    from convexcontact.fem.mesh import check_size
-    from convexcontact.scene.model import Box
+    from convexcontact.scene.description import Box
+    from convexcontact.scene.meshing import check_size
 
-    monkeypatch.setattr("convexcontact.fem.mesh.available_memory", lambda: 23 * 2**30)
+    monkeypatch.setattr("convexcontact.scene.meshing.available_memory", lambda: 23 * 2**30)
     check_size(cc.Body(Box(cells=(224, 224, 6)), "Q1"))
     with pytest.raises(cc.SceneError, match="of this shape fit") as error:
         check_size(cc.Body(Box(cells=(80, 80, 80)), "Q1"))

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from convexcontact import cli
 from convexcontact.scene.library import hertz_punch
-from convexcontact.studies import refinement
+from convexcontact.studies.precision import refinement
 
 SURFACES = ("convexcontact study work-precision",)
 
@@ -27,7 +27,7 @@ def digest(folder: Path) -> dict:
 @pytest.fixture
 def folder(tmp_path, monkeypatch):
     """A working folder with a user's file and an earlier comparison's outputs; the comparison may not start."""
-    for target in ("convexcontact.studies.refinement.compare", "convexcontact.studies.work_precision.run"):
+    for target in ("convexcontact.studies.precision.refinement.compare", "convexcontact.studies.precision.work_precision.run"):
         monkeypatch.setattr(target, lambda *args, **kwargs: pytest.fail("the work started"))
     (tmp_path / "file").write_text("the user's")
     (tmp_path / "earlier").mkdir()
@@ -82,7 +82,7 @@ def test_a_reference_beyond_the_memory_is_refused_with_the_estimate(capsys, fold
 
 
 def test_a_comparison_of_hours_is_refused(capsys, folder, monkeypatch):
-    monkeypatch.setattr("convexcontact.fem.mesh.available_memory", lambda: float("inf"))
+    monkeypatch.setattr("convexcontact.scene.meshing.available_memory", lambda: float("inf"))
     check(capsys, folder, STUDY + ["9"], "error: --refinement: ", " h, beyond the 1 h a run may take here")
 
 

@@ -21,9 +21,9 @@ import convexcontact as cc
 from convexcontact import cli
 from convexcontact.results.output import write_vtk
 from convexcontact.scene.toml import load_scene
-from convexcontact.studies.compare import compare_files
-from convexcontact.studies.grid import run_grid
-from convexcontact.studies.peer import compare_peer, read_peer
+from convexcontact.studies.crossvalidation.compare import compare_files
+from convexcontact.studies.crossvalidation.peer import compare_peer, read_peer
+from convexcontact.studies.parameters.grid import run_grid
 
 SURFACES = ("convexcontact compare", "convexcontact study grid", "reader peer", "reader grid resume")
 
@@ -442,7 +442,7 @@ def test_study_grid_out_and_scene_arguments(files, tmp_path, capsys):
 
 
 def test_imported_arrays_name_the_argument(files):
-    from convexcontact.studies.compare import Fields
+    from convexcontact.studies.crossvalidation.compare import Fields
 
     with pytest.raises(ValueError, match=r"^pressure: expected an array of numbers"):
         Fields.from_arrays(files["result"], pressure=["high"] * 4)

@@ -191,9 +191,9 @@ def test_a_singular_m_is_refused_by_the_solve_naming_m(tmp_path, capsys):
 def test_a_global_problem_too_large_to_condense_is_refused_before_the_work(global_file, capsys, monkeypatch):
     """The condensed W is dense, 24 bytes an entry (16 measured): one 2-D contact's 2 unknowns need 96 bytes, so a
     machine with 90 bytes available refuses them, naming H, before any factorization."""
-    from convexcontact.fem import mesh
+    from convexcontact.scene import meshing
 
-    monkeypatch.setattr(mesh, "available_memory", lambda: 90.0)
+    monkeypatch.setattr(meshing, "available_memory", lambda: 90.0)
     assert main(["solve", str(global_file)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: fclib_global/H: 2 contact unknowns; condensing onto them") and "GiB available" in err

@@ -13,8 +13,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import convexcontact as cc
+from convexcontact.scene.description import SHAPE_FIELDS
 from convexcontact.scene.library import hertz_punch, pressure_patch
-from convexcontact.scene.model import SHAPE_FIELDS
 from convexcontact.scene.toml import scene_from_dict
 
 SURFACES = ("cc.Signorini", "cc.Tresca", "cc.Coulomb", "cc.NormalCompliance", "cc.Obstacle", "cc.Contact",
@@ -217,12 +217,12 @@ DEPTH = punch(cc.Obstacle("parabolic", radius=1.0, depth=0.01))
 def test_the_matrix_free_dual_where_it_cannot_apply_names_the_formulation(scene, solver, words, monkeypatch):
     """It sent the user from newton-cg ('use clarabel') to Clarabel ('needs P as a matrix'): now one refusal under
     'formulation', before any assembly, with the formulations that apply."""
-    monkeypatch.setattr("convexcontact.drivers.model.assemble", lambda scene: pytest.fail("assembled"))
+    monkeypatch.setattr("convexcontact.drivers.prepared.assemble", lambda scene: pytest.fail("assembled"))
     refused(lambda: cc.solve(scene, solver, formulation="dual-matrix-free"), "formulation", *words)
 
 
 def test_the_dual_with_compliance_is_refused_before_assembly(monkeypatch):
-    monkeypatch.setattr("convexcontact.drivers.model.assemble", lambda scene: pytest.fail("assembled"))
+    monkeypatch.setattr("convexcontact.drivers.prepared.assemble", lambda scene: pytest.fail("assembled"))
     refused(lambda: cc.prepare(pressure_patch(nx=3, law=cc.NormalCompliance(10.0)), "dual"), "formulation",
             "'primal' or 'auto'")
 

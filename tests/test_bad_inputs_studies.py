@@ -21,13 +21,13 @@ SURFACES = ("convexcontact demo", "convexcontact run", "convexcontact bench", "c
 
 SCENE = str(Path(__file__).resolve().parents[1] / "examples" / "scenes" / "hertz.toml")
 
-WORK = ("convexcontact.drivers.model.assemble", "convexcontact.drivers.history.run",
-        "convexcontact.drivers.solve.all_solutions", "convexcontact.studies.bench.run",
-        "convexcontact.studies.bench.friction_sweep", "convexcontact.studies.history_bench.case",
-        "convexcontact.studies.work_precision.run", "convexcontact.studies.work_precision.overkill",
-        "convexcontact.studies.sweeps.penalty_sweep", "convexcontact.studies.sweeps.regularization_sweep",
-        "convexcontact.studies.stability.run", "convexcontact.studies.uniqueness.run",
-        "convexcontact.studies.sfepy_peer.penalty_study")
+WORK = ("convexcontact.drivers.prepared.assemble", "convexcontact.drivers.history_run.run",
+        "convexcontact.drivers.solve.all_solutions", "convexcontact.studies.benchmarks.bench.run",
+        "convexcontact.studies.benchmarks.bench.friction_sweep", "convexcontact.studies.benchmarks.history_bench.case",
+        "convexcontact.studies.precision.work_precision.run", "convexcontact.studies.precision.work_precision.overkill",
+        "convexcontact.studies.crossvalidation.sweeps.penalty_sweep", "convexcontact.studies.crossvalidation.sweeps.regularization_sweep",
+        "convexcontact.studies.precision.stability.run", "convexcontact.studies.verification.uniqueness.run",
+        "convexcontact.studies.crossvalidation.sfepy_peer.penalty_study")
 """Where each command's work starts: reaching one fails the test."""
 
 
@@ -108,6 +108,12 @@ def test_a_count_is_an_integer_of_at_least_its_minimum(capsys, folder, command, 
               f"argument {option}: expected an integer ≥ {minimum}, e.g.", f"got '{value}'")
 
 
+@pytest.mark.parametrize("command, option", POSITIVE + [("fclib solve x.hdf5", "--merit-tol")])
+def test_the_end_of_options_is_not_a_value(capsys, folder, command, option):
+    """``--tol=--``: argparse 3.11 passes an empty list on, past every type (the long profile's find)."""
+    check(capsys, folder, command_line(command, option, "--"), f"{option}: expected a value, got '--'", "give")
+
+
 @settings(suppress_health_check=[HealthCheck.function_scoped_fixture])  # the stubs and the folder hold for all
 @given(value=st.one_of(st.floats(max_value=0.0), st.sampled_from([math.inf, -math.inf, math.nan]),
                        st.text(alphabet="abexyz,;+- ", min_size=1, max_size=6)),
@@ -170,7 +176,7 @@ def test_a_bad_name_or_value_is_refused_with_the_valid_ones(capsys, folder, argu
 @pytest.fixture
 def roomy(monkeypatch):
     """A machine of unlimited memory: a size is refused for the hours it would take."""
-    monkeypatch.setattr("convexcontact.fem.mesh.available_memory", lambda: float("inf"))
+    monkeypatch.setattr("convexcontact.scene.meshing.available_memory", lambda: float("inf"))
 
 
 @pytest.mark.parametrize("arguments, option", [
@@ -251,10 +257,10 @@ def test_the_estimates_refuse_only_beyond_the_limit():
 def test_a_study_that_answered_no_case_exits_1(monkeypatch, tmp_path, capsys):
     """Every case failed: code 1, each row having said why; one answered case: 0."""
     failed = [{"case": "c", "status": status} for status in ("crash", "input error", "infeasible")]
-    monkeypatch.setattr("convexcontact.studies.stability.run", lambda **kwargs: failed)
-    monkeypatch.setattr("convexcontact.studies.stability.table", lambda rows: "table")
+    monkeypatch.setattr("convexcontact.studies.precision.stability.run", lambda **kwargs: failed)
+    monkeypatch.setattr("convexcontact.studies.precision.stability.table", lambda rows: "table")
     assert cli.main(["study", "stability"]) == 1
-    monkeypatch.setattr("convexcontact.studies.stability.run", lambda **kwargs: failed + [{"status": "inaccurate"}])
+    monkeypatch.setattr("convexcontact.studies.precision.stability.run", lambda **kwargs: failed + [{"status": "inaccurate"}])
     assert cli.main(["study", "stability"]) == 0
     assert not cli.failed_all([]) and not cli.failed_all(None)  # a resumed grid with nothing left failed nothing
 
@@ -263,7 +269,7 @@ def test_a_study_reference_that_cannot_be_solved_is_an_error_without_a_traceback
     def unsolved(*args):
         raise RuntimeError("overkill reference: Clarabel returned 'failed': stalled")
 
-    monkeypatch.setattr("convexcontact.studies.work_precision.overkill", unsolved)
+    monkeypatch.setattr("convexcontact.studies.precision.work_precision.overkill", unsolved)
     assert cli.main(["study", "work-precision", "punch", "--out", str(tmp_path)]) == 1
     assert capsys.readouterr().err == "error: overkill reference: Clarabel returned 'failed': stalled\n"
 

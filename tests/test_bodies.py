@@ -17,7 +17,7 @@ from convexcontact.scene.bodies_library import (
     two_cylinders,
     two_spheres,
 )
-from convexcontact.scene.model import Box
+from convexcontact.scene.description import Box
 
 STEEL = cc.Material(1.0, 0.3)
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
@@ -296,7 +296,7 @@ def test_hertz_two_spheres():
 def test_3d_pairs_refuse_node_to_segment_and_warped_quadrilaterals():
     with pytest.raises(cc.SceneError, match="node-to-segment is built in 2-D"):
         cc.solve(dataclasses.replace(boxes(), contact=Pair("upper.bottom", master="lower.top", method="node_to_segment")))
-    from convexcontact.fem.mesh import build_mesh
+    from convexcontact.scene.meshing import build_mesh
 
     flat = build_mesh(cc.Body(Box(size=(1, 1, 1), cells=(2, 2, 2)), "Q1"))
     warped = type(flat)(flat.p + [[0], [0], [0.1]] * flat.p[0] * flat.p[1], flat.t, _boundaries=flat.boundaries)
@@ -394,7 +394,7 @@ def test_a_mesh_file_part_moved_by_its_offset(tmp_path):
     file's subdomains and boundaries prefixed by the part's name."""
     from test_inputs import write_gmsh
 
-    from convexcontact.fem.mesh import build_mesh
+    from convexcontact.scene.meshing import build_mesh
 
     block = build_mesh(cc.Body(cc.Rectangle(1.0, 1.0, 5, 5)))
     path = tmp_path / "block.msh"
@@ -411,12 +411,12 @@ def test_a_whole_interface_in_contact_takes_the_matrix_free_dual(monkeypatch):
     """Two strips touching along their whole length: the gaps from two meshes are ±1e-11, not 0, and still
     count as closed, so auto leaves the dense W (condensed onto slave and master columns) for the
     matrix-free dual past the limit — with the dense dual's answer."""
-    import convexcontact.drivers.model as model_module
-    from convexcontact.studies.bodies_bench import strips
+    from convexcontact.drivers import rules
+    from convexcontact.studies.benchmarks.bodies_bench import strips
 
     scene = strips(120, 4)
     dense = cc.prepare(scene, "dual").solve()
-    monkeypatch.setattr(model_module, "CLOSED_LIMIT", 100)
+    monkeypatch.setattr(rules, "CLOSED_LIMIT", 100)
     model = cc.prepare(scene)
     assert "at closed nodes exceed 100" in model.reason
     result = model.solve()
@@ -428,7 +428,7 @@ def test_the_bench_measures_a_two_body_case(capsys):
     """``convexcontact bench --scenario two-body``: the punch on its foundation, a certified row against one
     linear solve of both bodies, and a 3-D request refused by name before any case runs."""
     from convexcontact.cli import main
-    from convexcontact.studies import bench
+    from convexcontact.studies.benchmarks import bench
 
     row = bench.measure(2, "signorini", 3000, "auto", "auto", "two-body")
     assert row["scenario"] == "two-body" and row["status"] == "solved" and row["certificate"] < 1e-10

@@ -7,10 +7,10 @@ import skfem as fe
 import convexcontact as cc
 from convexcontact import Pair, Part, bodies_scene
 from convexcontact.fem.assembly import assemble
-from convexcontact.fem.mesh import build_mesh
 from convexcontact.fem.mortar import dual_coefficients, gauss, lagrange
 from convexcontact.scene.bodies_library import patch_pair, two_cylinders
-from convexcontact.scene.model import Box
+from convexcontact.scene.description import Box
+from convexcontact.scene.meshing import build_mesh
 
 STEEL = cc.Material(1.0, 0.3)
 

@@ -14,8 +14,8 @@ from convexcontact.fem import factorization
 from convexcontact.fem.coarse import body_far_functions, grid_functions
 from convexcontact.fem.factorization import Approximation, Delassus, factorize
 from convexcontact.formulations import contact_weights
+from convexcontact.scene.description import Signorini, Tresca
 from convexcontact.scene.library import whole_face
-from convexcontact.scene.model import Signorini, Tresca
 from convexcontact.solvers import newton_cg
 
 

@@ -8,7 +8,7 @@ import pytest
 import convexcontact as cc
 from convexcontact.baselines import penalty_signorini
 from convexcontact.scene.library import hertz_punch
-from convexcontact.studies.compare import Fields, compare, compare_files, format_report, mass_matrix
+from convexcontact.studies.crossvalidation.compare import Fields, compare, compare_files, format_report, mass_matrix
 
 ERRORS = ("energy_error", "l2_displacement_error", "pressure_l2_error", "pressure_max_error")
 

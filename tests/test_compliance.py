@@ -7,8 +7,8 @@ import pytest
 
 import convexcontact as cc
 from convexcontact.baselines.penalty import penalty_signorini
+from convexcontact.scene.description import Coulomb, NormalCompliance
 from convexcontact.scene.library import hertz_punch
-from convexcontact.scene.model import Coulomb, NormalCompliance
 from convexcontact.scene.toml import scene_from_dict
 from convexcontact.solvers import ConeNotSupported
 

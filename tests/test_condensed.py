@@ -8,9 +8,9 @@ import pytest
 
 import convexcontact as cc
 from convexcontact.cli import main
+from convexcontact.scene.description import Coulomb, SceneError
 from convexcontact.scene.library import hertz_punch, pressure_patch
-from convexcontact.scene.model import Coulomb, SceneError
-from convexcontact.studies import bench
+from convexcontact.studies.benchmarks import bench
 
 
 @pytest.mark.parametrize("dim, law", [(2, "signorini"), (2, "tresca"), (2, "coulomb"), (3, "signorini"),

@@ -158,7 +158,7 @@ def test_a_failed_polish_returns_its_input_even_when_the_guess_says_polished(mon
 def test_a_vanishing_slip_bound_polishes_without_underflow(bound):
     """3-D slip bounds found by the fuzz suite: 1e-259 squared to 0 in ‖w‖ (NaN directions), 8.7e-311 made
     the curvature ν/ρ overflow; the dual now polishes to the answer of the primal."""
-    from convexcontact.scene.model import Box
+    from convexcontact.scene.description import Box
 
     scene = cc.Scene(name="tiny bound", body=cc.Body(Box(size=(1.0, 1.0, 0.5), cells=(2, 2, 2),
                                                           origin=(-0.5, -0.5, 0.0)), "P1"),

@@ -14,8 +14,8 @@ from convexcontact import solvers
 from convexcontact.conic import ConicProgram, nonnegative, soc
 from convexcontact.drivers import picard
 from convexcontact.formulations.dual import normal_multipliers, stick_guess
+from convexcontact.scene.description import Coulomb, SceneError
 from convexcontact.scene.library import punch_3d, whole_face
-from convexcontact.scene.model import Coulomb, SceneError
 from convexcontact.solvers import newton_cg
 
 
@@ -144,7 +144,7 @@ def test_newton_on_a_singular_delassus_operator():
 def test_a_step_towards_the_projected_gradient_gets_newton_past_a_stall():
     """The 2-D punch with F = 2: no step towards Newton's point lowered the natural residual after 2 Newton steps;
     one towards the projected gradient's does, and Newton reaches the map's fixed point."""
-    from convexcontact.studies.bench import punch_scene
+    from convexcontact.studies.benchmarks.bench import punch_scene
 
     scene = punch_scene(2, "coulomb", 1e4).with_law(Coulomb(friction=2.0, tol=1e-10))
     newton = cc.solve(scene)

@@ -13,11 +13,11 @@ import skfem as fe
 import convexcontact as cc
 from convexcontact.drivers.adapt import adapt, refine
 from convexcontact.fem.estimate import TERMS, algebraic_error, dorfler, estimate
-from convexcontact.fem.mesh import build_mesh
 from convexcontact.results.result import EFFECTIVITY, LARGE_ERROR, contact_state
+from convexcontact.scene.description import Box
 from convexcontact.scene.library import hertz_punch, pressure_patch
-from convexcontact.scene.model import Box
-from convexcontact.studies.stability import hertz
+from convexcontact.scene.meshing import build_mesh
+from convexcontact.studies.precision.stability import hertz
 
 
 def box_patch(element: str) -> cc.Scene:

@@ -13,7 +13,7 @@ import skfem
 from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from convexcontact.fem.factorization import Condensation, condense, factorize
-from convexcontact.scene.model import SceneError
+from convexcontact.scene.description import SceneError
 
 BACKENDS = ["superlu", "pardiso"]
 

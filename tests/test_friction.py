@@ -7,8 +7,8 @@ import pytest
 
 import convexcontact as cc
 from convexcontact.fem.mollifier import mollifier
+from convexcontact.scene.description import Coulomb, Tresca
 from convexcontact.scene.library import frictional_punch, hertz_punch, punch_mesh, tresca_punch
-from convexcontact.scene.model import Coulomb, Tresca
 
 F = 0.6
 

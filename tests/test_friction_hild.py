@@ -6,7 +6,7 @@ import skfem as fe
 
 import convexcontact as cc
 from convexcontact.analytic import hild_critical_friction, hild_one_triangle_solutions
-from convexcontact.scene.model import Coulomb, Tresca
+from convexcontact.scene.description import Coulomb, Tresca
 
 E, NU, LENGTH = 1.0, 0.3, 1.0
 CRITICAL = hild_critical_friction(NU)  # 1.8

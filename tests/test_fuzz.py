@@ -13,13 +13,13 @@ import dataclasses
 import itertools
 
 import numpy as np
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 import convexcontact as cc
 from convexcontact import solvers
 from convexcontact.results.certificate import certify
-from convexcontact.scene.model import Box
+from convexcontact.scene.description import Box
 
 AGREEMENT = 1e3
 """How far two certified answers may differ, in units of their worst residuals: a residual r bounds the
@@ -90,7 +90,15 @@ def solved_paths(scene):
     return results
 
 
+SUBNORMAL_SLIP = cc.Scene(
+    name="fuzz", body=cc.Body(cc.Rectangle(width=1.0, height=0.5, nx=3, ny=1, origin=(-0.5, 0.0)), "P1"),
+    materials=cc.Material(1.0, 0.0), dirichlet=(cc.Dirichlet("top", ux=0.0078125, uy=0.0),),
+    contact=cc.Contact("bottom", cc.Obstacle("flat", depth=0.0078125), cc.Tresca(slip_bound=1.73833895197e-313)))
+"""The long profile's find: a subnormal slip bound, whose disc newton-cg's curvature (‖y‖ − ρ)/(cρ) overflowed."""
+
+
 @given(scenes())
+@example(SUBNORMAL_SLIP)
 def test_certified_answers_agree(scene):
     """Any two solved answers differ by no more than their certificates allow (in displacement and forces).
 

@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 import convexcontact as cc
 from convexcontact import solvers
 from convexcontact.conic import ConicProgram, nonnegative, soc
+from convexcontact.scene.description import Signorini, Tresca
 from convexcontact.scene.library import whole_face
-from convexcontact.scene.model import Signorini, Tresca
 from convexcontact.solvers import newton_cg
 from convexcontact.solvers.cone_polish import unit_rows
 

@@ -8,7 +8,7 @@ import pytest
 
 import convexcontact as cc
 from convexcontact import cli
-from convexcontact.studies.grid import run_grid
+from convexcontact.studies.parameters.grid import run_grid
 
 
 def block(law) -> cc.Scene:

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import convexcontact as cc
-from convexcontact.drivers.history import run
-from convexcontact.scene.history import History
-from convexcontact.scene.model import SceneError
+from convexcontact.drivers.history_run import run
+from convexcontact.scene.description import SceneError
+from convexcontact.scene.load_history import History
 
 SLIP_BOUND, DEPTH, WIDTH = 0.002, 0.01, 1.0
 
@@ -252,16 +252,16 @@ def test_a_history_left_to_auto_runs_newton_cg_as_clarabel_would(monkeypatch):
     """Left to auto, the dense dual's session is newton-cg's, warm-started from step to step: every step
     certified and equal to Clarabel's history; where newton-cg fails (held to one Newton step), Clarabel answers
     that step and the rest, and the steps say why."""
-    from convexcontact.drivers import model as model_module
+    from convexcontact.drivers import rules
 
     scene = sliding_block([0.0, 0.002, 0.004, 0.006])
     newton, interior = run(scene, "auto"), run(scene, "clarabel")
     assert [step.solver for step in newton.steps] == ["newton-cg"] * 4
-    assert all(step.extra["solver_reason"] == model_module.DENSE_NEWTON for step in newton.steps)
+    assert all(step.extra["solver_reason"] == rules.DENSE_NEWTON for step in newton.steps)
     for a, b in zip(newton.steps, interior.steps):
         assert a.status == "solved" and a.certificate.worst < 1e-10
         assert np.abs(a.displacement - b.displacement).max() < 1e-8 * np.abs(b.displacement).max()
-    monkeypatch.setattr(model_module, "DENSE_NEWTON_STEPS", 1)
+    monkeypatch.setattr(rules, "DENSE_NEWTON_STEPS", 1)
     fallback = run(scene, "auto")
     assert fallback.status == "solved" and [step.solver for step in fallback.steps] == ["clarabel"] * 4
     assert fallback.steps[0].extra["solver_reason"].startswith("newton-cg max_iter after 1 Newton steps")

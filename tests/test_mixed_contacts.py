@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import convexcontact as cc
-from convexcontact.drivers.model import prepare
+from convexcontact.drivers.prepared import prepare
 from convexcontact.scene.bodies import Pair, Part, bodies_scene
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"

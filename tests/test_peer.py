@@ -9,7 +9,7 @@ import pytest
 import convexcontact as cc
 from convexcontact import cli
 from convexcontact.results.output import write_vtk
-from convexcontact.studies.peer import compare_peer
+from convexcontact.studies.crossvalidation.peer import compare_peer
 
 
 @pytest.fixture(scope="module")

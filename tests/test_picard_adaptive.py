@@ -11,8 +11,8 @@ import convexcontact as cc
 from convexcontact.analytic import hild_critical_friction, hild_one_triangle_solutions
 from convexcontact.cli import table
 from convexcontact.drivers.picard import NOISE, UNFINISHED, paths
+from convexcontact.scene.description import Box, Coulomb
 from convexcontact.scene.library import HERTZ_FORCE, frictional_punch, hertz_punch, punch_mesh
-from convexcontact.scene.model import Box, Coulomb
 
 MU = 0.3
 

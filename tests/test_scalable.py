@@ -11,12 +11,12 @@ import scipy.sparse.linalg as spla
 import convexcontact as cc
 from convexcontact import cli, solvers
 from convexcontact.conic import ConicProgram, nonnegative, soc, zero
-from convexcontact.drivers import model as model_module
+from convexcontact.drivers import rules
 from convexcontact.fem import factorization
 from convexcontact.fem.factorization import factorize
 from convexcontact.formulations import contact_weights
+from convexcontact.scene.description import Coulomb, Signorini, Tresca
 from convexcontact.scene.library import hertz_punch, punch_3d, tresca_punch, whole_face
-from convexcontact.scene.model import Coulomb, Signorini, Tresca
 
 
 def random_program(rng, bounds: int, balls: int, size: int, operator: bool = False) -> ConicProgram:
@@ -152,13 +152,13 @@ def test_auto_condenses_densely_only_onto_columns_that_fit(monkeypatch):
     1.4e6 DOFs ran out of memory with 9816 unknowns, 34,762 columns). Beyond COLUMN_LIMIT, no dense W."""
     scene = cc.bodies_library.punch_on_foundation(0.05)
     assert cc.prepare(scene).formulation == "dual"
-    columns = model_module.contact_columns(cc.prepare(scene, "primal").fem).size
-    monkeypatch.setattr(model_module, "COLUMN_LIMIT", columns - 1)
+    columns = rules.contact_columns(cc.prepare(scene, "primal").fem).size
+    monkeypatch.setattr(rules, "COLUMN_LIMIT", columns - 1)
     model = cc.prepare(scene)
     assert model.formulation == "dual" and solvers.matrix_free(model.program)
     assert f"the {columns} DOFs to condense onto exceed {columns - 1}" in model.reason
     forced = cc.prepare(cc.scene.library.hertz_punch(20))  # a force-controlled obstacle: no bound form
-    monkeypatch.setattr(model_module, "COLUMN_LIMIT", 1)
+    monkeypatch.setattr(rules, "COLUMN_LIMIT", 1)
     assert cc.prepare(cc.scene.library.hertz_punch(20)).formulation == "primal" != forced.formulation
 
 
@@ -168,14 +168,14 @@ def test_auto_goes_matrix_free_for_large_closed_zones(monkeypatch):
     (an equality) is not in newton-cg's bound form and keeps the primal beyond DENSE_LIMIT."""
     scene = whole_face(2, 41, 1e3, Tresca(slip_bound=0.002))
     assert cc.prepare(scene).formulation == "dual" and not solvers.matrix_free(cc.prepare(scene).program)
-    monkeypatch.setattr(model_module, "CLOSED_LIMIT", 50)
+    monkeypatch.setattr(rules, "CLOSED_LIMIT", 50)
     model = cc.prepare(scene)
     assert solvers.matrix_free(model.program) and "closed nodes exceed 50" in model.reason
     result = model.solve()
     assert result.solver == "newton-cg" and "never formed" in result.extra["formulation_reason"]
     punch = cc.prepare(cc.library.tresca_punch(nx=80))  # 81 contact nodes, 162 unknowns, a few closed
     assert punch.formulation == "dual" and not solvers.matrix_free(punch.program)
-    monkeypatch.setattr(model_module, "DENSE_LIMIT", 100)
+    monkeypatch.setattr(rules, "DENSE_LIMIT", 100)
     assert solvers.matrix_free(cc.prepare(cc.library.tresca_punch(nx=80)).program)
     forced = cc.prepare(cc.library.hertz_punch(nx=120))
     assert forced.formulation == "primal" and "force-controlled" in forced.reason
@@ -188,13 +188,13 @@ def test_auto_goes_matrix_free_for_large_3d_bodies(monkeypatch):
     scene = punch_3d(cells=6, law=Tresca(slip_bound=0.002))
     dense = cc.prepare(scene)
     assert dense.formulation == "dual" and not solvers.matrix_free(dense.program)
-    monkeypatch.setattr(model_module, "DENSE_DOFS_3D", dense.fem.n_free - 1)
+    monkeypatch.setattr(rules, "DENSE_DOFS_3D", dense.fem.n_free - 1)
     model = cc.prepare(scene)
     assert solvers.matrix_free(model.program) and "costs more to condense than to factorize" in model.reason
     result, expected = model.solve(), dense.solve("clarabel")
     assert result.solver == "newton-cg" and result.status == "solved" and result.certificate.worst < 1e-10
     assert np.abs(result.contact.pressure - expected.contact.pressure).max() < 1e-8 * expected.max_pressure
-    monkeypatch.setattr(model_module, "DENSE_DOFS_3D", 10)
+    monkeypatch.setattr(rules, "DENSE_DOFS_3D", 10)
     assert not solvers.matrix_free(cc.prepare(tresca_punch(nx=30)).program)
     pushed = cc.Obstacle("parabolic", radius=1.0, center=(0.0, 0.0, 0.0), force=0.01)
     forced = cc.prepare(dataclasses.replace(scene, contact=dataclasses.replace(scene.contact, obstacle=pushed)))
@@ -203,7 +203,7 @@ def test_auto_goes_matrix_free_for_large_3d_bodies(monkeypatch):
 
 def test_whole_face_bench_row_says_what_auto_chose(tmp_path, monkeypatch):
     from convexcontact.cli import main
-    from convexcontact.studies import bench
+    from convexcontact.studies.benchmarks import bench
 
     row = bench.measure(2, "tresca", 2000, "dual-matrix-free", "auto", "whole-face", 41)
     assert (row["scenario"], row["formulation"], row["solver"], row["status"]) == (
@@ -231,7 +231,7 @@ def test_a_failed_matrix_free_solve_that_auto_chose_gives_way_to_the_primal(monk
     from convexcontact.solvers import newton_cg
 
     scene = whole_face(2, 41, 1e3, Tresca(slip_bound=0.002))
-    monkeypatch.setattr(model_module, "CLOSED_LIMIT", 50)
+    monkeypatch.setattr(rules, "CLOSED_LIMIT", 50)
 
     def fails(self):
         n, m = self.program.n_variables, self.program.n_constraints
@@ -256,8 +256,8 @@ def test_auto_answers_a_dense_dual_by_newton_cg_as_clarabel_does(scene):
     the same program) and certified, and the result says which solver answered and why."""
     model = cc.prepare(scene, "dual")
     auto, clarabel = model.solve(), model.solve("clarabel")
-    assert auto.solver == "newton-cg" and auto.extra["solver_reason"] == model_module.DENSE_NEWTON
-    assert model_module.DENSE_NEWTON in cli.table(auto) and "solver choice" not in cli.table(clarabel)
+    assert auto.solver == "newton-cg" and auto.extra["solver_reason"] == rules.DENSE_NEWTON
+    assert rules.DENSE_NEWTON in cli.table(auto) and "solver choice" not in cli.table(clarabel)
     assert auto.status == clarabel.status == "solved" and auto.certificate.worst < 1e-10
     assert np.abs(auto.displacement - clarabel.displacement).max() < 1e-8 * np.abs(clarabel.displacement).max()
     assert np.abs(auto.contact.pressure - clarabel.contact.pressure).max() < 1e-8 * clarabel.max_pressure
@@ -291,7 +291,7 @@ def test_a_failed_dense_newton_gives_way_to_clarabel(monkeypatch):
 def test_auto_gives_newton_cg_a_bounded_number_of_steps_on_a_dense_dual(monkeypatch):
     """newton-cg has DENSE_NEWTON_STEPS Newton steps on a dense dual before Clarabel answers (a wandering Newton
     costs at most those): held to 1, the punch's Tresca dual goes to Clarabel, whose answer is certified."""
-    monkeypatch.setattr(model_module, "DENSE_NEWTON_STEPS", 1)
+    monkeypatch.setattr(rules, "DENSE_NEWTON_STEPS", 1)
     result = cc.prepare(tresca_punch(nx=30), "dual").solve()
     assert result.status == "solved" and result.solver == "clarabel" and result.certificate.worst < 1e-10
     assert result.extra["solver_reason"] == "newton-cg max_iter after 1 Newton steps on the dense dual, so Clarabel"
@@ -320,13 +320,13 @@ def test_newton_cg_solves_the_dense_two_body_tresca_dual_by_the_projection_arc(m
     the projection arc newton-cg converges well within auto's DENSE_NEWTON_STEPS, to Clarabel's answer, certified;
     without it (ARC = 0) it does not."""
     from convexcontact.solvers import newton_cg
-    from convexcontact.studies.bench import two_body_scene
+    from convexcontact.studies.benchmarks.bench import two_body_scene
 
     model = cc.prepare(two_body_scene("tresca", 1e5), "dual")
     auto, clarabel = model.solve(), model.solve("clarabel")
-    assert auto.solver == "newton-cg" and auto.iterations < model_module.DENSE_NEWTON_STEPS
+    assert auto.solver == "newton-cg" and auto.iterations < rules.DENSE_NEWTON_STEPS
     assert auto.status == clarabel.status == "solved" and auto.certificate.worst < 1e-10
     assert np.abs(auto.displacement - clarabel.displacement).max() < 1e-8 * np.abs(clarabel.displacement).max()
     assert np.abs(auto.contact.pressure - clarabel.contact.pressure).max() < 1e-8 * clarabel.max_pressure
     monkeypatch.setattr(newton_cg, "ARC", 0)
-    assert model.solve("newton-cg", max_iter=model_module.DENSE_NEWTON_STEPS).status != "solved"
+    assert model.solve("newton-cg", max_iter=rules.DENSE_NEWTON_STEPS).status != "solved"

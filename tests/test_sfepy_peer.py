@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import convexcontact as cc
-from convexcontact.studies import sfepy_peer
-from convexcontact.studies.peer import compare_peer
+from convexcontact.studies.crossvalidation import sfepy_peer
+from convexcontact.studies.crossvalidation.peer import compare_peer
 
 pytest.importorskip("sfepy")
 

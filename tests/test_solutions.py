@@ -74,7 +74,7 @@ def test_tresca_is_refused_with_the_reason():
 def test_the_uniqueness_map_reproduces_prop_4_1_on_a_grid(tmp_path):
     """The study's counts equal the closed form's on a grid crossing F_c and the critical load line,
     and its CSV and PNG are written."""
-    from convexcontact.studies import uniqueness
+    from convexcontact.studies.verification import uniqueness
 
     rows = uniqueness.main(["--frictions", "4", "--max-friction", "2.7", "--angles", "13", "--out", str(tmp_path)])
     assert all(r["solutions"] == r["closed_form"] for r in rows)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from convexcontact.studies.spence import dundurs_beta, flat_punch, half_plane_stick_ratio, indentation
+from convexcontact.studies.verification.spence import dundurs_beta, flat_punch, half_plane_stick_ratio, indentation
 
 HALF_PLANE = {0.2: 0.3604, 0.4: 0.8645, 0.6: 0.9732}
 """The self-similar c/a at ν = 0.3 (200 cells a side), checked below."""

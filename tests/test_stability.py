@@ -5,14 +5,12 @@ library is known to give a wrong answer or to crash are marked xfail with the ca
 docs/stability.md) — they are library bugs to fix, not tolerances to relax.
 """
 
-import time
-
 import numpy as np
 import pytest
 
 import convexcontact as cc
-from convexcontact.scene.model import Coulomb
-from convexcontact.studies import stability
+from convexcontact.scene.description import Coulomb
+from convexcontact.studies.precision import stability
 
 ALL_PATHS = tuple(stability.PATHS)
 CLARABEL = ("clarabel/primal", "clarabel/dual", "cvxpy/primal")  # cvxpy's default solver is Clarabel too
@@ -31,21 +29,18 @@ def expectation(case: str, path: str):
 
 @pytest.fixture(scope="module")
 def suite():
-    start = time.perf_counter()
-    rows = stability.run(quick=True, progress=None)
-    return rows, time.perf_counter() - start
+    return stability.run(quick=True, progress=None)
 
 
-def test_quick_suite_runs_in_a_minute(suite):
-    rows, seconds = suite
-    assert {row["case"] for row in rows} == set(stability.CASES)
-    assert seconds < 60
+def test_quick_suite_runs_every_case(suite):
+    """Every case of the suite gives rows (its time is the study's to report, not a unit test's to assert)."""
+    assert {row["case"] for row in suite} == set(stability.CASES)
 
 
 @pytest.mark.parametrize("case, path", [expectation(c, p) for c in stability.CASES for p in stability.PATHS])
 def test_correct_answer_or_clear_failure(suite, case, path):
     """No wrong answer reported as solved, no crash, no failure without a message."""
-    rows = [row for row in suite[0] if row["case"] == case and row["path"] == path]
+    rows = [row for row in suite if row["case"] == case and row["path"] == path]
     if not rows:
         pytest.skip(f"{path} does not run on {case} (cvxpy only on small scenes)")
     (row,) = rows
@@ -53,14 +48,14 @@ def test_correct_answer_or_clear_failure(suite, case, path):
 
 
 def test_table_lists_every_row(suite):
-    rows = suite[0]
+    rows = suite
     lines = stability.table(rows).splitlines()
     assert len(lines) == len(rows) + 2 and lines[0].startswith("| case | path | status")
 
 
 def test_units_give_equal_relative_answers(suite):
     """E = 2.1e11 Pa with millimetre geometry: p/E and u/L equal those of E = 1 to 1e-8, on every path."""
-    rows = [row for row in suite[0] if row["case"] == "units: E = 2.1e11 Pa, mm"]
+    rows = [row for row in suite if row["case"] == "units: E = 2.1e11 Pa, mm"]
     assert len(rows) >= 3
     assert all(row["status"] == "solved" and row["error"] < 1e-8 for row in rows), stability.table(rows)
 
@@ -68,10 +63,10 @@ def test_units_give_equal_relative_answers(suite):
 def test_loads_scale_exactly(suite):
     """Loads 1e-8 and 1e10 (radius / load): u and λ are load × those of load 1 to 1e-8. At 1e-10 the punch's force
     is 2·10⁻¹³ of E·L, below the strain 10⁻¹² a solve resolves: refused by name on every path."""
-    rows = [row for row in suite[0] if row["case"] in ("load 1e-8", "load 1e10")]
+    rows = [row for row in suite if row["case"] in ("load 1e-8", "load 1e10")]
     assert len(rows) >= 6
     assert all(row["status"] == "solved" and row["error"] < 1e-8 for row in rows), stability.table(rows)
-    refused = [row for row in suite[0] if row["case"].startswith("load 1e-10")]
+    refused = [row for row in suite if row["case"].startswith("load 1e-10")]
     assert refused and all(row["status"] == "input error" and "obstacle.force" in row["message"] for row in refused)
 
 
@@ -122,7 +117,7 @@ def test_locking_of_p1_is_detected():
 
 def test_the_suites_locking_rows_are_flagged(suite):
     """The error estimate's warning names locking on every path that answers (issue 26: flagged by the estimate)."""
-    rows = [row for row in suite[0] if row["case"] == "ν = 0.4999, P1 (locking)" and row["status"] == "solved"]
+    rows = [row for row in suite if row["case"] == "ν = 0.4999, P1 (locking)" and row["status"] == "solved"]
     assert rows and all(row["verdict"] == "pass (locking flagged)" for row in rows), stability.table(rows)
 
 

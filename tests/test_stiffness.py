@@ -9,9 +9,10 @@ from skfem.helpers import ddot, div, sym_grad
 
 import convexcontact as cc
 from convexcontact.fem.assembly import assemble, lame_per_element, load_vector
-from convexcontact.fem.mesh import build_mesh, scaled, tensor_mesh, vector_basis
+from convexcontact.fem.basis import vector_basis
 from convexcontact.fem.scaling import Scaling
 from convexcontact.fem.stiffness import stiffness
+from convexcontact.scene.meshing import build_mesh, scaled, tensor_mesh
 
 
 @fe.BilinearForm

@@ -1,4 +1,4 @@
-"""Work-precision study and parameter sweeps (convexcontact.studies.work_precision, .sweeps)."""
+"""Work-precision study and parameter sweeps (convexcontact.studies.precision.work_precision, .sweeps)."""
 
 import math
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from convexcontact.scene.library import hertz_punch, tresca_punch
-from convexcontact.studies import sweeps
-from convexcontact.studies import work_precision as wp
+from convexcontact.studies.crossvalidation import sweeps
+from convexcontact.studies.precision import work_precision as wp
 
 
 @pytest.fixture(scope="module")

@@ -19,10 +19,10 @@ import skfem as fe
 from scipy.spatial import cKDTree
 
 from ..fem.estimate import dorfler
-from ..fem.mesh import build_mesh
 from ..results.result import ContactResult
 from ..scene.bodies import Bodies
-from ..scene.model import Body, Material, Scene, SceneError, of_type
+from ..scene.description import Body, Material, Scene, SceneError, of_type
+from ..scene.meshing import build_mesh
 from .solve import solve
 
 LOCAL = (fe.MeshTri1, fe.MeshTet1)

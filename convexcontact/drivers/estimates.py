@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..scene.model import Scene
+from ..scene.description import Scene
 
 LONG_RUN = 3600.0
 """Seconds a run (a history, a search for every solution, a bench or a study) may be estimated to take before it is

@@ -35,8 +35,8 @@ from ..conic import ConicSolution
 from ..fem.mollifier import mollifier
 from ..formulations.dual import normal_multipliers
 from ..results.certificate import certify
-from ..scene.model import Coulomb, SceneError, evaluate_field
-from .model import CERTIFIED, CHOSEN, LAW_DRIVERS, Model, field_at_points, formulate, timed
+from ..scene.description import Coulomb, SceneError, evaluate_field
+from .prepared import CERTIFIED, CHOSEN, LAW_DRIVERS, Model, field_at_points, formulate, timed
 
 CYCLE_PERIODS = (2, 3, 4)
 WINDOW = 8

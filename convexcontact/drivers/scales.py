@@ -10,7 +10,7 @@ import numpy as np
 
 from ..fem.assembly import MIN_STRAIN
 from ..fem.contact import gap_field
-from ..scene.model import SceneError, compliance_of
+from ..scene.description import SceneError, compliance_of
 
 TRACTION_RANGE = 1e6
 """Largest slip bound (or initial pressure), in units of the data's pressure scale, and largest friction coefficient:

@@ -36,11 +36,11 @@ import scipy.optimize as opt
 from .. import solvers
 from ..conic import ConicSolution
 from ..fem.assembly import FEModel, assemble
-from ..fem.mesh import available_memory
 from ..results.result import ContactResult
-from ..scene.model import Coulomb, Scene, SceneError, of_type
+from ..scene.description import Coulomb, Scene, SceneError, of_type
+from ..scene.meshing import available_memory
 from .estimates import LONG_RUN, duration
-from .model import Model, check_formulation_name, field_at_points, formulate, timed
+from .prepared import Model, check_formulation_name, field_at_points, formulate, timed
 
 EXHAUSTIVE_LIMIT = 10
 """Most contact nodes enumerated exhaustively: 4^10 ≈ 10⁶ linear systems of order 20 (seconds)."""

@@ -1,25 +1,25 @@
 """The entry point: one call that picks the driver a scene needs.
 
-A static scene is prepared (:mod:`.model`) and solved — Coulomb laws through the Picard map of
-:mod:`.picard`; a scene with a history runs it step by step (:mod:`.history`); ``solutions="all"``
+A static scene is prepared (:mod:`.prepared`) and solved — Coulomb laws through the Picard map of
+:mod:`.picard`; a scene with a history runs it step by step (:mod:`.history_run`); ``solutions="all"``
 lists every solution of a Coulomb scene (:mod:`.solutions`).
 """
 
 from __future__ import annotations
 
 from .. import solvers
-from ..scene.model import Scene, SceneError, of_type
-from .history import run
-from .model import check_formulation, prepare
+from ..scene.description import Scene, SceneError, of_type
+from .history_run import run
+from .prepared import check_formulation, prepare
 from .solutions import all_solutions
 
 
 def solve(scene: Scene, solver: str = "auto", formulation: str = "auto", solutions: str = "one", confirm: bool = False,
           **options):
-    """Solve ``scene`` exactly with ``solver``; see :meth:`~convexcontact.drivers.model.Model.solve`.
+    """Solve ``scene`` exactly with ``solver``; see :meth:`~convexcontact.drivers.prepared.Model.solve`.
 
     Returns a :class:`~convexcontact.results.result.ContactResult`; for a scene with a history a
-    :class:`~convexcontact.drivers.history.HistoryResult`; with ``solutions="all"`` (Coulomb) a
+    :class:`~convexcontact.drivers.history_run.HistoryResult`; with ``solutions="all"`` (Coulomb) a
     :class:`~convexcontact.drivers.solutions.SolutionSet`: every solution, or as many as a search
     finds, each certified (docs/uniqueness.md). ``confirm=True`` runs a history or a search for every solution that
     is estimated to take long (both are refused otherwise, with the estimate).

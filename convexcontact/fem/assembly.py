@@ -12,9 +12,10 @@ from skfem.helpers import dot, eye, trace
 from skfem.models.elasticity import lame_parameters
 
 from ..scene.bodies import Bodies, Pair, Pairs
-from ..scene.model import Contact, Dirichlet, Material, Scene, SceneError, check_plane
+from ..scene.description import Contact, Dirichlet, Material, Scene, SceneError, check_plane
+from ..scene.meshing import build_mesh, check_boundary, mesh_warnings, scaled
+from .basis import vector_basis
 from .contact import ContactTrace, contact_trace
-from .mesh import build_mesh, check_boundary, mesh_warnings, scaled, vector_basis
 from .mortar import PairTrace, pair_trace, pairs_trace
 from .scaling import Scaling
 from .stiffness import stiffness

@@ -8,8 +8,8 @@ import numpy as np
 import scipy.sparse as sp
 import skfem as fe
 
-from ..scene.model import COVERED, Contact, SceneError, check_order
-from .mesh import check_boundary
+from ..scene.description import COVERED, Contact, SceneError, check_order
+from ..scene.meshing import check_boundary
 from .scaling import Scaling
 
 

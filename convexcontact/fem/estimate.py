@@ -35,10 +35,10 @@ import skfem as fe
 from scipy.sparse.linalg import splu
 from skfem.assembly import Dofs
 
-from ..scene.model import Dirichlet
+from ..scene.description import Dirichlet
+from ..scene.meshing import check_boundary
 from .assembly import FEModel, check_length
 from .assembly import stress as elastic_stress
-from .mesh import check_boundary
 
 TERMS = ("interior", "jump", "neumann", "contact", "complementarity", "penetration", "friction")
 """The kinds of terms of η², in the order of the module's formula."""

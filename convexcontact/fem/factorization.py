@@ -21,7 +21,7 @@ import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..scene.model import SceneError
+from ..scene.description import SceneError
 
 BLOCK = 64
 """Right-hand sides per SuperLU solve: one 300-column block was 5–10× slower than blocks of ≤ 64."""

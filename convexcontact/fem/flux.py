@@ -33,9 +33,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..scene.meshing import check_boundary
 from .assembly import FEModel
 from .estimate import ContactState, applied_traction, components, held_components
-from .mesh import check_boundary
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from ..conic import ConicProgram, ConicSolution, nonnegative, soc, zero
 from ..fem.contact import ContactTrace
 from ..fem.factorization import Factorization, factorize
 from ..fem.friction import FrictionPoints
-from ..scene.model import SceneError
+from ..scene.description import SceneError
 from .fields import ContactFields
 from .primal import carrying
 

@@ -26,7 +26,7 @@ import scipy.sparse as sp
 from ..conic import ConicProgram, ConicSolution, nonnegative, power, soc
 from ..fem.contact import ContactTrace
 from ..fem.friction import FrictionPoints
-from ..scene.model import SceneError
+from ..scene.description import SceneError
 from .fields import ContactFields
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..results.output import check_file_target, write_text
-from ..scene.model import SceneError
+from ..scene.description import SceneError
 
 EXIT = {"solved": 0, "answered": 3, "no answer": 1}
 """cli.EXIT's codes: solved and certified, an answer with a caveat, no answer (tests/test_bad_inputs_fclib.py
@@ -94,7 +94,7 @@ contact unknowns: 94 MB above the interpreter's 165 MB), with a margin."""
 
 def check_condensation(problem) -> None:
     """Refuse, before the work, a global problem whose dense condensed W would not fit in this machine's memory."""
-    from ..fem.mesh import available_memory
+    from ..scene.meshing import available_memory
 
     unknowns = problem.H.shape[1]
     need, have = CONDENSED_BYTES * float(unknowns) ** 2, available_memory()

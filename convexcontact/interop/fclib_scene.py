@@ -32,9 +32,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..drivers.model import Model, field_at_points, prepare
+from ..drivers.prepared import Model, field_at_points, prepare
 from ..results.result import ContactResult
-from ..scene.model import Coulomb, Scene, SceneError, compliance_of
+from ..scene.description import Coulomb, Scene, SceneError, compliance_of
 from .fclib import GlobalProblem, LocalProblem, Solution, write
 
 

@@ -280,7 +280,7 @@ def condense(problem: GlobalProblem):
 def inverse(M: sp.spmatrix):
     """b ↦ M⁻¹ b from one factorization of M as read; ValueError naming fclib_global/M if M is singular."""
     from ..fem.factorization import factorize
-    from ..scene.model import SceneError
+    from ..scene.description import SceneError
 
     singular = ValueError("fclib_global/M: singular (a motion costs no energy); the global problem cannot be "
                           "condensed onto its contacts")

@@ -31,7 +31,7 @@ def output_folder(directory) -> Path:
 
 
 def save_history(history, directory, formats=FORMATS) -> list[Path]:
-    """Write the chosen outputs of a :class:`~convexcontact.drivers.history.HistoryResult`; return the paths."""
+    """Write the chosen outputs of a :class:`~convexcontact.drivers.history_run.HistoryResult`; return the paths."""
     directory, paths = begin(history, output_folder(directory), formats)
     solved = [(t, s) for t, s in zip(history.times, history.steps) if s.solved]
     if "vtk" in formats and solved:
@@ -60,6 +60,18 @@ def loading_coordinate(history) -> tuple[np.ndarray, str]:
     return np.array(series["time"], dtype=float), "time"
 
 
+def indentation(history) -> tuple[np.ndarray, str]:
+    """The obstacle's depth at each step where it moves (given, or its unknown advance under force control), else
+    :func:`loading_coordinate`'s."""
+    values = history.history.values
+    if "obstacle.depth" in values:
+        return np.array(values["obstacle.depth"][: len(history.steps)], dtype=float), "indentation"
+    advance = history.series()["obstacle_advance"]
+    if any(v is not None for v in advance):
+        return np.array([np.nan if v is None else v for v in advance], dtype=float), "indentation"
+    return loading_coordinate(history)
+
+
 def plot_history(history, path):
     """Forces, contact zone and stick/slip counts against time, and the tangential force loop."""
     import matplotlib.pyplot as plt
@@ -83,11 +95,15 @@ def plot_history(history, path):
         ax.set_ylabel(label)
         ax.legend(fontsize=8)
     ax = axes[1, 1]
-    x, name = loading_coordinate(history)
     force = np.array([np.nan if v is None else v for v in series["tangential_force"]], dtype=float)
+    x, name = loading_coordinate(history)
+    kind = "tangential"
+    if not np.isfinite(force).any():  # frictionless: the force–indentation curve (a plastic punch's limit load)
+        force = np.array([np.nan if v is None else v for v in series["normal_force"]], dtype=float)
+        (x, name), kind = indentation(history), "normal"
     ax.plot(x, force, "o-", ms=3)
     ax.set_xlabel(name)
-    ax.set_ylabel("tangential force")
-    ax.set_title("tangential force loop")
+    ax.set_ylabel(f"{kind} force")
+    ax.set_title("tangential force loop" if kind == "tangential" else f"normal force against {name}")
     fig.suptitle(f"{history.scene.name}: {len(history.steps)} steps, {history.status}")
     return save_figure(fig, path)

@@ -13,7 +13,7 @@ import numpy as np
 from skfem.io.meshio import to_meshio
 
 from ..scene.bodies import Bodies
-from .fields_out import element_stress, vertex_contact, vertex_displacement
+from .fields_out import vertex_contact, vertex_displacement
 
 FORMATS = ("json", "vtk", "png")
 
@@ -31,7 +31,7 @@ def write_vtk(result, path: Path):
     }
     if result.contact.friction is not None:
         point_data["friction_traction"] = vertex_contact(result, result.contact.friction)
-    cell_data = {name: [values] for name, values in element_stress(result).items()}
+    cell_data = {name: [values] for name, values in result.cell_fields().items()}
     if result.error_estimate is not None:  # η_T per cell, user energy units (docs/estimate.md)
         cell_data["error_indicator"] = [np.sqrt(result.error_estimate.indicators * fem.scaling.energy)]
     if isinstance(fem.scene.body, Bodies):

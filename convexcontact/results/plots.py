@@ -12,8 +12,8 @@ import numpy as np
 from matplotlib.collections import PolyCollection
 
 from ..analytic import hertz_plane_strain, hertz_pressure, hertz_sphere
-from ..scene.model import Coulomb, Material, Tresca, field_at_nodes, has_friction
-from .fields_out import element_stress, vertex_displacement
+from ..scene.description import Coulomb, Material, Tresca, field_at_nodes, has_friction
+from .fields_out import vertex_displacement
 
 
 def deformed_mesh(result, path, magnification: float | None = None):
@@ -28,7 +28,7 @@ def deformed_mesh(result, path, magnification: float | None = None):
     moved = points + magnification * u
     corners = fem.mesh.t[: 4 if fem.mesh.t.shape[0] >= 4 else 3]
     fig, ax = plt.subplots(figsize=(8, 5))
-    polys = PolyCollection(moved[corners.T], array=element_stress(result)["von_mises"], cmap="viridis",
+    polys = PolyCollection(moved[corners.T], array=result.cell_fields()["von_mises"], cmap="viridis",
                            edgecolors="k", linewidths=0.1)
     ax.add_collection(polys)
     fig.colorbar(polys, ax=ax, label="von Mises stress")

@@ -15,8 +15,9 @@ from ..fem.flux import supported as flux_supported
 from ..fem.friction import FrictionPoints
 from ..fem.mortar import PairTrace
 from ..formulations.fields import ContactFields
-from ..scene.model import compliance_of
+from ..scene.description import compliance_of
 from .certificate import Certificate, normal_displacement, normal_gap, pair_multipliers
+from .fields_out import element_stress
 
 CLOSED_PRESSURE = 1e-6
 """A node is closed when its pressure exceeds this fraction of the largest pressure, and of the
@@ -204,6 +205,10 @@ class ContactResult:
         return [*self.fem.warnings,
                 f"estimated discretization error {share:.0%} of the energy norm (over {LARGE_ERROR:.0%}): {remedy}"]
 
+    def cell_fields(self) -> dict[str, np.ndarray]:
+        """The per-cell fields of solution.vtu (user units): element stresses and von Mises."""
+        return element_stress(self)
+
     def summary(self) -> dict:
         """JSON-ready summary (see docs/certificate.md for the certificate, docs/estimate.md for the error budget)."""
         out = {
@@ -358,7 +363,7 @@ def not_unique(fem: FEModel, fields: ContactFields, friction: FrictionPoints | N
     the support: reported as 0), nor among Gauss friction points that stick on more points than the
     nodal DOFs they act on (the nodal friction force Gᵀωλ_T stays unique and is what is reported).
     """
-    from ..scene.model import Coulomb, compliance_of
+    from ..scene.description import Coulomb, compliance_of
 
     contact, reasons = fem.contact, {}
     normal = held(contact.N)

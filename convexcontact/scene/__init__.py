@@ -1,8 +1,7 @@
 """What a user describes: the scene dataclasses, their errors and the TOML scene files."""
 
 from .bodies import Pair, Part, bodies_scene
-from .history import History
-from .model import (
+from .description import (
     Body,
     Box,
     Contact,
@@ -19,6 +18,7 @@ from .model import (
     Traction,
     Tresca,
 )
+from .load_history import History
 from .toml import load_scene, scene_from_dict
 
 __all__ = [

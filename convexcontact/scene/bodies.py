@@ -16,10 +16,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import skfem as fe
 
-from ..fem.mesh import build_mesh
 from .checks import SceneError, finite_vector, of_type, sequence_of
-from .history import History
-from .model import (
+from .description import (
     Body,
     Box,
     Contact,
@@ -35,6 +33,8 @@ from .model import (
     compliance_of,
     has_friction,
 )
+from .load_history import History
+from .meshing import build_mesh
 
 METHODS = ("mortar", "node_to_segment")
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import skfem as fe
 
-from ..fem.mesh import build_mesh, check_memory
 from .bodies import Pair, Part, bodies_scene, facet_index
 from .checks import SceneError, finite, positive_integer
+from .description import Body, Box, Dirichlet, Material, Rectangle, Scene, Signorini, Traction
 from .library import punch_mesh
-from .model import Body, Box, Dirichlet, Material, Rectangle, Scene, Signorini, Traction
+from .meshing import build_mesh, check_memory
 
 FINE, ROWS = 0.15, 10
 """The cylinder meshes' zone of cells of size h: |x| < FINE, ROWS rows deep (:func:`punch_mesh`)."""
@@ -118,7 +118,7 @@ def punch_on_foundation(h: float = 0.01, law=None, approach: float = 0.01, modul
 def sphere_cap_mesh(cells: int, radius: float, upper: bool, grading: float = 12.0) -> fe.Mesh:
     """A quarter [0, 1]² × [0, 1] (``upper``) or × [−1, 0] of P1 tetrahedra whose face on z = 0 is bent into the
     sphere of ``radius`` touching the origin; cells graded ``grading``:1 towards the origin. Boundaries as
-    :class:`~convexcontact.scene.model.Box`'s (the bent face is ``bottom`` above, ``top`` below)."""
+    :class:`~convexcontact.scene.description.Box`'s (the bent face is ``bottom`` above, ``top`` below)."""
     base = build_mesh(Body(Box(size=(1.0, 1.0, 1.0), cells=(cells,) * 3, origin=(0.0, 0.0, 0.0 if upper else -1.0),
                                grading=(grading,) * 3, refine=(0.0, 0.0, 0.0))))
     x, y, z = base.p

@@ -1,7 +1,7 @@
 """Checks of user input where it enters: :class:`SceneError` names the field and the fix.
 
-Shared by the scene's dataclasses (:mod:`.model`), its expressions and its history, so that
-none of them imports another for its errors.
+Shared by the scene's dataclasses (:mod:`.description`), its expressions and its load history
+(:mod:`.load_history`), so that none of them imports another for its errors.
 """
 
 from __future__ import annotations

@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 import skfem as fe
 
-from ..fem.mesh import tensor_mesh
 from .checks import SceneError, finite, positive_integer
-from .model import Body, Box, Contact, Dirichlet, Material, Obstacle, Rectangle, Scene, Signorini, Traction
+from .description import Body, Box, Contact, Dirichlet, Material, Obstacle, Rectangle, Scene, Signorini, Traction
+from .meshing import tensor_mesh
 
 HERTZ_FORCE = 0.0086307
 """Force per unit thickness giving a = 0.1, p₀ = 0.054945 for R = 1, E = 1, ν = 0.3."""
@@ -85,7 +85,7 @@ def punch_mesh(
 def check_punch_mesh(h, fine, rows, width, depth) -> None:
     """The sizes of :func:`punch_mesh`: ``h`` fits the fine zone (``fine`` ≤ width/2, ``rows`` h < depth) and the
     mesh fits in memory (h = 1e-9 asked for 92 GiB)."""
-    from ..fem.mesh import check_memory
+    from .meshing import check_memory
 
     for name, value in (("h", h), ("fine", fine), ("width", width), ("depth", depth)):
         if finite(value, name) <= 0:
@@ -101,7 +101,7 @@ def check_punch_mesh(h, fine, rows, width, depth) -> None:
 def frictional_punch(h: float = 0.005, depth: float = 0.02, friction: float = 0.6, nu: float = 0.3,
                      element: str = "P1", law=None) -> Scene:
     """Oden's example (DESIGN.md case 4): a rigid cylinder (R = 1) indents the block, Coulomb friction."""
-    from .model import Coulomb
+    from .description import Coulomb
 
     law = law or Coulomb(friction=friction)
     return Scene(
@@ -115,7 +115,7 @@ def frictional_punch(h: float = 0.005, depth: float = 0.02, friction: float = 0.
 
 def tresca_punch(nx: int = 40, slip_bound: float = 0.005, depth: float = 0.01, regularization: float | None = None):
     """The Hertz block indented by depth (displacement control) with Tresca friction of a given bound."""
-    from .model import Tresca
+    from .description import Tresca
 
     law = Tresca(slip_bound=slip_bound, regularization=regularization)
     contact = Contact("top", Obstacle("parabolic", radius=1.0, depth=depth), law)

@@ -1,4 +1,4 @@
-"""Scene files: TOML → the dataclasses of :mod:`convexcontact.scene.model`.
+"""Scene files: TOML → the dataclasses of :mod:`convexcontact.scene.description`.
 
 This module only maps keys to fields and checks TOML types; every value is
 validated by the model. Unknown keys are errors, never ignored. The schema is
@@ -18,8 +18,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
 from .bodies import Pair, Part, bodies_scene
-from .history import History
-from .model import (
+from .description import (
     Body,
     Box,
     Contact,
@@ -38,6 +37,7 @@ from .model import (
     check_shape_fields,
     of_type,
 )
+from .load_history import History
 
 NUMBER, INTEGER, TEXT, PAIR = "a number", "an integer", "a string", "two numbers [a, b]"
 BOOLEAN = "true or false"
@@ -61,7 +61,7 @@ RECTANGLE = {
     "grading": PAIR, "refine_x": NUMBER, "refine_y": TEXT,
 }
 BOX = {**BODY, "size": TRIPLE, "cells": INTEGERS3, "origin": TRIPLE, "grading": TRIPLE, "refine": TRIPLE}
-MATERIAL = {"E": NUMBER, "nu": NUMBER, "viscosity": NUMBER}
+MATERIAL = {"E": NUMBER, "nu": NUMBER, "viscosity": NUMBER, "yield_stress": NUMBER, "plastic_viscosity": NUMBER}
 DIRICHLET = {"boundary": TEXT, "ux": NUMBER, "uy": NUMBER, "uz": NUMBER}
 TRACTION = {"boundary": TEXT, "pressure": NUMBER, "vector": VECTOR}
 CONTACT = {"boundary": TEXT, "law": TEXT}

@@ -458,8 +458,11 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
     radius = sets.radii(v)
     ball = y[sets.balls]
     norm = np.linalg.norm(ball, axis=1)
-    point = np.flatnonzero(radius <= 0)  # a ball of radius 0 is its centre
-    sphere = np.flatnonzero((norm > radius) & (radius > 0))
+    # a ball of radius 0 is its centre, and so is one whose radius is below round-off of the point projected
+    # (a slip bound of 1e-313 beside a traction of 1: its sphere's curvature (‖y‖ − ρ)/(cρ) overflowed)
+    centre = radius <= np.finfo(float).eps * norm
+    point = np.flatnonzero(centre)
+    sphere = np.flatnonzero((norm > radius) & ~centre)
     held[sets.balls[point].ravel()] = True
     held[sets.balls[sphere].ravel()] = True
     free = np.flatnonzero(~held)

@@ -1,6 +1,10 @@
-"""Scripted studies on top of the solve.
+"""Scripted studies on top of the solve, one folder per thing a user does.
 
-:mod:`.compare` cross-validates two solutions, :mod:`.work_precision` measures error
-against run time for every method × solver × tolerance, :mod:`.sweeps` follows the
-penalty and ε errors over decades, :mod:`.stability` runs stiff and extreme cases.
+- :mod:`.benchmarks` — what a solve costs (``convexcontact bench``, factorizations, Picard reuse);
+- :mod:`.crossvalidation` — another answer against the exact one (``compare``, a peer's file, sfepy, sweeps);
+- :mod:`.precision` — error against run time, stiff and extreme cases (``study work-precision``, ``stability``);
+- :mod:`.verification` — the theory's own answers (``study uniqueness``, Spence's stick zone);
+- :mod:`.parameters` — grids of solves (``study grid``).
+
+:mod:`.arguments` checks the commands' arguments for all of them.
 """

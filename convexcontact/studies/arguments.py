@@ -12,7 +12,7 @@ import contextlib
 import math
 
 from ..drivers.estimates import LONG_RUN, duration
-from ..scene.model import SceneError
+from ..scene.description import SceneError
 
 
 def integer(minimum: int, example: int):
@@ -48,8 +48,8 @@ def number(example: str, positive: bool = True):
 
 @contextlib.contextmanager
 def named(option: str):
-    """Turn a SceneError of a size check (:func:`~convexcontact.fem.mesh.check_size`,
-    :func:`~convexcontact.fem.mesh.check_memory`) into a ValueError naming the command-line ``option``."""
+    """Turn a SceneError of a size check (:func:`~convexcontact.scene.meshing.check_size`,
+    :func:`~convexcontact.scene.meshing.check_memory`) into a ValueError naming the command-line ``option``."""
     try:
         yield
     except SceneError as error:

@@ -1,0 +1,137 @@
+"""``auto``'s rules: which formulation a scene gets (:func:`choose_formulation`) and when newton-cg answers a
+dense dual before Clarabel (:func:`dense_newton`). Each threshold carries the measurements that set it
+(docs/performance.md); changing a rule touches this module only."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from .. import solvers
+from ..conic import ConicProgram
+from ..fem.assembly import FEModel
+from ..scene.description import Coulomb, compliance_of
+
+INCOMPRESSIBLE = 1000.0
+"""λ/μ (ν ≈ 0.4995) from which "auto" keeps the primal: on the Cattaneo–Mindlin scene the
+dual's certificate was 1e-9 at ν = 0.499 (λ/μ = 499), 9e-5 at 0.4999 and 3e-2 at 0.49999."""
+
+DENSE_LIMIT = 10000
+"""Most contact unknowns (rows of B) a dense W takes at all: memory grows as m² (800 MB at the limit).
+Measured at 6348 rows (3-D Tresca punch, 2.8·10⁵ DOFs, few of them in contact): contact 3.9× one
+linear solve, peak memory 2.3×. Beyond it, the matrix-free dual (or the primal where that has no bound
+form)."""
+
+TOUCHING = 1e-9
+"""A gap (scaled: of the displacement scale) this small counts as closed for :data:`CLOSED_LIMIT`: two
+bodies' meshes that touch have gaps of ±1e-11 from their geometry, not 0."""
+
+CLOSED_LIMIT = 2000
+"""Most contact unknowns at nodes closed at the start (gap ≤ 0) for a dense W: the dense solvers' work
+grows with the unknowns in contact, the matrix-free dual's hardly. Measured on whole faces (every node
+closed; ratios to one linear solve, dense / matrix-free; docs/performance.md): 2-D 10⁵ DOFs, Signorini
+1000 unknowns 3.3 / 3.3, 2000: 24 / 2.1; Tresca 1000: 4.7 / 5.7, 2000: 10.4 / 4.2, 4000: 169 / 3.7;
+3-D 3·10⁴ DOFs, Signorini 625: 3.4 / 1.6–2.5, 1089: 12.1 / 2.7; Tresca 867: 2.8 / failed, 1875: 11.9 / 9.2,
+3267: 51 / 7.3. On the punch (few nodes closed) the dense W stays ahead: 2-D Tresca 634 unknowns
+1.9 / 4.0, 1098: 2.2 / 7.0."""
+
+DENSE_DOFS_3D = 50_000
+"""Most free DOFs of a 3-D body for a dense W: there its condensation (PARDISO's Schur complement onto the contact
+DOFs) costs 1.6–1.8× a factorization and forming W |C|³ more, while the matrix-free dual costs one factorization and
+its products. Measured on the 3-D punch (ratios to one linear solve, dense / matrix-free; Signorini, Tresca,
+Coulomb): 9.0·10³ DOFs 1.64 / 2.25, 2.47 / 4.51, 2.30 / 4.17; 3.0·10⁴ DOFs 1.53 / 2.22, 2.80 / 3.17, 2.59 / 3.48;
+8.5·10⁴ DOFs 1.86 / 1.59, 2.83 / 2.27, 2.63 / 2.70; 2.8·10⁵ DOFs 1.71 / 1.27, 2.47 / 1.48, 2.51 / 1.52 (peak memory 1.1–1.4×
+the linear solve's against 1.5–1.9×)."""
+
+COLUMN_LIMIT = 15000
+"""Most columns K is condensed onto for a dense W (the contact DOFs; a pair's slave and master DOFs): the
+Schur complement is dense, 8·c² bytes (1.8 GB at the limit) before PARDISO's own copies. The two-body
+bench at 1.4·10⁶ DOFs has 9816 unknowns, under DENSE_LIMIT, but 34,762 columns: its condensation passed
+18 GB and was stopped. Beyond it, the matrix-free dual (or the primal where that has no bound form)."""
+
+MATRIX_FREE = "dual-matrix-free"
+"""The dual with W as an operator (one solve with K's factors per product) and newton-cg."""
+
+
+def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
+    """The formulation "auto" runs, and why (before knowing whether K is singular)."""
+    if compliance_of(law) is not None:
+        return "primal", "normal compliance is posed in the primal only"
+    if getattr(law, "non_penetration", None) == "gauss":
+        return "primal", ("Gauss-point non-penetration: more multipliers than contact nodes leave the condensed W "
+                          "singular, the primal is not")
+    lam, mu = fem.lame
+    if np.max(lam / mu) >= INCOMPRESSIBLE:
+        return "primal", (f"near-incompressible (λ/μ up to {np.max(lam / mu):.0f}): the condensed program loses "
+                          "accuracy with the conditioning of W, the primal does not")
+    columns = contact_columns(fem).size
+    if columns == 0:
+        return "primal", "no contact node has a free DOF: nothing to condense onto"
+    reuse = " and is reused by every Picard step" if isinstance(law, Coulomb) else ""
+    closed = round(unknowns * np.count_nonzero(fem.contact.gap <= TOUCHING) / fem.contact.m)
+    too_large = (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}" if unknowns > DENSE_LIMIT else
+                 f"{closed} contact unknowns at closed nodes exceed {CLOSED_LIMIT}" if closed > CLOSED_LIMIT else
+                 f"the {columns} DOFs to condense onto exceed {COLUMN_LIMIT}" if columns > COLUMN_LIMIT else
+                 f"a 3-D body of {fem.n_free} DOFs (over {DENSE_DOFS_3D}) costs more to condense than to factorize"
+                 if fem.dim == 3 and fem.n_free > DENSE_DOFS_3D else None)
+    if too_large and matrix_free_applies(fem, law):
+        return MATRIX_FREE, (f"{too_large}: W = B K⁻¹ Bᵀ is applied through one factorization of K{reuse}, never "
+                             "formed (a dense W would cost more), and newton-cg solves the dual")
+    if too_large and (unknowns > DENSE_LIMIT or columns > COLUMN_LIMIT):
+        return "primal", (f"{too_large}: the dense condensed program would cost more than the sparse one (a "
+                          "force-controlled obstacle or a regularized friction has no matrix-free dual)")
+    if 4 * columns > fem.n_free:
+        return "primal", f"the contact nodes carry {columns} of the {fem.n_free} DOFs: too many to gain by condensing"
+    return "dual", (f"{unknowns} contact unknowns beside {fem.n_free} DOFs: K is condensed onto Γ_C once "
+                    f"(Delassus operator W){reuse}, then the program is small and dense")
+
+
+DENSE_NEWTON = "auto: newton-cg on the dense dual (Clarabel where it fails)"
+"""Why newton-cg answered a dense dual that ``auto`` was left (docs/performance.md, "newton-cg on a dense W"): its
+Newton steps are dense Cholesky solves of the reduced W, 2–10× faster than Clarabel with the polish (3-D punch,
+2.8·10⁵ DOFs, Tresca: 8.1 s against 38.6 s); it converges (a bounded number of steps), but the bound may exceed its
+step limit (a two-body Tresca dual at 10⁵ DOFs stopped after 100 Newton steps, 1.4 s, before the globalization; Clarabel
+answered in 2.4 s)."""
+
+
+DENSE_NEWTON_STEPS = 50
+"""Newton steps newton-cg gets on a dense dual before Clarabel answers: those it solved took up to 42 (two-body
+Tresca, 5·10⁴ DOFs), one it failed wandered at residuals 1e-2 to 1e-4 for 100 (the same at 10⁵ DOFs)."""
+
+
+def dense_newton(formulation: str, program: ConicProgram, law):
+    """A newton-cg session on a model's dense dual (its ``formulation``, ``program`` and contact ``law``), or None
+    where ``auto`` keeps Clarabel: programs not in newton-cg's bound form (a force-controlled obstacle's equality)
+    and contact at Gauss points (more touching points than nodes: W singular on their multipliers)."""
+    if formulation != "dual" or solvers.matrix_free(program) or "gauss" in (
+            getattr(law, "non_penetration", None), getattr(law, "quadrature", None)):
+        return None
+    try:
+        return solvers.session(program, "newton-cg", max_iter=DENSE_NEWTON_STEPS)
+    except ValueError:
+        return None
+
+
+def matrix_free_applies(fem: FEModel, law) -> bool:
+    """Whether the matrix-free dual is in bound form (newton-cg's programs): no equality (force control) and
+    exact friction."""
+    return matrix_free_obstruction(fem.scene.contact.obstacle, law) is None
+
+
+def matrix_free_obstruction(obstacle, law) -> str | None:
+    """What keeps the dual of a scene out of newton-cg's bound form (None: nothing)."""
+    if compliance_of(law) is not None:
+        return "normal compliance is posed in the primal only"
+    if obstacle.force_controlled:
+        return "a force-controlled obstacle (obstacle.force) adds an equality row"
+    if obstacle.tangential_force is not None:
+        return "a tangential obstacle force (obstacle.tangential_force) adds an equality row"
+    if getattr(law, "regularization", None) is not None:
+        return "the ε-regularized friction (contact.regularization) has no bound form"
+    return None
+
+
+def contact_columns(fem: FEModel) -> np.ndarray:
+    """Free DOFs the contact rows touch (the contact nodes; a pair's master nodes too): the columns of
+    N, T and R, where K is condensed to. Their stored entries, zeros included, cover every free DOF of a node."""
+    return np.unique(sp.vstack([fem.contact.N, fem.contact.T]).tocsr().indices)

@@ -1,0 +1,1 @@
+"""Parameter studies: :mod:`.grid` runs every combination of given values as Dask tasks (``study grid``)."""
