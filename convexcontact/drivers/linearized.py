@@ -166,13 +166,15 @@ def condensed(fem: FEModel, extra: int, solved: Condensation | None = None) -> t
     return condensation, np.concatenate([columns, fem.n_free + np.arange(extra)])
 
 
-def reduced(point: Point, rates: Rates) -> Rates:
-    """The rates of the condensed system: the force condensed onto the contact DOFs (f_C − K_CI K_II⁻¹ f_I)."""
-    if point.condensation is None:
+def reduced(point: Point, rates: list[Rates]) -> list[Rates]:
+    """The rates of the condensed system: each force condensed onto the contact DOFs (f_C − K_CI K_II⁻¹ f_I), all
+    in one pass through the factors."""
+    if point.condensation is None or not rates:
         return rates
     n = point.fem.n_free
-    return Rates(np.concatenate([point.condensation.load(rates.force[:n]), rates.force[n:]]), rates.gap, rates.offset,
-                 rates.bound)
+    loads = point.condensation.load(np.column_stack([rate.force[:n] for rate in rates])).reshape(-1, len(rates))
+    return [Rates(np.concatenate([load, rate.force[n:]]), rate.gap, rate.offset, rate.bound)
+            for load, rate in zip(loads.T, rates)]
 
 
 def expanded(point: Point, x: np.ndarray, force: np.ndarray) -> np.ndarray:
@@ -253,7 +255,7 @@ def with_obstacle(result: ContactResult, C: sp.spmatrix, friction: FrictionPoint
         return sp.csr_matrix(sp.hstack([matrix, sp.csr_matrix(np.column_stack(columns))])) if columns else \
             sp.csr_matrix(matrix)
 
-    K = sp.block_diag([fem.K, sp.csr_matrix((len(values), len(values)))], format="csr")
+    K = sp.block_diag([fem.K, sp.csr_matrix((len(values), len(values)))], format="csr") if values else fem.K
     return (K, widened(C @ contact.N, normal), None if friction is None else widened(friction.R, tangential),
             np.array(values, dtype=float))
 
