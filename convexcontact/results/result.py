@@ -10,6 +10,7 @@ import scipy.sparse as sp
 
 from ..fem.assembly import FEModel
 from ..fem.estimate import ContactState, ErrorEstimate, algebraic_error, estimate
+from ..fem.factorization import Condensation
 from ..fem.flux import FluxEstimate, flux_estimate
 from ..fem.flux import supported as flux_supported
 from ..fem.friction import FrictionPoints
@@ -85,6 +86,13 @@ class ContactResult:
     extra: dict = field(default_factory=dict)
     not_unique: dict[str, str] = field(default_factory=dict)  # quantity → why the answer does not fix it
     estimate_error: bool = True  # False: no error budget (summary, VTU), saving the estimator's cost
+    condensation: Condensation | None = field(default=None, repr=False, compare=False)
+    """K condensed onto the contact DOFs as the dual solve built it (None: the solve built none), kept in memory
+    for the derivatives of :mod:`convexcontact.drivers.sensitivity`, which then factorize nothing; never saved,
+    and dropped when the result is pickled (it holds the sparse solver's factors)."""
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "condensation": None}
 
     @property
     def solved(self) -> bool:
