@@ -92,6 +92,8 @@ DIRECT_LIMIT = 10_000
 systems took hundreds of unpreconditioned Krylov iterations per step (a mortar pair on graded meshes; the 3-D punch at
 2.8·10⁵ DOFs, ~5000 unknowns: 180–400 a step, 52 s against 8 s by Cholesky), and an inexact direction stalled the
 Coulomb Newton. 10,000 is ``auto``'s largest dense W; a Cholesky there is ~3·10¹¹ flops."""
+EPS = np.finfo(float).eps
+"""A ball's radius at most EPS × ‖y‖ is a point to the Newton step (see :func:`_step`)."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
@@ -458,10 +460,13 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
     radius = sets.radii(v)
     ball = y[sets.balls]
     norm = np.linalg.norm(ball, axis=1)
-    point = np.flatnonzero(radius <= 0)  # a ball of radius 0 is its centre
-    sphere = np.flatnonzero((norm > radius) & (radius > 0))
+    # a ball whose radius is below the rounding of its point's norm is held at Π(y) (its centre where ρ = 0): its
+    # tangent curvature (‖y‖ − ρ)/(cρ) would pass 1/(c·eps), and overflowed at a slip bound of 5e-324 (fuzz suite)
+    point = np.flatnonzero(radius <= EPS * norm)
+    sphere = np.flatnonzero((norm > radius) & (radius > EPS * norm))
     held[sets.balls[point].ravel()] = True
     held[sets.balls[sphere].ravel()] = True
+    new[sets.balls[point]] = radius[point, None] * unit_rows(ball[point])
     free = np.flatnonzero(~held)
     rho = radius[sphere]
     p = sets.balls.shape[1]
