@@ -466,7 +466,8 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
     sphere = np.flatnonzero((norm > radius) & (radius > EPS * norm))
     held[sets.balls[point].ravel()] = True
     held[sets.balls[sphere].ravel()] = True
-    new[sets.balls[point]] = radius[point, None] * unit_rows(ball[point])
+    if point.size:
+        new[sets.balls[point]] = radius[point, None] * unit_rows(ball[point])
     free = np.flatnonzero(~held)
     rho = radius[sphere]
     p = sets.balls.shape[1]
