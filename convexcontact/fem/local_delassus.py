@@ -42,7 +42,7 @@ def colouring(conflict: sp.csr_matrix) -> np.ndarray:
     colour a maximal independent set of the rows left, grown by rounds in which the rows whose random priority is the
     largest among their free neighbours join (Luby's rule; scipy has no graph colouring)."""
     m = conflict.shape[0]
-    conflict = sp.csr_matrix(conflict, dtype=float)
+    conflict = sp.csr_matrix(_pattern(conflict), dtype=float)  # its entries, whatever their values, as ones
     conflict.setdiag(0.0)
     conflict.eliminate_zeros()
     priority = np.random.default_rng(0).permutation(m) + 1.0
@@ -61,5 +61,6 @@ def colouring(conflict: sp.csr_matrix) -> np.ndarray:
 
 
 def _pattern(A: sp.spmatrix) -> sp.csc_matrix:
+    """The stored entries of A as ones (a new matrix)."""
     A = sp.csc_matrix(A)
     return sp.csc_matrix((np.ones(A.nnz, dtype=np.int32), A.indices, A.indptr), shape=A.shape)
