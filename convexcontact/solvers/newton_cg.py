@@ -62,8 +62,9 @@ of the whole-face scenes then reached ≤ 1e-12."""
 FORCING = 0.1
 """CG stops at FORCING · min(1, ‖F‖/‖F₀‖) · ‖F‖ (as a gradient): loose while the active set moves."""
 SHIFT = 1e-3
-"""δ of the preconditioner relative to P's mean eigenvalue: 1e-1 left 49 CG iterations on a 2-D Tresca
-dual, 1e-2 34, 1e-3 and below 31, as the exact (δ = 0) slab operator."""
+"""δ of the preconditioner relative to each row's scale (:func:`_shifts`; P's mean eigenvalue without an estimate):
+relative to the mean, 1e-1 left 49 CG iterations on a 2-D Tresca dual, 1e-2 34, 1e-3 and below 31, as the exact
+(δ = 0) slab operator."""
 ACCEPT = 0.5
 """Newton's point is taken outright where its natural residual is below ACCEPT × the least so far (and f there is at
 most its value at the start: see "Convergence")."""

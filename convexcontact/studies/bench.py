@@ -1,7 +1,8 @@
 """``convexcontact bench``: a contact solve against one linear elastic solve, per mesh size.
 
 For each size and law (Signorini, Tresca, Coulomb) on the punch scene (or, with
-``--scenario whole-face``, a block whose whole bottom face is in contact), one fresh
+``--scenario whole-face``, a block whose whole bottom face is in contact; ``two-body``, a punch on
+a foundation; ``shapes``, each scene of the family of :mod:`.shapes`), one fresh
 process assembles the scene, then times (a) one linear elastic solve, K's sparse
 factorization plus u = K⁻¹f, and (b) the contact solve on the same assembly: the
 condensation (if the formulation condenses), the formulation, the solver (the whole
