@@ -371,6 +371,7 @@ def run_command(args) -> int:
             options["progress"] = lambda done, count, what: print(f"{what} ({done}/{count})", flush=True)
         elif scene.history is not None:
             options["progress"] = step_printer()
+        levels = None  # the adaptive loop's results, one per mesh
         if getattr(args, "adapt", False) or getattr(args, "target", None) is not None \
                 or getattr(args, "max_dofs", None) is not None:
             levels = adapt_command(args, scene, options)
@@ -383,7 +384,7 @@ def run_command(args) -> int:
         return 2
     try:
         code = report(result, args.out, args.json)
-        if args.out is not None and "adaptive_levels" in result.extra:  # the mesh sequence and the error curves
+        if args.out is not None and levels is not None:  # the mesh sequence and the error curves
             from .drivers.adapt import plot_levels
 
             print("wrote", *staged(args.out, lambda folder: [plot_levels(levels, folder / "adaptive.png")]))

@@ -98,7 +98,7 @@ def test_gmsh_file_with_subdomain_materials(tmp_path):
     """
     scene = hertz_punch(nx=24)
     scene = dataclasses.replace(scene, contact=cc.Contact("top", cc.Obstacle("parabolic", radius=1.0, depth=0.005)))
-    mesh = cc.drivers.model.assemble(scene).mesh.scaled(4.0)  # the built-in mesh in user units
+    mesh = cc.drivers.prepared.assemble(scene).mesh.scaled(4.0)  # the built-in mesh in user units
     upper = np.flatnonzero(mesh.p[1, mesh.t].mean(axis=0) > -0.5)
     lower = np.setdiff1d(np.arange(mesh.t.shape[1]), upper)
     path = tmp_path / "block.msh"
