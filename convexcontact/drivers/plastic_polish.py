@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from ..fem.factorization import factorize
 from ..fem.plasticity import PlasticPoints
@@ -122,6 +123,29 @@ def secant(model, u: np.ndarray, y: np.ndarray, increment: np.ndarray | None) ->
     return float(np.clip(move @ gap / max(move @ move, np.finfo(float).tiny), 0.0, SECANT)) * increment
 
 
+def cholesky(plastic: Plastic, J: sp.spmatrix, G: sp.spmatrix, D: sp.spmatrix, dim: int):
+    """A Cholesky factorization of the tangent J (free DOFs), refactorizing the step's earlier one on its pattern (J's
+    pattern is K's with the points' k × k blocks coupled through G and D); None where J is singular."""
+    factors = plastic.factors
+    if "pattern" not in factors:
+        k, count = plastic.points.components, plastic.points.count
+        blocks = sp.kron(sp.eye(count), np.ones((k, k)))  # the tangent's blocks, full
+        pattern = (abs(J) + abs(G) @ blocks @ abs(D)).tocsr()
+        pattern.data[:] = 1.0
+        factors["pattern"] = pattern
+    J = J + PATTERN_FILL * factors["pattern"]
+    try:
+        if "J" in factors and factors["J"].size == J.shape[0]:
+            factors["J"].refactorize(J)
+        else:
+            factors["J"] = factorize(J, dim=dim)
+            factors["J"].size = J.shape[0]
+    except (ValueError, RuntimeError):  # SceneError (singular) is a ValueError; PARDISO's zero pivot a RuntimeError
+        factors.pop("J", None)
+        return None
+    return factors["J"]
+
+
 @dataclass
 class Outcome:
     """Newton's answer (None if it gave up), the Newton steps taken and, if it gave up, why."""
@@ -170,31 +194,21 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
         return merit, gradient, M
 
     def direction(M, gradient, active, u):
-        """Newton's step d and the active rows' multipliers z (None if the tangent is singular)."""
-        J = fem.K - G @ M @ D[:, fem.free]
-        if "pattern" not in plastic.factors:
-            k, count = plastic.points.components, plastic.points.count
-            blocks = sp.kron(sp.eye(count), np.ones((k, k)))  # the tangent's k × k blocks, full
-            pattern = (abs(fem.K) + abs(G) @ blocks @ abs(D[:, fem.free])).tocsr()
-            pattern.data[:] = 1.0
-            plastic.factors["pattern"] = pattern
-        J = J + PATTERN_FILL * plastic.factors["pattern"]
-        try:
-            if "J" in plastic.factors and plastic.factors["J"].size == J.shape[0]:
-                plastic.factors["J"].refactorize(J)
-            else:
-                plastic.factors["J"] = factorize(J, dim=fem.dim)
-                plastic.factors["J"].size = J.shape[0]
-        except (ValueError, RuntimeError):  # SceneError (singular) is a ValueError; PARDISO's zero pivot
-            plastic.factors.pop("J", None)
-            return None, None
-        factors, B = plastic.factors["J"], E[active]
+        """Newton's step d and the active rows' multipliers z (None, None if the system is singular)."""
+        J, B, rhs = fem.K - G @ M @ D[:, fem.free], E[active], e[active] - E[active] @ u
+        factors = None if plastic.factors.get("saddle") else cholesky(plastic, J, G, D[:, fem.free], fem.dim)
+        if factors is None:  # J singular (a body held by its contact alone): the saddle-point matrix is not
+            plastic.factors["saddle"] = True
+            try:
+                step = spla.splu(sp.bmat([[J, B.T], [B, None]], format="csc")).solve(np.concatenate([-gradient, rhs]))
+            except RuntimeError:  # "Factor is exactly singular"
+                return None, None
+            return step[: u.size], step[u.size:]
         free = factors.solve(-gradient)
         if not active.any():
             return free, np.zeros(0)
-        W = factors.schur(B)
         try:
-            z = np.linalg.solve(W, B @ free - (e[active] - B @ u))
+            z = np.linalg.solve(factors.schur(B), B @ free - rhs)
         except np.linalg.LinAlgError:
             return None, None
         return free - factors.solve(B.T @ z), z
