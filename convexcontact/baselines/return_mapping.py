@@ -10,6 +10,7 @@ conic one by the penalty's error, O(1/c).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -116,12 +117,14 @@ class ReturnMappingStep:
 
 @dataclass
 class ReturnMappingResult:
-    """The baseline's answer at every step (user units): displacements, contact pressures and the normal force."""
+    """The baseline's answer at every step (user units): displacements, contact pressures and the normal force; its
+    Newton steps and seconds per step."""
 
     displacement: list[np.ndarray]
     pressure: list[np.ndarray]
     normal_force: np.ndarray
     newton_steps: list[int]
+    seconds: list[float]
 
 
 def return_mapping_history(scene: Scene, penalty: float, tol: float = 1e-10, max_iter: int = 100):
@@ -135,9 +138,10 @@ def return_mapping_history(scene: Scene, penalty: float, tol: float = 1e-10, max
     sigma, eta = (points.per_point(values) for values in material_per_element(fem))
     radius, relaxation = np.sqrt(2 / 3) * sigma / fem.scaling.pressure, eta / fem.scaling.stress
     alpha, u = np.zeros(points.count * points.components), np.zeros(fem.free.size)
-    out = ReturnMappingResult([], [], np.zeros(len(scene.history)), [])
+    out = ReturnMappingResult([], [], np.zeros(len(scene.history)), [], [])
     times = (0.0, *scene.history.times)
     for k in range(len(scene.history)):
+        start = time.perf_counter()
         step_fem = fem.at(scene.history.scene(scene, k))
         step = ReturnMappingStep(step_fem, points, alpha, radius, relaxation / (times[k + 1] - times[k]), penalty)
         u, steps, converged, _ = newton(step.energy, step.gradient, step.hessian, u, step.force_scale, tol, max_iter,
@@ -145,6 +149,7 @@ def return_mapping_history(scene: Scene, penalty: float, tol: float = 1e-10, max
         if not converged:
             raise RuntimeError(f"return mapping: step {k + 1} did not converge in {max_iter} Newton steps")
         alpha = alpha + step.radial_return(step.strains(u)[1])[0].ravel()
+        out.seconds.append(time.perf_counter() - start)
         pressure = penalty * step.overlap(u)
         scaling = step_fem.scaling
         out.displacement.append(step_fem.full(u) * scaling.displacement)
