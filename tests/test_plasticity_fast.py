@@ -5,11 +5,11 @@ bench's plastic case reports both paths and the return-mapping baseline on the s
 
 import numpy as np
 import pytest
+from test_plasticity import confined_block
 
 import convexcontact as cc
 from convexcontact.drivers import plastic_history, plastic_polish
 from convexcontact.studies.benchmarks import plastic_bench
-from test_plasticity import confined_block
 
 
 def history(scene, fast: bool):
