@@ -170,7 +170,7 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
     weights = contact.row_weights(model.C)
     bound = model.slip_bound if friction else np.zeros(0)
     rows = carrying(E)
-    G, D = plastic.coupling[fem.free], plastic.points.deviatoric
+    G, D = plastic.coupling[fem.free], plastic.points.deviatoric[:, fem.free].tocsr()
     force = max(np.abs(fem.f).max(initial=0.0), np.abs(fem.K @ u).max(), contact.weights.max())
 
     def sets(u, y):
@@ -195,8 +195,8 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
 
     def direction(M, gradient, active, u):
         """Newton's step d and the active rows' multipliers z (None, None if the system is singular)."""
-        J, B, rhs = fem.K - G @ M @ D[:, fem.free], E[active], e[active] - E[active] @ u
-        factors = None if plastic.factors.get("saddle") else cholesky(plastic, J, G, D[:, fem.free], fem.dim)
+        J, B, rhs = fem.K - G @ (M @ D), E[active], e[active] - E[active] @ u
+        factors = None if plastic.factors.get("saddle") else cholesky(plastic, J, G, D, fem.dim)
         if factors is None:  # J singular (a body held by its contact alone): the saddle-point matrix is not
             plastic.factors["saddle"] = True
             try:
