@@ -169,3 +169,11 @@ def test_the_plastic_bench_refuses_what_its_punch_is_not_built_for(capsys, tmp_p
     for text in texts:
         assert text in err, err
     assert (tmp_path / "earlier" / "bench_2d_plastic.csv").read_text() == "an earlier run's"
+
+
+def test_the_return_mapping_baseline_refuses_friction():
+    """Its penalty contact is frictionless: a Tresca scene would be solved as a smooth one, so it is refused."""
+    from convexcontact.baselines import return_mapping_history
+
+    scene = block(PLASTIC, law=cc.Tresca(slip_bound=0.01))
+    raises(lambda: return_mapping_history(scene, 1e3), "contact.law", "cc.Signorini()")

@@ -18,7 +18,7 @@ import scipy.sparse as sp
 
 from ..fem.assembly import FEModel, assemble
 from ..fem.plasticity import PlasticPoints, material_per_element, plastic_points
-from ..scene.description import Scene, SceneError, of_type
+from ..scene.description import Scene, SceneError, Signorini, of_type
 from .penalty import check_inputs, newton
 
 
@@ -132,6 +132,9 @@ def return_mapping_history(scene: Scene, penalty: float, tol: float = 1e-10, max
     displacement: relative to E/L) on its contact; rigid obstacle under displacement control, one body."""
     if of_type(scene, Scene, "scene", "build cc.Scene(...) with a history").history is None:
         raise SceneError("history", "the return-mapping baseline runs a load history", "give the scene a history")
+    if not isinstance(scene.contact.law, Signorini):
+        raise SceneError("contact.law", f"{type(scene.contact.law).__name__}: the return-mapping baseline's penalty "
+                         "contact is frictionless", "give the scene contact law cc.Signorini()")
     fem = assemble(scene.history.envelope(scene))
     check_inputs(fem.contact, penalty, 1.0)
     points = plastic_points(fem)
