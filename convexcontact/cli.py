@@ -57,7 +57,9 @@ def table(result) -> str:
             budget = s["error_budget"]
             algebraic, discretization = ("— (zero answer)" if budget[name] is None else f"{budget[name]:.1e}"
                                          for name in ("algebraic", "discretization"))
-            errors = f"algebraic {algebraic}, discretization ≈ {discretization} (estimated, docs/estimate.md)"
+            bound = budget.get("estimator", "").startswith("equilibrated")
+            how = "≤ {} (equilibrated bound" if bound else "≈ {} (residual estimate, calibrated"
+            errors = f"algebraic {algebraic}, discretization {how.format(discretization)}, docs/estimate.md)"
             rows.append(("error / ‖u‖_E", errors))
     if s["message"]:
         rows.append(("message", s["message"]))
@@ -103,7 +105,7 @@ EXIT = {"solved": 0, "inaccurate": 3, "not converged": 3, "not complete": 3}
 
 
 OUTPUTS = ("summary.json", "solution.vtu", "solution.pvd", "solution_*.vtu", "solution_*", "deformed.png",
-           "contact.png", "picard.png", "history.png", "pressures.png")
+           "contact.png", "picard.png", "history.png", "pressures.png", "adaptive.png")
 """What a run writes into --out: the names it would replace."""
 
 
@@ -319,8 +321,8 @@ def step_printer():
 
 
 def adapt_command(args, scene, options: dict):
-    """``run SCENE --adapt``: the last level of :func:`~convexcontact.drivers.adapt.adapt`, every level's size and
-    estimate in its ``extra`` (summary.json); a level's line printed as it ends."""
+    """``run SCENE --adapt``: every level of :func:`~convexcontact.drivers.adapt.adapt`, each level's size, estimate and
+    time so far in the last one's ``extra`` (summary.json); a level's line printed as it ends."""
     from .drivers.adapt import adapt, check_adapt_options
 
     for option, value in (("--target", args.target), ("--max-dofs", args.max_dofs)):
@@ -342,9 +344,10 @@ def adapt_command(args, scene, options: dict):
 
     levels = adapt(scene, target, max_dofs, solver=args.solver, progress=progress, formulation=args.formulation,
                    **options)
-    levels[-1].extra["adaptive_levels"] = [{"ndof": r.ndof, "status": r.status, **{
-        key: (r.error_budget or {}).get(key) for key in ("discretization", "eta")}} for r in levels]
-    return levels[-1]
+    levels[-1].extra["adaptive_levels"] = [{"ndof": r.ndof, "status": r.status, "seconds": r.extra["adaptive_seconds"],
+                                            **{key: (r.error_budget or {}).get(key) for key in ("discretization", "eta")}}
+                                           for r in levels]
+    return levels
 
 
 def run_command(args) -> int:
@@ -370,7 +373,8 @@ def run_command(args) -> int:
             options["progress"] = step_printer()
         if getattr(args, "adapt", False) or getattr(args, "target", None) is not None \
                 or getattr(args, "max_dofs", None) is not None:
-            result = adapt_command(args, scene, options)
+            levels = adapt_command(args, scene, options)
+            result = levels[-1]
         else:
             result = solve(scene, args.solver, formulation=args.formulation, solutions=solutions,
                            confirm=getattr(args, "confirm", False), **options)
@@ -378,7 +382,12 @@ def run_command(args) -> int:
         print(f"error: {as_option(error)}", file=sys.stderr)
         return 2
     try:
-        return report(result, args.out, args.json)
+        code = report(result, args.out, args.json)
+        if args.out is not None and "adaptive_levels" in result.extra:  # the mesh sequence and the error curves
+            from .drivers.adapt import plot_levels
+
+            print("wrote", *staged(args.out, lambda folder: [plot_levels(levels, folder / "adaptive.png")]))
+        return code
     except OSError as error:  # a full disk, a folder without write permission: --out is left as it was
         print(f"error: could not write the outputs: {error}", file=sys.stderr)
         return 1

@@ -75,10 +75,13 @@ def test_tresca_2d_agrees_with_finite_differences(non_penetration):
     assert np.allclose(found["slip_bound"].derivative.friction[slipping], np.sign(result.contact.friction[slipping]))
 
 
-@pytest.fixture(params=["condensed", "sparse"])
+@pytest.fixture(params=["kept", "condensed", "sparse"])
 def system(request, monkeypatch):
-    """The derivative system condensed onto the contact DOFs (the default from 2·10⁴ DOFs), or over every DOF."""
-    monkeypatch.setattr(f"convexcontact.drivers.linearized.{'CONDENSED_DOFS' if request.param == 'condensed' else 'CONDENSED'}", 0)
+    """The derivative system condensed onto the contact DOFs by the dual solve's own condensation (kept with its
+    result), by one of its own (the default from 2·10⁴ DOFs where the solve kept none), or over every DOF."""
+    if request.param != "kept":
+        monkeypatch.setattr("convexcontact.drivers.prepared.kept_for", lambda reused, fem: None)
+        monkeypatch.setattr(f"convexcontact.drivers.linearized.{'CONDENSED_DOFS' if request.param == 'condensed' else 'CONDENSED'}", 0)
     return request.param
 
 
@@ -308,3 +311,44 @@ def test_the_degenerate_rows_complementarity_problem():
             assert np.allclose(pivoting(Q, q), w)
     assert complementary(np.array([[-1.0]]), np.array([1.0])) is None
     assert complementary(np.array([[-1.0]]), np.array([-1.0])) is None
+
+
+def test_the_solves_condensation_is_reused_not_saved(monkeypatch):
+    """A dual-solved result keeps K's condensation: its derivatives and gradient factorize nothing of K's size and
+    equal those of a fresh factorization (SuperLU over every DOF) to round-off; pickling drops it, and the
+    unpickled result is differentiated afresh to the same numbers."""
+    import pickle
+
+    import scipy.sparse.linalg as spla
+
+    result = cc.solve(block(cc.Coulomb(friction=0.3), nx=12), **TIGHT)
+    assert result.condensation is not None
+    parameters, weights = ["friction", "E", "dirichlet[top].ux"], {"tangential_force": 1.0, "normal_force": 0.5}
+    fresh = dataclasses.replace(result, condensation=None)
+    expected = cc.sensitivity(fresh, parameters), cc.gradient(fresh, parameters, **weights)
+    sizes = []
+
+    def counted(matrix, *args, **kwargs):
+        sizes.append(matrix.shape[0])
+        return splu(matrix, *args, **kwargs)
+
+    def refused(*args, **kwargs):
+        raise AssertionError("K factorized again")
+
+    splu = spla.splu
+    monkeypatch.setattr("convexcontact.drivers.active_set.spla.splu", counted)
+    for where in ("convexcontact.drivers.linearized.condense", "convexcontact.fem.factorization.condense",
+                  "convexcontact.fem.factorization.factorize", "convexcontact.fem.factorization._superlu",
+                  "convexcontact.fem.factorization._pardiso_factors"):
+        monkeypatch.setattr(where, refused)
+    found, gradient = cc.sensitivity(result, parameters), cc.gradient(result, parameters, **weights)
+    assert sizes and max(sizes) < result.ndof  # the condensed system only: contact DOFs and multipliers
+    for parameter in parameters:
+        new, old = fields(result, found[parameter].derivative), fields(result, expected[0][parameter].derivative)
+        assert np.abs(new - old).max() <= 1e-10 * np.abs(old).max(), parameter
+        assert gradient[parameter] == pytest.approx(expected[1][parameter], rel=1e-10, abs=1e-14)
+    monkeypatch.undo()
+    restored = pickle.loads(pickle.dumps(result))
+    assert restored.condensation is None and result.condensation is not None
+    again = cc.gradient(restored, parameters, **weights)
+    assert all(again[name] == pytest.approx(gradient[name], rel=1e-10, abs=1e-14) for name in parameters)

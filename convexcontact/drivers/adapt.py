@@ -10,7 +10,9 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import numpy as np
 import skfem as fe
@@ -127,14 +129,16 @@ def adapt(scene: Scene, target: float = 1e-2, max_dofs: int = 200_000, fraction:
     how = ("local (Dörfler)" if isinstance(mesh, LOCAL) else
            "uniform: quadrilaterals and hexahedra are not refined locally")
     levels: list[ContactResult] = []
+    start = time.perf_counter()
     while True:
         body = Body(mesh, scene.body.element, scene.body.plane)
         result = solve(dataclasses.replace(scene, body=body), solver, **options)
         result.extra["refinement"] = how
         levels.append(result)
+        budget = result.error_budget
+        result.extra["adaptive_seconds"] = time.perf_counter() - start  # end to end: every solve, estimate, refinement
         if progress is not None:
             progress(len(levels) - 1, result)
-        budget = result.error_budget
         estimated = None if budget is None else budget["discretization"]
         if estimated is None or not math.isfinite(estimated) or estimated <= target:
             return levels
@@ -144,3 +148,41 @@ def adapt(scene: Scene, target: float = 1e-2, max_dofs: int = 200_000, fraction:
                               f"{max_dofs} (estimated error {estimated:.2e} > target {target:.2e})")
             return levels
         mesh = refined
+
+
+def plot_levels(levels: Sequence[ContactResult], path, errors: Sequence[float] | None = None, panels: int = 4) -> Path:
+    """A PNG of the adaptive sequence: up to ``panels`` of its meshes (the first, the last and evenly between) and the
+    estimated relative error (with the true one, ``errors`` relative to ‖u‖_E, where given) against DOFs and against
+    the run time so far (``extra["adaptive_seconds"]``, end to end)."""
+    from ..results.plots import plt, save_figure
+
+    shown = sorted({round(k * (len(levels) - 1) / max(panels - 1, 1)) for k in range(min(panels, len(levels)))})
+    fig = plt.figure(figsize=(3.2 * max(len(shown), 2), 6.4))
+    grid = fig.add_gridspec(2, 2 * len(shown))
+    meshes = [fig.add_subplot(grid[0, 2 * j:2 * j + 2]) for j in range(len(shown))]
+    curves = [fig.add_subplot(grid[1, :len(shown)]), fig.add_subplot(grid[1, len(shown):])]
+    for ax, k in zip(meshes, shown):
+        mesh = levels[k].fem.mesh
+        scale = levels[k].fem.scaling.length
+        if mesh.dim() == 2:
+            from matplotlib.collections import LineCollection
+
+            ax.add_collection(LineCollection(mesh.p[:, mesh.facets].T * scale, colors="k", linewidths=0.2))
+            ax.autoscale()
+            ax.set_aspect("equal")
+        ax.set_title(f"level {k}: {levels[k].ndof} DOFs", fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    dofs = [r.ndof for r in levels]
+    seconds = [r.extra.get("adaptive_seconds", math.nan) for r in levels]
+    estimated = [(r.error_budget or {}).get("discretization") or math.nan for r in levels]
+    for ax, x, label in ((curves[0], dofs, "DOFs"), (curves[1], seconds, "run time so far [s]")):
+        ax.loglog(x, estimated, "o-", label="estimate (bound for 2-D P1)")
+        if errors is not None:
+            ax.loglog(x, errors, "s--", label="true error")
+        ax.set_xlabel(label)
+        ax.set_ylabel("relative energy error")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"adaptive refinement: {levels[0].scene.name} ({levels[-1].extra.get('refinement', '')})", fontsize=10)
+    return save_figure(fig, path)

@@ -129,7 +129,7 @@ def point_of(result: ContactResult) -> Point:
         unit, state, room = friction_state(result, friction, R @ u + friction.offset, normal, (u_ref, p_ref), tol)
         arguments.update(state, R=R)
         strict.append(room)
-    condensation, kept = condensed(fem, obstacle.size)
+    condensation, kept = condensed(fem, obstacle.size, result.condensation)
     if condensation is not None:  # the derivative system on the contact DOFs, K replaced by its Schur complement
         K = sp.block_diag([sp.csr_matrix(condensation.S), sp.csr_matrix((obstacle.size,) * 2)], format="csr")
         A = A[:, kept]
@@ -150,23 +150,31 @@ CONDENSED_DOFS = 20000
 0.18 s against 0.56 s for PARDISO's Schur complement; 4·10⁴ DOFs, 201 nodes: 1.10 s against 0.78 s)."""
 
 
-def condensed(fem: FEModel, extra: int) -> tuple[Condensation | None, np.ndarray | None]:
-    """K condensed onto the DOFs the contact rows touch (one sparse factorization, PARDISO's Schur complement
-    where it loads), and the columns of the augmented unknowns (u, obstacle) kept: those DOFs, then the obstacle's;
-    (None, None) where condensing gains nothing."""
+def condensed(fem: FEModel, extra: int, solved: Condensation | None = None) -> tuple[Condensation | None,
+                                                                                    np.ndarray | None]:
+    """K condensed onto the DOFs the contact rows touch, and the columns of the augmented unknowns (u, obstacle)
+    kept: those DOFs, then the obstacle's; (None, None) where condensing gains nothing. ``solved``: the condensation
+    the solve built (the dual's), taken as it is whatever the size: no factorization of K at all; else one sparse
+    factorization (PARDISO's Schur complement where it loads)."""
     columns = contact_columns(fem)
-    if fem.n_free < CONDENSED_DOFS or not 0 < columns.size <= min(CONDENSED, fem.n_free // 2):
+    if solved is not None and np.array_equal(solved.C, columns):
+        condensation = solved
+    elif fem.n_free < CONDENSED_DOFS or not 0 < columns.size <= min(CONDENSED, fem.n_free // 2):
         return None, None
-    return condense(fem.K, columns, dim=fem.dim), np.concatenate([columns, fem.n_free + np.arange(extra)])
+    else:
+        condensation = condense(fem.K, columns, dim=fem.dim)
+    return condensation, np.concatenate([columns, fem.n_free + np.arange(extra)])
 
 
-def reduced(point: Point, rates: Rates) -> Rates:
-    """The rates of the condensed system: the force condensed onto the contact DOFs (f_C − K_CI K_II⁻¹ f_I)."""
-    if point.condensation is None:
+def reduced(point: Point, rates: list[Rates]) -> list[Rates]:
+    """The rates of the condensed system: each force condensed onto the contact DOFs (f_C − K_CI K_II⁻¹ f_I), all
+    in one pass through the factors."""
+    if point.condensation is None or not rates:
         return rates
     n = point.fem.n_free
-    return Rates(np.concatenate([point.condensation.load(rates.force[:n]), rates.force[n:]]), rates.gap, rates.offset,
-                 rates.bound)
+    loads = point.condensation.load(np.column_stack([rate.force[:n] for rate in rates])).reshape(-1, len(rates))
+    return [Rates(np.concatenate([load, rate.force[n:]]), rate.gap, rate.offset, rate.bound)
+            for load, rate in zip(loads.T, rates)]
 
 
 def expanded(point: Point, x: np.ndarray, force: np.ndarray) -> np.ndarray:
@@ -247,7 +255,7 @@ def with_obstacle(result: ContactResult, C: sp.spmatrix, friction: FrictionPoint
         return sp.csr_matrix(sp.hstack([matrix, sp.csr_matrix(np.column_stack(columns))])) if columns else \
             sp.csr_matrix(matrix)
 
-    K = sp.block_diag([fem.K, sp.csr_matrix((len(values), len(values)))], format="csr")
+    K = sp.block_diag([fem.K, sp.csr_matrix((len(values), len(values)))], format="csr") if values else fem.K
     return (K, widened(C @ contact.N, normal), None if friction is None else widened(friction.R, tangential),
             np.array(values, dtype=float))
 

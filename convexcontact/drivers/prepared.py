@@ -18,7 +18,7 @@ from .. import solvers
 from ..conic import ConicProgram, ConicSolution, Recovery
 from ..fem.assembly import FEModel, assemble
 from ..fem.coarse import body_far_functions
-from ..fem.factorization import Delassus, Factorization, condense, factorize
+from ..fem.factorization import Condensation, Delassus, Factorization, condense, factorize
 from ..fem.friction import FrictionPoints, friction_points
 from ..formulations import FORMULATIONS, contact_weights
 from ..formulations.dual import stick_guess
@@ -219,6 +219,7 @@ class Model:
             certificate=certificate,
             displacement=fem.full(fields.u) * scaling.displacement,
             contact=contact_nodes(fem, fields, self.C, self.friction),
+            condensation=kept_for(self.condensation, fem),
             not_unique=not_unique(fem, fields, self.friction, self.law),
             obstacle_advance=fields.obstacle_advance * scaling.displacement
             if contact.obstacle_coupling is not None else None,
@@ -392,7 +393,7 @@ def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, 
                 formulation, reason = "primal", "K is singular (the contact holds a rigid motion): nothing to condense"
     elif formulation != "primal":
         condensation = condensation or condensed(fem, timings, formulation == MATRIX_FREE)
-    options = {"factorization": condensation if isinstance(condensation, Reused) else Reused(condensation),
+    options = {"factorization": condensation if isinstance(condensation, Reused) else Reused(condensation, fem.K),
                "matrix_free": formulation == MATRIX_FREE} if formulation != "primal" else {}
     if formulation == MATRIX_FREE:
         options["coarse"] = body_far_functions(fem)
@@ -414,8 +415,8 @@ class Reused:
     recomputed; nor is it for the frictionless program that seeds a friction solve, whose B = C N is the friction
     program's first rows (its W is the leading block, its slab approximation the same with G's first rows)."""
 
-    def __init__(self, factorization: Factorization):
-        self.factorization = factorization
+    def __init__(self, factorization: Factorization, K: sp.spmatrix):
+        self.factorization, self.K = factorization, K  # K: the matrix factorized, by identity (kept_for)
         self._B, self._W, self._delassus = None, None, None
 
     def solve(self, b: np.ndarray) -> np.ndarray:
@@ -440,6 +441,15 @@ class Reused:
             return block
         self._B, self._W = B, self.factorization.schur(B)
         return self._W
+
+
+def kept_for(reused: Reused | None, fem: FEModel) -> Condensation | None:
+    """The condensation of ``fem``'s own K that a dual solve built (what a result keeps for its derivatives), or
+    None: no condensation (the primal; the matrix-free dual, whose factors of all of K are the large ones a result
+    should not hold), or one of another K."""
+    if reused is None or reused.K is not fem.K or not isinstance(reused.factorization, Condensation):
+        return None
+    return reused.factorization
 
 
 def _leading(kept: sp.csr_matrix, B: sp.spmatrix) -> bool:

@@ -141,19 +141,21 @@ def along(point: Point, parameter: str, value: float, previous: dict | None = No
     contact nodes for each direction (what the next step of a history measures its slip from). ``previous``: that
     of the step before, per direction (a history step's tangential offset is minus that slip)."""
     rates, prescribed, tangent = data_rates(point, parameter, value)
+    condensed = reduced(point, [rates])[0]  # linear in the rates: condensed once for both directions
     linear, sides, message, slips = point.linear, {}, [], {}
     for sign, side in ((1.0, "right"), (-1.0, "left")):
-        directed = Rates(sign * rates.force, sign * rates.gap, None if rates.offset is None else sign * rates.offset,
+        directed = Rates(sign * condensed.force, sign * rates.gap,
+                         None if rates.offset is None else sign * rates.offset,
                          None if rates.bound is None else sign * rates.bound)
         if previous is not None and previous.get(sign) is not None:
             directed.offset = directed.offset - weighted_slip_rate(point, previous[sign])
-        x = directional(linear, reduced(point, directed), 1.0)
+        x = directional(linear, directed, 1.0)
         if x is None:
             message.append(f"the {side} derivative's complementarity problem on the degenerate rows has no "
                            "solution or several (the answer may branch there)")
             sides[side], slips[sign] = None, None
             continue
-        x = expanded(point, x, directed.force)
+        x = expanded(point, x, sign * rates.force)
         sides[side] = derivative_of(point, sign * x, prescribed)
         slips[sign] = slip_rate(point, x, None if tangent is None else sign * tangent)
     degenerate = {"grazing": np.flatnonzero(linear.normal == "grazing")}
@@ -238,12 +240,11 @@ def gradient(result: ContactResult, parameters: list[str], *, displacement=None,
                                 "Use cc.sensitivity for the one-sided derivatives, or move the parameters off this "
                                 "point")
     adjoint, interior = adjoint_vector(point, weights)
+    rates, prescribed, _ = zip(*(data_rates(point, name, value) for name, value in values.items()))
     out = {}
-    for name, value in values.items():
-        rates, prescribed, _ = data_rates(point, name, value)
-        explicit = weights["displacement"] @ (prescribed * fem.scaling.displacement)  # prescribed DOFs' share
-        out[name] = float(adjoint @ right_side(linear, reduced(point, rates)) + interior @ rates.force[:fem.n_free]
-                          + explicit)
+    for name, rate, condensed, moved in zip(values, rates, reduced(point, list(rates)), prescribed):
+        explicit = weights["displacement"] @ (moved * fem.scaling.displacement)  # prescribed DOFs' share
+        out[name] = float(adjoint @ right_side(linear, condensed) + interior @ rate.force[:fem.n_free] + explicit)
     return out
 
 

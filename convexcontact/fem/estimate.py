@@ -81,6 +81,7 @@ class ContactState:
     constrained: bool = True  # non-penetration (False: normal compliance, no complementarity)
     gap_at_nodes: bool = True  # the discrete constraint rows weigh the nodal gap (nodal, weak); False at Gauss points
     nodal_friction: bool = True  # the discrete friction law holds node by node (lumped, not weak or Gauss)
+    master_forces: np.ndarray | None = None  # a pair's forces on its master nodes (mortar: transferred), (n, d)
 
 
 def components(fem: FEModel, u: np.ndarray) -> np.ndarray:
@@ -264,6 +265,8 @@ def algebraic_error(fem: FEModel, u: np.ndarray, state: ContactState) -> float:
     contact = fem.contact
     forces = np.zeros(fem.basis.N)
     forces[contact.dofs.ravel()] = state.forces.ravel()
+    if state.master_forces is not None:
+        forces[contact.master_dofs.ravel()] += state.master_forces.ravel()
     residual = (fem.K_full @ u - fem.f_full - forces)[fem.free]
     squared = residual @ (residual / fem.K_full.diagonal()[fem.free])
     normal_force = -(state.forces * contact.normals).sum(axis=1)

@@ -11,6 +11,7 @@ Measurements behind the choices: docs/factorizations.md.
 
 from __future__ import annotations
 
+import functools
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
@@ -152,17 +153,27 @@ COARSE_LAYERS = 2
 """Fewest layers of a slab that gets coarse functions beyond it. A slab of fewer is the face of a body too thin
 for more (a third of its DOFs): the functions then cost more than they gain (2-D strip 4 cells high, 10⁵ contact
 nodes, Tresca: contact solve 5.6 s with them against 4.0 s without; 3-D block 9 cells high, a 3-layer slab: 40
-products with W against 73)."""
+products with W against 73), and the approximation is then the whole body (see :func:`slab`)."""
 
 
 @dataclass(frozen=True)
 class Approximation:
-    """W ≈ G H⁻¹ Gᵀ with H sparse SPD (K on a slab of DOFs next to the contact, and on coarse functions
-    beyond it) and G = B on them; ``factorize(H)`` returns an object with ``solve``."""
+    """W ≈ G H⁻¹ Gᵀ with H sparse SPD (K on a slab of DOFs next to the contact, its first ``slab`` rows, and on
+    coarse functions beyond it) and G = B on them; ``factorize(H)`` returns an object with ``solve``."""
 
     G: sp.csr_matrix
     H: sp.csr_matrix
     factorize: Callable
+    slab: int | None = None  # None: every row of H is a DOF's
+
+    @functools.cached_property
+    def diagonal(self) -> np.ndarray:
+        """W_jj up to a factor that varies slowly along the face: each row's Delassus with the body clamped a few
+        layers from its support (:func:`~convexcontact.fem.local_delassus.local_diagonal`)."""
+        from .local_delassus import local_diagonal
+
+        slab = self.H.shape[0] if self.slab is None else self.slab
+        return local_diagonal(self.H[:slab, :slab], self.G[:, :slab])
 
 
 def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Approximation:
@@ -174,7 +185,13 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Appr
     (n × c, see :func:`~convexcontact.fem.coarse.far_functions`): the rest of the body then moves with them
     instead of being clamped, K on slab + functions (a Galerkin approximation of K) has the long waves too, and
     CG needs fewer iterations still; only beyond a slab of COARSE_LAYERS layers or more. Functions that leave that
-    K singular (dependent on the rest) are dropped."""
+    K singular (dependent on the rest) are dropped.
+
+    A body too thin for COARSE_LAYERS layers is its own approximation (G = B, H = K: exact, one more factorization
+    of K's size). A strip clamped at its ends has W's long waves from beam bending, which neither a clamped slab nor
+    grid functions beyond it have (aspect 100, 5 cells high: W's first bending mode 4·10⁴ times the slab's); its
+    Signorini dual at aspect 400 (2.4·10⁴ DOFs) took 17,006 CG iterations with the 1-layer slab, 1694 with coarse
+    functions beyond it, 22 with the whole strip (docs/performance.md, "Shapes")."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
     graph = (abs(K) > 0).astype(np.int32)  # int8 sums of neighbours overflow
     contact = np.unique(B.indices)
@@ -187,6 +204,8 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Appr
         inside = grown
     else:
         layers = LAYERS
+    if layers < COARSE_LAYERS:  # too thin for coarse functions: the whole body
+        inside[:] = True
     index = np.flatnonzero(inside)
     G, H = B[:, index], K[index][:, index]
     far = None if coarse is None or layers < COARSE_LAYERS or inside.all() else coarse(inside, contact)
@@ -196,7 +215,7 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Appr
         if _definite(block):  # else functions dependent on the rest of the body: keep the clamped slab
             H = sp.bmat([[H, K_far[index]], [K_far[index].T, block]])
             G = sp.hstack([G, sp.csr_matrix((B.shape[0], far.shape[1]))])
-    return Approximation(G.tocsr(), H.tocsr(), factorize)
+    return Approximation(G.tocsr(), H.tocsr(), factorize, index.size)
 
 
 def _definite(matrix: sp.spmatrix) -> bool:

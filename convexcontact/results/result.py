@@ -10,6 +10,9 @@ import scipy.sparse as sp
 
 from ..fem.assembly import FEModel
 from ..fem.estimate import ContactState, ErrorEstimate, algebraic_error, estimate
+from ..fem.factorization import Condensation
+from ..fem.flux import FluxEstimate, flux_estimate
+from ..fem.flux import supported as flux_supported
 from ..fem.friction import FrictionPoints
 from ..fem.mortar import PairTrace
 from ..formulations.fields import ContactFields
@@ -83,6 +86,13 @@ class ContactResult:
     extra: dict = field(default_factory=dict)
     not_unique: dict[str, str] = field(default_factory=dict)  # quantity → why the answer does not fix it
     estimate_error: bool = True  # False: no error budget (summary, VTU), saving the estimator's cost
+    condensation: Condensation | None = field(default=None, repr=False, compare=False)
+    """K condensed onto the contact DOFs as the dual solve built it (None: the solve built none), kept in memory
+    for the derivatives of :mod:`convexcontact.drivers.sensitivity`, which then factorize nothing; never saved,
+    and dropped when the result is pickled (it holds the sparse solver's factors)."""
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "condensation": None}
 
     @property
     def solved(self) -> bool:
@@ -138,10 +148,26 @@ class ContactResult:
         return float(0.5 * scaled @ (self.fem.K_full @ scaled) * self.fem.scaling.energy)
 
     @cached_property
-    def error_estimate(self) -> ErrorEstimate | None:
+    def error_estimate(self) -> ErrorEstimate | FluxEstimate | None:
+        """The estimate of the discretization error, scaled units: the equilibrated-flux bound for 2-D P1 triangles
+        (:mod:`convexcontact.fem.flux`), else :attr:`residual_estimate`; None where that is."""
+        if not self.estimated:
+            return None
+        if flux_supported(self.fem):
+            return flux_estimate(self.fem, self.displacement / self.fem.scaling.displacement, contact_state(self))
+        return self.residual_estimate
+
+    @property
+    def estimated(self) -> bool:
+        """Whether the result carries an error estimate: solved, not switched off (``estimate_error``), one body."""
+        return self.solved and self.estimate_error and (flux_supported(self.fem)
+                                                         or not isinstance(self.fem.contact, PairTrace))
+
+    @cached_property
+    def residual_estimate(self) -> ErrorEstimate | None:
         """The residual estimate of the discretization error (:mod:`convexcontact.fem.estimate`), scaled units;
         None without an answer, when switched off (``estimate_error``) or for two bodies (not estimated)."""
-        if not (self.solved and self.estimate_error) or isinstance(self.fem.contact, PairTrace):
+        if not self.estimated or isinstance(self.fem.contact, PairTrace):
             return None
         return estimate(self.fem, self.displacement / self.fem.scaling.displacement, contact_state(self))
 
@@ -154,8 +180,10 @@ class ContactResult:
         if estimated is None:
             return None
         norm = np.sqrt(estimated.energy)
+        total = sum(estimated.terms.values())
         algebraic = algebraic_error(self.fem, self.displacement / self.fem.scaling.displacement, contact_state(self))
-        calibration = EFFECTIVITY[self.scene.body.element]
+        equilibrated = isinstance(estimated, FluxEstimate)
+        calibration = 1.0 if equilibrated else EFFECTIVITY[self.scene.body.element]
 
         def relative(error: float) -> float | None:
             return float(error / norm) if norm > 0 else 0.0 if error == 0 else None
@@ -165,9 +193,9 @@ class ContactResult:
             "discretization": relative(estimated.eta / calibration),
             "eta": float(estimated.eta * np.sqrt(self.fem.scaling.energy)),
             "energy_norm": float(norm * np.sqrt(self.fem.scaling.energy)),
+            "estimator": "equilibrated (a bound)" if equilibrated else "residual (calibrated)",
             "calibration": calibration,
-            "terms": {name: value / estimated.eta**2 if estimated.eta > 0 else 0.0
-                      for name, value in estimated.terms.items()},
+            "terms": {name: value / total if total > 0 else 0.0 for name, value in estimated.terms.items()},
         }
 
     @property
@@ -258,8 +286,9 @@ class ContactResult:
 
 
 EFFECTIVITY = {"P1": 4.6, "Q1": 4.6, "P2": 7.2, "Q2": 7.2}
-"""η / true energy error measured on Hertz 2-D under uniform refinement (docs/estimate.md): the estimated
-discretization error is η divided by it — a calibration on one family, checked on others, not a bound."""
+"""The residual estimator's η / true energy error measured on Hertz 2-D under uniform refinement (docs/estimate.md):
+where it is the estimator (all but 2-D P1), the estimated discretization error is η divided by it — a calibration on
+one family, checked on others, not a bound. The equilibrated bound (2-D P1) is reported as it is."""
 
 LARGE_ERROR = 0.5
 """Estimated relative discretization error (energy norm) above which a result warns and names the remedy: an answer
@@ -280,7 +309,8 @@ def contact_state(result: ContactResult) -> ContactState:
     return ContactState(c.forces / scaling.force, c.normal_displacement / scaling.displacement,
                         c.gap / scaling.displacement, slip, constrained=compliance_of(law) is None,
                         gap_at_nodes=non_penetration != "gauss",
-                        nodal_friction=non_penetration == "nodal" and getattr(law, "quadrature", "nodal") == "nodal")
+                        nodal_friction=non_penetration == "nodal" and getattr(law, "quadrature", "nodal") == "nodal",
+                        master_forces=None if c.master_forces is None else c.master_forces / scaling.force)
 
 
 def contact_nodes(

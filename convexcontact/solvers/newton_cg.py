@@ -62,8 +62,9 @@ of the whole-face scenes then reached ≤ 1e-12."""
 FORCING = 0.1
 """CG stops at FORCING · min(1, ‖F‖/‖F₀‖) · ‖F‖ (as a gradient): loose while the active set moves."""
 SHIFT = 1e-3
-"""δ of the preconditioner relative to P's mean eigenvalue: 1e-1 left 49 CG iterations on a 2-D Tresca
-dual, 1e-2 34, 1e-3 and below 31, as the exact (δ = 0) slab operator."""
+"""δ of the preconditioner relative to each row's scale (:func:`_shifts`; P's mean eigenvalue without an estimate):
+relative to the mean, 1e-1 left 49 CG iterations on a 2-D Tresca dual, 1e-2 34, 1e-3 and below 31, as the exact
+(δ = 0) slab operator."""
 ACCEPT = 0.5
 """Newton's point is taken outright where its natural residual is below ACCEPT × the least so far (and f there is at
 most its value at the start: see "Convergence")."""
@@ -92,6 +93,8 @@ DIRECT_LIMIT = 10_000
 systems took hundreds of unpreconditioned Krylov iterations per step (a mortar pair on graded meshes; the 3-D punch at
 2.8·10⁵ DOFs, ~5000 unknowns: 180–400 a step, 52 s against 8 s by Cholesky), and an inexact direction stalled the
 Coulomb Newton. 10,000 is ``auto``'s largest dense W; a Cholesky there is ~3·10¹¹ flops."""
+EPS = np.finfo(float).eps
+"""A ball's radius at most EPS × ‖y‖ is a point to the Newton step (see :func:`_step`)."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
@@ -227,12 +230,12 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     products[0] += 1
     curvature = probe @ P.matvec(probe) / (probe @ probe)
     c = 0.1 / curvature if curvature > 0 else 1.0  # 0.1: 219 products on a 2-D Tresca dual, 1: 263, 10: 2076
-    c = _step_lengths(program.P, sets, c)
+    c = _step_lengths(program.P, sets, c, products)
     cache = {} if cache is None else cache
     if "precondition" not in cache:
         approximation = getattr(program.P, "approximation", None)
         cache["precondition"] = approximation and _Preconditioner(approximation, sets.scale, sets.balls,
-                                                                  SHIFT * max(curvature, 1e-300))
+                                                                  SHIFT * _shifts(approximation, sets, curvature))
     v = np.zeros(program.n_variables) if start is None else (start - sets.shift) / sets.scale
     if start is not None and sets.coupling is None:  # the last answer may be outside this program's sets (a Picard
         v = _project(v, sets)  # step's smaller radii), and the convergence argument needs v₀ in them
@@ -370,10 +373,11 @@ class _Preconditioner:
     step), 2-D Tresca 7.0 s (8.0 s); Signorini 3.6 s (3.9 s) in 2-D and 3.6 s (4.5 s) in 3-D, whose held variables
     are only the open nodes."""
 
-    def __init__(self, approximation, scale: np.ndarray, balls: np.ndarray, shift: float):
-        self.G, self.H, self.shift = sp.csr_matrix(sp.diags(scale) @ approximation.G), approximation.H, shift
+    def __init__(self, approximation, scale: np.ndarray, balls: np.ndarray, shift):
+        self.G, self.H = sp.csr_matrix(sp.diags(scale) @ approximation.G), approximation.H
+        self.shift = np.broadcast_to(np.asarray(shift, dtype=float), scale.shape)  # δ, one or per variable
         self.exact = balls.size > 0
-        every_free = self.H + self.G.T @ self.G / shift
+        every_free = self.H + self.G.T @ sp.diags(1.0 / self.shift) @ self.G
         if self.exact:  # every later R D⁻¹ Rᵀ is on E: order the pattern they all fit
             n, p = scale.size, balls.shape[1]
             pairs = (np.repeat(balls, p, axis=1).ravel(), np.tile(balls, (1, p)).ravel())
@@ -385,10 +389,22 @@ class _Preconditioner:
         """ξ ↦ the preconditioner of D + Rᵀ P̃ R, D = δ + ``curvature``."""
         if not self.exact:
             return lambda xi: R.T @ _woodbury(self.factors, self.G, self.shift, R @ xi)
-        d = self.shift + curvature
+        d = R.multiply(R).T @ self.shift + curvature  # a tangent coordinate's δ: its ball's, weighted by its basis
         G = sp.csr_matrix(R.T @ self.G)
         self.factors.refactorize(self.H + G.T @ sp.diags(1.0 / d) @ G)
         return lambda xi: _woodbury(self.factors, G, d, xi)
+
+
+def _shifts(approximation, sets: _Bounds, curvature: float) -> np.ndarray:
+    """δ/SHIFT of the preconditioner per variable: the approximation's estimate of P̃_jj with the body clamped near
+    its row (``approximation.diagonal``), the short waves' scale; else P's mean eigenvalue (``curvature``). On a
+    strip clamped at its ends W's long waves (beam bending) make the mean eigenvalue 10⁴ times the short waves', a δ
+    beyond those leaves the short waves unpreconditioned: Signorini, aspect 400, 2.4·10⁴ DOFs with the whole strip
+    as the approximation took 1346 CG iterations with δ = 10⁻³ × the mean eigenvalue, 29 with 10⁻⁷ ×."""
+    estimate = getattr(approximation, "diagonal", None)
+    if estimate is None:
+        return np.full(sets.scale.size, max(curvature, 1e-300))
+    return np.maximum(sets.scale**2 * estimate, 1e-300)
 
 
 def _woodbury(factors, G: sp.csr_matrix, d, xi: np.ndarray) -> np.ndarray:
@@ -412,14 +428,26 @@ def _scaled(P, scale: np.ndarray):
     return scale[:, None] * (P.toarray() if sp.issparse(P) else np.asarray(P, dtype=float)) * scale
 
 
-def _step_lengths(P, sets: _Bounds, c: float):
-    """c per variable, 0.1 / P̃_jj (one per ball: its least), where P is a matrix and its diagonal known; the
-    scalar ``c`` for an operator. One c for all misjudges the active set where rows differ in scale: the dense
+def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
+    """c per variable, 0.1 / P̃_jj (one per ball: its least), where P is a matrix and its diagonal known; for an
+    operator whose approximation estimates its diagonal up to a slowly varying factor (``approximation.diagonal``,
+    d), 0.1 / (r d̃_j), r the mean of P̃_jj / d̃_j by one random product (Hutchinson's estimate of the trace of
+    D̃^-½ P̃ D̃^-½); else the scalar ``c``. One c for all misjudges the active set where rows differ in scale: the dense
     W of a mortar pair on graded meshes took 29 Newton steps on Signorini with one c, 5 with these, and
-    Tresca failed after 100 where it now converges (86: the slip zone still moves a node a step)."""
+    Tresca failed after 100 where it now converges (86: the slip zone still moves a node a step); the same pair's
+    Tresca dual applied matrix-free: see ``approximation.diagonal``'s measurements in docs/performance.md."""
     if isinstance(P, spla.LinearOperator):
-        return c
-    diagonal = sets.scale**2 * np.asarray(P.diagonal()).ravel()
+        estimate = getattr(getattr(P, "approximation", None), "diagonal", None)
+        if estimate is None:
+            return c
+        diagonal = sets.scale**2 * estimate
+        probe = np.random.default_rng(1).standard_normal(diagonal.size) / np.sqrt(np.maximum(diagonal, 1e-300))
+        if products is not None:
+            products[0] += 1
+        ratio = (sets.scale * probe) @ P.matvec(sets.scale * probe) / (probe @ (diagonal * probe))
+        diagonal = diagonal * ratio
+    else:
+        diagonal = sets.scale**2 * np.asarray(P.diagonal()).ravel()
     lengths = np.where(diagonal > 0, 0.1 / np.maximum(diagonal, 1e-300), c)
     if sets.balls.size:
         lengths[sets.balls] = lengths[sets.balls].min(axis=1, keepdims=True)
@@ -458,13 +486,14 @@ def _step(P, q, sets: _Bounds, v, y, c, target, products, precondition, matrix=N
     radius = sets.radii(v)
     ball = y[sets.balls]
     norm = np.linalg.norm(ball, axis=1)
-    # a ball of radius 0 is its centre, and so is one whose radius is below round-off of the point projected
-    # (a slip bound of 1e-313 beside a traction of 1: its sphere's curvature (‖y‖ − ρ)/(cρ) overflowed)
-    centre = radius <= np.finfo(float).eps * norm
-    point = np.flatnonzero(centre)
-    sphere = np.flatnonzero((norm > radius) & ~centre)
+    # a ball whose radius is below the rounding of its point's norm is held at Π(y) (its centre where ρ = 0): its
+    # tangent curvature (‖y‖ − ρ)/(cρ) would pass 1/(c·eps), and overflowed at a slip bound of 5e-324 (fuzz suite)
+    point = np.flatnonzero(radius <= EPS * norm)
+    sphere = np.flatnonzero((norm > radius) & (radius > EPS * norm))
     held[sets.balls[point].ravel()] = True
     held[sets.balls[sphere].ravel()] = True
+    if point.size:
+        new[sets.balls[point]] = radius[point, None] * unit_rows(ball[point])
     free = np.flatnonzero(~held)
     rho = radius[sphere]
     p = sets.balls.shape[1]

@@ -1,7 +1,9 @@
 """``convexcontact bench``: a contact solve against one linear elastic solve, per mesh size.
 
 For each size and law (Signorini, Tresca, Coulomb) on the punch scene (or, with
-``--scenario whole-face``, a block whose whole bottom face is in contact), one fresh
+``--scenario whole-face``, a block whose whole bottom face is in contact; ``two-body``, a punch on
+a foundation; ``shapes``, each scene of the family of :mod:`.shapes`; ``plastic``, a plastic step:
+:mod:`.plastic_bench`), one fresh
 process assembles the scene, then times (a) one linear elastic solve, K's sparse
 factorization plus u = K⁻¹f, and (b) the contact solve on the same assembly: the
 condensation (if the formulation condenses), the formulation, the solver (the whole
@@ -34,7 +36,7 @@ from . import plastic_bench
 
 LAWS = ("signorini", "tresca", "coulomb")
 SIZES = {2: (1e4, 1e5, 1e6), 3: (1e4, 1e5, 3e5)}
-SCENARIOS = ("punch", "whole-face", "two-body", "plastic")
+SCENARIOS = ("punch", "whole-face", "two-body", "shapes", "plastic")
 NODES = {2: (1e3, 4e3), 3: (1e3, 4e3)}
 """Contact nodes of the whole-face cases, by default (``--nodes``)."""
 COLUMNS = ("scenario", "dim", "law", "dofs", "contact_nodes", "unknowns", "formulation", "solver", "status", "iterations",
@@ -84,12 +86,16 @@ def two_body_scene(law: str, dofs: float):
 
 
 def scene_of(scenario: str, dim: int, law: str, dofs: float, nodes: float | None = None):
-    """The bench's scene: the punch, the whole face of :func:`~convexcontact.scene.library.whole_face`, or
-    two bodies (:func:`two_body_scene`, 2-D)."""
+    """The bench's scene: the punch, the whole face of :func:`~convexcontact.scene.library.whole_face`, two
+    bodies (:func:`two_body_scene`, 2-D), or a shape of :mod:`.shapes` (2-D) named as the scenario."""
+    from .shapes import SHAPES, shape_scene
+
     if scenario == "punch":
         return punch_scene(dim, law, dofs)
     if scenario == "two-body":
         return two_body_scene(law, dofs)
+    if scenario in SHAPES:
+        return shape_scene(scenario, law_of(law), dofs)
     if scenario == "plastic":
         return plastic_bench.punch_scene(dofs, law)
     from ...scene.library import whole_face
@@ -170,14 +176,17 @@ def measure(dim: int, law: str, dofs: float, formulation: str, solver: str, scen
 def run(dim: int, sizes, laws=LAWS, formulation: str = "auto", solver: str = "auto", progress=print,
         scenario: str = "punch", nodes=(None,)) -> list:
     """All cases, each in a fresh Python process (clean caches, thread pools and peak memory)."""
+    from .shapes import SHAPES
+
     rows = []
-    for dofs, count in ((dofs, count) for dofs in sizes for count in nodes):
+    family = SHAPES if scenario == "shapes" else (scenario,)
+    for dofs, count, scene in ((dofs, count, scene) for dofs in sizes for count in nodes for scene in family):
         for law in laws:
-            case = json.dumps([dim, law, dofs, formulation, solver, scenario, count])
+            case = json.dumps([dim, law, dofs, formulation, solver, scene, count])
             done = subprocess.run([sys.executable, "-m", "convexcontact.studies.benchmarks.bench", "--case", case],
                                   check=False, capture_output=True, text=True, env=ENVIRONMENT)
             if done.returncode != 0:
-                progress(f"{dim}-D {law} {dofs:.0e}: failed\n{done.stderr.strip()[-2000:]}")
+                progress(f"{dim}-D {scene} {law} {dofs:.0e}: failed\n{done.stderr.strip()[-2000:]}")
                 continue
             rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
             progress((plastic_bench.format_row if scenario == "plastic" else format_row)(rows[-1]))
@@ -209,7 +218,9 @@ def friction_sweep(dim: int, dofs: float, coefficients, solver: str = "auto", pr
 
 
 def format_row(row: dict) -> str:
-    return (f"{row['dim']}-D {row['law']:>9} {row['dofs']:>8d} DOFs {row['unknowns']:>5d} unknowns "
+    from .shapes import SHAPES
+
+    return ((f"{row['scenario']:>17} " if row["scenario"] in SHAPES else "") + f"{row['dim']}-D {row['law']:>9} {row['dofs']:>8d} DOFs {row['unknowns']:>5d} unknowns "
             f"{row['formulation']:>6}/{row['solver']:<9} {row['status']:>10} it {row['iterations']:>3}  "
             f"assembly {row['assembly']:6.2f} s  linear {row['linear']:6.2f} s  contact {row['contact_total']:6.2f} s "
             f"(condensation {row['condensation']:.2f}, solve {row['contact_solve']:.2f})  ratio {row['ratio']:5.2f}  "
@@ -268,22 +279,22 @@ def check_arguments(args) -> None:
                          "e.g. --sizes 1e4 1e5")
     if args.nodes is not None and (args.scenario != "whole-face" or min(args.nodes) < 2):
         raise ValueError("--nodes: give at least 2 contact nodes, with --scenario whole-face")
-    if args.scenario == "two-body" and args.dim != 2:
-        raise ValueError("--scenario two-body: the bench's two-body scene is 2-D; drop --dim 3")
+    if args.scenario in ("two-body", "shapes") and args.dim != 2:
+        raise ValueError(f"--scenario {args.scenario}: the bench's {args.scenario} scenes are 2-D; drop --dim 3")
     if args.sweep:
         check_folder_target(args.out, "--out")
     else:
         check_new_files(args.out, (f"{csv_name(args)}.csv", f"{csv_name(args)}.png"), "--out", args.overwrite)
     sizes = args.sizes or SIZES[args.dim]
     for dofs in sizes:
-        if args.scenario == "two-body":  # its meshes are built with the scene: estimated from the target DOFs
+        if args.scenario in ("two-body", "shapes"):  # meshes built with the scene: estimated from the target DOFs
             with named("--sizes"):
                 check_memory(dofs, 2, "--sizes", f"--sizes {dofs:g}", "give fewer DOFs")
             continue
         for nodes in nodes_of(args):
             with named("--sizes" if nodes is None else "--sizes/--nodes"):
                 check_size(scene_of(args.scenario, args.dim, "signorini", dofs, nodes).body)
-    cases = 2 * args.sweep if args.sweep else len(sizes) * len(args.laws) * len(nodes_of(args))
+    cases = 2 * args.sweep if args.sweep else len(sizes) * len(args.laws) * len(nodes_of(args)) * len(family_of(args))
     mean = sizes[0] if args.sweep else sum(sizes) / len(sizes)
     check_duration("--sweep" if args.sweep else "--sizes", cases, SECONDS_PER_DOF * mean, "contact solves",
                    "give fewer or smaller sizes" + (", or a smaller COUNT" if args.sweep else ", or fewer --laws"))
@@ -292,6 +303,13 @@ def check_arguments(args) -> None:
 def csv_name(args) -> str:
     """The name of the bench's CSV and PNG in --out."""
     return f"bench_{args.dim}d" + ("" if args.scenario == "punch" else f"_{args.scenario}")
+
+
+def family_of(args) -> tuple:
+    """The scenes of the scenario: each shape of :mod:`.shapes`, or the scenario's one scene."""
+    from .shapes import SHAPES
+
+    return SHAPES if args.scenario == "shapes" else (args.scenario,)
 
 
 def nodes_of(args) -> tuple:
@@ -311,8 +329,10 @@ def main(argv=None) -> list:
                         help="default: all three; signorini with --scenario plastic")
     parser.add_argument("--scenario", choices=SCENARIOS, default="punch",
                         help="punch (a small contact zone), whole-face (a block's whole bottom face in contact) "
-                        "or two-body (a punch with its own mesh on an elastic foundation, mortar; 2-D), or plastic (a "
-                        "plastic step of Prandtl's punch: conic, Newton's fast path and return mapping; 2-D)")
+                        "or two-body (a punch with its own mesh on an elastic foundation, mortar; 2-D) or shapes (a "
+                        "family: block, tall block, strips 20:1 to 400:1 with free or clamped ends, two bodies; 2-D), "
+                        "or plastic (a plastic step of Prandtl's punch: conic, Newton's fast path and return "
+                        "mapping; 2-D)")
     parser.add_argument("--nodes", type=number("1e3"), nargs="+", default=None,
                         help="whole-face: contact nodes (default: 1e3 4e3), each case at each of --sizes")
     parser.add_argument("--formulation", default="auto", help="auto | primal | dual | dual-matrix-free")

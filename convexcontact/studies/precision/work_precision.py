@@ -46,7 +46,7 @@ from ...drivers.prepared import prepare
 from ...results.result import ContactResult
 from ...scene.description import Coulomb, Material, NormalCompliance, Scene, SceneError, Signorini, has_friction
 from ...solvers import ConeNotSupported
-from ..arguments import SECONDS_PER_DOF, check_duration, number
+from ..arguments import SECONDS_PER_DOF, check_duration, integer, number
 
 FORMULATIONS = ("primal", "dual")
 SOLVERS = ("clarabel", "osqp", "cvxpy")
@@ -55,6 +55,8 @@ EPSILON_FACTORS = (1e-2, 1e-3, 1e-4, 1e-5)
 STIFFNESS_FACTORS = (1e2, 1e3, 1e4, 1e5)
 """c_N / (E/L) over three decades; Clarabel stops near 1e5 (docs/friction.md) — an outcome, recorded."""
 REFERENCE_TOLS = (1e-12, 1e-11, 1e-10)
+TOLS = (1e-4, 1e-6, 1e-8, 1e-10)
+"""The solver tolerances of the command's rows by default."""
 CLOSED_FORM = "closed form"
 FIELDS = ("scene", "ndof", "method", "parameter", "formulation", "solver", "tol", "status", "time", "error",
           "pressure_error", "friction_error", "certificate", "iterations", "reference", "message")
@@ -326,19 +328,24 @@ def plot(rows: Sequence[dict], path, title: str | None = None) -> Path:
 
 # --- command line -----------------------------------------------------------------------------
 
-SCENES = ("hertz", "punch")
+SCENES = ("hertz", "punch", "flat-punch")
 PUNCH_H = 0.2
 """The punch mesh's h must leave room for its 10 fine rows in the block's depth 2
 (:func:`~convexcontact.scene.library.punch_mesh`)."""
 
 
 def library_scene(name: str, size: float | None = None) -> Scene:
-    """``hertz``: hertz_punch(nx) (closed form); ``punch``: the depth-controlled frictional punch, Tresca s = 0.005."""
-    from ...scene.description import Tresca
+    """``hertz``: hertz_punch(nx) (closed form); ``punch``: the depth-controlled frictional punch, Tresca s = 0.005;
+    ``flat-punch``: hertz_punch's block under a flat rigid punch of half-width 0.5 (pressure singular at its edges)."""
+    from ...scene.description import Contact, Obstacle, Tresca
     from ...scene.library import frictional_punch, hertz_punch
 
     if name == "hertz":
         return hertz_punch(nx=int(size or 40))
+    if name == "flat-punch":
+        scene = hertz_punch(nx=int(size or 40))
+        return dataclasses.replace(scene, name="flat_punch",
+                                   contact=Contact("top", Obstacle("flat_punch", radius=0.5, depth=0.01)))
     if name == "punch":
         return frictional_punch(h=size or 0.02, law=Tresca(slip_bound=0.005))
     raise ValueError(f"scene: unknown {name!r}; use one of {SCENES}")
@@ -349,10 +356,10 @@ def library_dofs(name: str, size: float | None, option: str) -> float:
     large for this machine's memory, before anything is built."""
     from ...scene.meshing import check_memory
 
-    if name == "hertz":
+    if name in ("hertz", "flat-punch"):
         nx = 40 if size is None else size
         if nx != int(nx) or nx < 2:
-            raise ValueError(f"{option}: hertz's size is nx, an integer ≥ 2 (elements across the block); got {nx:g}")
+            raise ValueError(f"{option}: {name}'s size is nx, an integer ≥ 2 (elements across the block); got {nx:g}")
         dofs = 2.0 * (nx + 1) * (nx // 2 + 1)
     else:
         h = 0.02 if size is None else size
@@ -378,14 +385,19 @@ def main(argv=None) -> list[dict]:
                         help="mesh sizes, one study each against one reference — hertz: nx (40); punch: h (0.02)")
     parser.add_argument("--reference-size", type=number("80"), default=None,
                         help="finer mesh for the overkill reference")
-    parser.add_argument("--tol", type=number("1e-8"), nargs="+", default=[1e-4, 1e-6, 1e-8, 1e-10])
+    parser.add_argument("--tol", type=number("1e-8"), nargs="+", default=list(TOLS))
     parser.add_argument("--solvers", nargs="+", default=list(SOLVERS), help=f"default: {' '.join(SOLVERS)}")
     parser.add_argument("--formulations", nargs="+", choices=("primal", "dual", "dual-matrix-free"),
                         default=list(FORMULATIONS))
     parser.add_argument("--out", type=Path, default=Path("out/work_precision"),
                         help="writes NAME.csv, NAME.png, NAME.txt here")
     parser.add_argument("--overwrite", action="store_true", help="replace the files of an earlier study in --out")
+    parser.add_argument("--refinement", type=integer(2, 4), default=None, metavar="LEVELS",
+                        help="instead: uniform against adaptive refinement from the first --size (default nx 8), "
+                             "LEVELS uniform levels; writes NAME_refinement.csv/png/txt")
     args = parser.parse_args(argv)
+    if args.refinement is not None:
+        return refinement_main(args)
     for solver in args.solvers:
         try:
             solver_paths.check_name(solver)
@@ -411,6 +423,49 @@ def main(argv=None) -> list[dict]:
     plot(rows, args.out / f"{args.scene}.png")
     text = table(rows)
     (args.out / f"{args.scene}.txt").write_text(text + "\n")
+    print(text)
+    return rows
+
+
+REFINEMENT_BASE = 8
+"""The coarsest mesh (nx) of the refinement comparison when no --size is given."""
+
+
+def refinement_main(args) -> list[dict]:
+    """``study work-precision SCENE --refinement LEVELS``: :func:`.refinement.compare` on the first --size, its
+    reference :data:`~.refinement.REFERENCE_LEVELS` finer, checked for memory and time before any work."""
+    from ...results.output import check_new_files
+    from ...scene.meshing import check_memory
+    from . import refinement
+
+    solver_grid = {"--reference-size": (args.reference_size, None), "--tol": (args.tol, list(TOLS)),
+                   "--solvers": (args.solvers, list(SOLVERS)), "--formulations": (args.formulations, list(FORMULATIONS))}
+    for option, (value, default) in solver_grid.items():
+        if value != default:
+            raise ValueError(f"{option}: the refinement comparison solves every level exactly with the default solver "
+                             f"against its own reference; drop {option} or --refinement")
+    if len(args.size) > 1:
+        raise ValueError("--size: --refinement starts from one mesh and refines it; give one --size")
+    size = args.size[0] if args.size[0] is not None else (REFINEMENT_BASE if args.scene != "punch" else None)
+    dofs = library_dofs(args.scene, size, "--size")
+    finest = dofs * 4.0 ** (args.refinement - 1 + refinement.REFERENCE_LEVELS)
+    check_memory(finest, 2, "--refinement", f"{args.scene}'s reference mesh", "give fewer levels or a coarser --size")
+    check_duration("--refinement", 3, SECONDS_PER_DOF * finest, "reference and finest solves",
+                   "give fewer --refinement levels or a coarser --size")
+    extensions = ("csv", "png", "txt")
+    check_new_files(args.out, [f"{args.scene}_refinement.{extension}" for extension in extensions], "--out",
+                    args.overwrite)
+    rows = refinement.compare(library_scene(args.scene, size), args.refinement, progress=print)
+    path = args.out / f"{args.scene}_refinement.csv"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as stream:
+        writer = csv.DictWriter(stream, fieldnames=refinement.FIELDS)
+        writer.writeheader()
+        writer.writerows({k: "" if row.get(k) is None else row[k] for k in refinement.FIELDS} for row in rows)
+    front = pareto(rows)
+    refinement.plot(rows, args.out / f"{args.scene}_refinement.png", front)
+    text = refinement.table(rows, front)
+    (args.out / f"{args.scene}_refinement.txt").write_text(text + "\n")
     print(text)
     return rows
 

@@ -1,0 +1,206 @@
+"""Adaptive against uniform refinement: the discretization axis of the work-precision study (docs/work_precision.md).
+
+Uniform: the scene's mesh refined 0 … levels − 1 times, each level solved from scratch (its time is that one solve
+and its estimate: a user who knew the mesh in advance). Adaptive: :func:`~convexcontact.drivers.adapt.adapt` from the
+scene's mesh until the next mesh would exceed the finest uniform level's DOFs (its time is end to end: every level's
+solve, estimate and refinement so far). The true error of a level is ‖u_ref − u_h‖_E / ‖u_ref‖_E against a reference
+:data:`REFERENCE_LEVELS` uniform refinements finer than the finest mesh of its own family (the meshes of a family are
+nested in it, so u_h is prolonged exactly); the estimate is the result's ``error_budget["discretization"]``. ::
+
+    from convexcontact.studies.precision import refinement, work_precision
+    rows = refinement.compare(scene, levels=4)
+    front = work_precision.pareto(rows)
+    print(refinement.table(rows, front)); refinement.plot(rows, "refinement.png", front)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+import skfem as fe
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from ...drivers.adapt import adapt
+from ...drivers.solve import solve
+from ...results.result import ContactResult
+from ...scene.description import Body, Scene
+from ...scene.meshing import build_mesh
+
+REFERENCE_LEVELS = 2
+"""Uniform refinements between a family's finest mesh and its reference (the true error then reads ≈ 3 % small for
+the rate h¹, ≈ 13 % for the rate h^½ of a singular scene)."""
+
+FIELDS = ("scene", "method", "level", "ndof", "time", "error", "estimate", "effectivity", "reference")
+
+
+def on_mesh(scene: Scene, mesh: fe.Mesh) -> Scene:
+    return dataclasses.replace(scene, body=Body(mesh, scene.body.element, scene.body.plane))
+
+
+def timed_solve(scene: Scene) -> tuple[ContactResult, float]:
+    """The result and the wall time of its solve and its error budget."""
+    start = time.perf_counter()
+    result = solve(scene)
+    result.error_budget  # noqa: B018 -- the estimate is part of what a level costs
+    return result, time.perf_counter() - start
+
+
+def locate(mesh: fe.MeshTri1, points: np.ndarray, candidates: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """The triangle of ``mesh`` holding each point (2, n) and the point's barycentric coordinates (n, 3), among its
+    nearest cells by centroid, more of them where a thin cell hides (scikit-fem's finder tests every point against
+    the union of all candidates: (points × cells) memory on a fine reference)."""
+    tree = cKDTree(mesh.p[:, mesh.t].mean(axis=1).T)
+    cell = np.full(points.shape[1], -1)
+    weights = np.zeros((points.shape[1], 3))
+    todo = np.arange(points.shape[1])
+    while todo.size:
+        k = min(candidates, mesh.nelements)
+        _, near = tree.query(points[:, todo].T, k=k)
+        near = near.reshape(todo.size, k)
+        corners = mesh.p[:, mesh.t[:, near]]  # (2, 3, points, k)
+        e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+        r = points[:, todo, None] - corners[:, 0]
+        det = e1[0] * e2[1] - e1[1] * e2[0]
+        b1, b2 = (r[0] * e2[1] - r[1] * e2[0]) / det, (e1[0] * r[1] - e1[1] * r[0]) / det
+        tol = 1e-10
+        inside = (b1 >= -tol) & (b2 >= -tol) & (b1 + b2 <= 1 + tol)
+        found = inside.any(axis=1)
+        column = inside.argmax(axis=1)[found]
+        rows = np.flatnonzero(found)
+        cell[todo[found]] = near[rows, column]
+        weights[todo[found]] = np.column_stack([1 - b1[rows, column] - b2[rows, column], b1[rows, column],
+                                                b2[rows, column]])
+        if k == mesh.nelements and not found.all():
+            raise ValueError("a reference node lies in no cell of the coarse mesh: the meshes are not nested")
+        todo, candidates = todo[~found], 4 * candidates
+    return cell, weights
+
+
+def bodies_of(mesh: fe.Mesh) -> np.ndarray:
+    """The body (connected component, numbered from the lowest vertex) of each vertex."""
+    n = mesh.nvertices
+    edges = sp.coo_matrix((np.ones(mesh.facets.shape[1]), (mesh.facets[0], mesh.facets[1])), (n, n))
+    return connected_components(edges, directed=False)[1]
+
+
+def prolong(result: ContactResult, points: np.ndarray, body: np.ndarray) -> np.ndarray:
+    """The P1 displacement of ``result`` (scaled) at ``points`` (2, n), each point looked for in the cells of its own
+    ``body`` (two bodies touch at their contact: a point there lies in both)."""
+    fem = result.fem
+    mesh = fem.mesh
+    label = bodies_of(mesh)
+    u = (result.displacement / fem.scaling.displacement).reshape(-1, fem.dim)  # (vertices, d) for P1
+    out = np.zeros((points.shape[1], fem.dim))
+    for b in np.unique(label):
+        at = np.flatnonzero(body == b)
+        cells = mesh.t[:, label[mesh.t[0]] == b]
+        cell, weights = locate(fe.MeshTri(mesh.p, cells), points[:, at])
+        out[at] = np.einsum("nm,nmd->nd", weights, u[cells[:, cell].T])
+    return out.ravel()
+
+
+def true_errors(results: Sequence[ContactResult], reference: ContactResult) -> list[float]:
+    """‖u_ref − u_h‖_E / ‖u_ref‖_E of each P1 result, u_h interpolated at the reference's nodes (exact on nested
+    meshes; one body or several, each in its own cells)."""
+    fine = reference.fem
+    u_ref = reference.displacement / fine.scaling.displacement
+    norm = np.sqrt(u_ref @ (fine.K_full @ u_ref))
+    body = bodies_of(fine.mesh)
+    out = []
+    for result in results:
+        error = u_ref - prolong(result, fine.mesh.p, body)
+        out.append(float(np.sqrt(error @ (fine.K_full @ error)) / norm))
+    return out
+
+
+def rows_of(method: str, results, seconds, errors, reference: str) -> list[dict]:
+    out = []
+    for level, (result, spent, error) in enumerate(zip(results, seconds, errors)):
+        estimate = (result.error_budget or {}).get("discretization")
+        out.append({"scene": result.scene.name, "method": method, "level": level, "ndof": result.ndof,
+                    "time": spent, "error": error, "estimate": estimate,
+                    "effectivity": None if estimate is None or error == 0 else estimate / error,
+                    "reference": reference})
+    return out
+
+
+def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Callable | None = None) -> list[dict]:
+    """Rows (:data:`FIELDS`) of uniform and adaptive refinement of ``scene`` (one body, P1 triangles: the true error
+    interpolates them); ``progress(text)`` after each solve."""
+    if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or levels < 2:
+        raise ValueError(f"levels: the number of uniform levels, an integer ≥ 2, got {levels!r}; e.g. 4")
+    if scene.body.element != "P1" or build_mesh(scene.body).t.shape[0] != 3:
+        raise ValueError(f"scene: the comparison measures P1 triangles (their true error is interpolated exactly), "
+                         f"got {scene.body.element}; give a 2-D P1 scene")
+    say = progress or (lambda text: None)
+    coarse = build_mesh(scene.body)
+    solve(scene).error_budget  # noqa: B018 -- warm-up: the first solve of a process pays its imports, not timed
+    uniform, seconds = [], []
+    for k in range(levels):
+        result, spent = timed_solve(on_mesh(scene, coarse.refined(k) if k else coarse))
+        uniform.append(result)
+        seconds.append(spent)
+        say(f"uniform level {k}: {result.ndof} DOFs, {spent:.2f} s")
+    reference, _ = timed_solve(on_mesh(scene, coarse.refined(levels - 1 + REFERENCE_LEVELS)))
+    say(f"uniform reference: {reference.ndof} DOFs")
+    adaptive = adapt(scene, target=1e-9, max_dofs=uniform[-1].fem.basis.N, fraction=fraction,
+                     progress=lambda k, r: say(f"adaptive level {k}: {r.ndof} DOFs, "
+                                               f"{r.extra['adaptive_seconds']:.2f} s so far"))
+    finest = build_mesh(adaptive[-1].scene.body)
+    adaptive_reference, _ = timed_solve(on_mesh(scene, finest.refined(REFERENCE_LEVELS)))
+    say(f"adaptive reference: {adaptive_reference.ndof} DOFs")
+    label = f"{REFERENCE_LEVELS} uniform refinements finer ({{}} DOFs)"
+    return (rows_of("uniform", uniform, seconds, true_errors(uniform, reference), label.format(reference.ndof))
+            + rows_of("adaptive", adaptive, [r.extra["adaptive_seconds"] for r in adaptive],
+                      true_errors(adaptive, adaptive_reference), label.format(adaptive_reference.ndof)))
+
+
+def table(rows: Sequence[dict], front: Sequence[dict] = ()) -> str:
+    """Aligned text table; ``*`` marks the rows of ``front`` (the Pareto front of true error against run time,
+    :func:`.work_precision.pareto`)."""
+    front = {id(r) for r in front}
+    header = f"{'':2}{'method':<10}{'level':>6}{'DOFs':>9}{'time [s]':>10}{'error':>10}{'estimate':>10}{'η/error':>9}"
+    lines = [header]
+    for r in rows:
+        effectivity = "" if r["effectivity"] is None else f"{r['effectivity']:.2f}"
+        estimate = "" if r["estimate"] is None else f"{r['estimate']:.3e}"
+        lines.append(f"{'*' if id(r) in front else '':2}{r['method']:<10}{r['level']:>6}{r['ndof']:>9}"
+                     f"{r['time']:>10.3f}{r['error']:>10.3e}{estimate:>10}{effectivity:>9}")
+    lines += [f"reference ({method}): {next(r['reference'] for r in rows if r['method'] == method)}"
+              for method in ("uniform", "adaptive") if any(r["method"] == method for r in rows)]
+    return "\n".join(lines)
+
+
+def plot(rows: Sequence[dict], path, front: Sequence[dict] = (), title: str | None = None) -> Path:
+    """True error and estimate against DOFs (left) and against run time (right, with the Pareto ``front``)."""
+    from ...results.plots import plt, save_figure
+
+    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.4))
+    for method, color in (("uniform", "tab:blue"), ("adaptive", "tab:red")):
+        group = [r for r in rows if r["method"] == method]
+        if not group:
+            continue
+        for ax, key in zip(axes, ("ndof", "time")):
+            x = [r[key] for r in group]
+            ax.loglog(x, [r["error"] for r in group], "o-", color=color, label=f"{method}: true error")
+            ax.loglog(x, [r["estimate"] or np.nan for r in group], "^--", color=color, mfc="none",
+                      label=f"{method}: estimate")
+    if front:
+        axes[1].step([r["time"] for r in front], [r["error"] for r in front], "k-", where="post", lw=1.0,
+                     label="Pareto front (true error)")
+    ndof = np.array([r["ndof"] for r in rows], dtype=float)
+    optimal = rows[0]["error"] * (ndof.min() / np.sort(ndof)) ** 0.5
+    axes[0].loglog(np.sort(ndof), optimal, "k:", lw=0.8, label="N^(−1/2) (optimal, P1 in 2-D)")
+    for ax, label in zip(axes, ("DOFs", "wall time, end to end [s]")):
+        ax.set_xlabel(label)
+        ax.set_ylabel("relative energy error")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(title or f"uniform against adaptive refinement: {rows[0]['scene']}", fontsize=10)
+    return save_figure(fig, path)
