@@ -14,7 +14,8 @@ R_S u + o_S = 0; the slipping ones' tractions held at ±s, a linear term of Φ) 
     [J  E_Aᵀ] [d]   [−∇Φ − E_fixedᵀ y_fixed]
     [E_A  0 ] [z] = [e_A − E_A u           ]
 
-by the Schur complement E_A J⁻¹ E_Aᵀ on one sparse Cholesky of J (its ordering kept from step to step). After the
+on one sparse Cholesky of J (its ordering kept from step to step): by eliminating the active rows' DOFs where each
+row moves one DOF of its own (nodes against a flat obstacle), else by the Schur complement E_A J⁻¹ E_Aᵀ. After the
 step that meets the rows, the iterates stay on them, and an Armijo line search on Φ — the merit a residual norm is
 not: a semismooth residual's norm need not decrease along Newton's direction where points start or stop flowing —
 makes the iteration globally convergent for a fixed A (a convex function on an affine set); primal-dual active-set
@@ -123,6 +124,17 @@ def secant(model, u: np.ndarray, y: np.ndarray, increment: np.ndarray | None) ->
     return float(np.clip(move @ gap / max(move @ move, np.finfo(float).tiny), 0.0, SECANT)) * increment
 
 
+def unit_rows(B: sp.spmatrix) -> tuple[np.ndarray, np.ndarray] | None:
+    """The DOF and the coefficient of each row of ``B`` where every row has one nonzero, on a DOF of its own; else
+    None. Such rows are eliminated from the Newton system like Dirichlet conditions: one solve per step instead of
+    the Schur complement's one per row."""
+    B = sp.csr_matrix(B, copy=True)
+    B.eliminate_zeros()
+    if B.shape[0] == 0 or (np.diff(B.indptr) != 1).any() or np.unique(B.indices).size != B.shape[0]:
+        return None
+    return B.indices, B.data
+
+
 def cholesky(plastic: Plastic, J: sp.spmatrix, G: sp.spmatrix, D: sp.spmatrix, dim: int):
     """A Cholesky factorization of the tangent J (free DOFs), refactorizing the step's earlier one on its pattern (J's
     pattern is K's with the points' k × k blocks coupled through G and D); None where J is singular."""
@@ -196,6 +208,20 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
     def direction(M, gradient, active, u):
         """Newton's step d and the active rows' multipliers z (None, None if the system is singular)."""
         J, B, rhs = fem.K - G @ (M @ D), E[active], e[active] - E[active] @ u
+        unit = unit_rows(B)
+        if unit is not None:  # each active row moves one DOF (nodes against a flat obstacle): eliminated in J
+            dofs, values = unit
+            prescribed = np.zeros(u.size)
+            prescribed[dofs] = rhs / values
+            keep = np.ones(u.size)
+            keep[dofs] = 0.0
+            eliminated = sp.diags(keep) @ J @ sp.diags(keep) + sp.diags(1.0 - keep)
+            factors = cholesky(plastic, eliminated, G, D, fem.dim)
+            if factors is not None:
+                b = -gradient - J @ prescribed
+                b[dofs] = prescribed[dofs]
+                d = factors.solve(b)
+                return d, (-gradient - J @ d)[dofs] / values
         factors = None if plastic.factors.get("saddle") else cholesky(plastic, J, G, D, fem.dim)
         if factors is None:  # J singular (a body held by its contact alone): the saddle-point matrix is not
             plastic.factors["saddle"] = True
