@@ -1,9 +1,11 @@
-"""Histories of elasto-viscoplastic bodies (von Mises, Perzyna): each step one conic program (docs/plasticity.md).
+"""Histories of elasto-viscoplastic bodies (von Mises, Perzyna): each step one convex program (docs/plasticity.md).
 
 The contact side is the elastic history's (:mod:`.history_run`: the step's loads and obstacle, friction on the slip
 increment, the primal program); :class:`PlasticProcess` carries the plastic strain α and the accumulated plastic
-strain from step to step, and :class:`PlasticStepper` extends each step's program with the plastic points
-(:func:`~convexcontact.formulations.plastic_step.plastic`), solves it and certifies the contact and the material law.
+strain from step to step, and :class:`PlasticStepper` solves each step — by Newton's method on the reduced step energy
+from the last step's answer where it applies (:mod:`.plastic_polish`), else, or where Newton fails, by the conic
+program extended with the plastic points (:func:`~convexcontact.formulations.plastic_step.plastic`) — and certifies
+the contact and the material law.
 """
 
 from __future__ import annotations
