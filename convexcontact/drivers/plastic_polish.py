@@ -51,7 +51,7 @@ ROUNDING = 1e-10
 ARMIJO = 1e-4
 """Sufficient decrease of Φ along a step, in units of the directional derivative."""
 ROUNDOFF = 1e-13
-"""Changes of Φ below ROUNDOFF · max(|Φ|, force scale) are rounding: the full step is taken there."""
+"""Changes of Φ below ROUNDOFF · |Φ| are rounding: near the answer the full step is taken."""
 PATTERN_FILL = 1e-300
 """Weight of the structural entries added to J so that its first factorization holds every later J's pattern
 (the entries are below the floats' resolution of any J entry, so they change no value)."""
@@ -264,7 +264,7 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
                 trial = state(u + length * d, fixed)
                 missed = (1 - length) * np.abs(violation).sum()  # the rows are linear: the violation shrinks so
                 if trial[0] + weight * missed <= penalized + ARMIJO * length * slope \
-                        + ROUNDOFF * max(abs(merit), force):
+                        + ROUNDOFF * max(abs(merit), abs(trial[0])):
                     break
             else:
                 return Outcome(None, steps, f"the line search on the step energy found no decrease in {LINE_SEARCH} "
@@ -275,11 +275,11 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
         settled, law = sets(u, y)
         slack = e[:m] - A @ u  # in the units of the rows' violation that stopped Newton
         tolerance = CONVERGED * max(1.0, np.abs(y).max(initial=0.0))
-        feasible = slack[rows[:m]].min(initial=0.0) >= -CONVERGED * max(1.0, np.abs(u).max()) and y[:m].min(initial=0.0) >= -tolerance and \
-            (np.abs(y[m:]) <= bound + tolerance).all()
+        feasible = slack[rows[:m]].min(initial=0.0) >= -CONVERGED * max(1.0, np.abs(u).max()) \
+            and y[:m].min(initial=0.0) >= -tolerance and (np.abs(y[m:]) <= bound + tolerance).all()
         if np.array_equal(settled, active) and np.array_equal(law, fixed) and feasible:
-            return Outcome(ContactFields(u=u, pressure=np.maximum(y[:m], 0.0), friction=y[m:] if friction else None),
-                           steps)
+            pressure = np.maximum(y[:m], 0.0)  # a closed row's pressure may end at −1e-12 of the largest: rounding
+            return Outcome(ContactFields(u=u, pressure=pressure, friction=y[m:] if friction else None), steps)
         active, fixed = settled, law
         y = np.where(active, y, fixed)
     return Outcome(None, steps, f"the contact's active set did not settle in {rounds} rounds")
