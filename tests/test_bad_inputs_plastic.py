@@ -10,10 +10,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import convexcontact as cc
+from convexcontact import cli
 from convexcontact.drivers import plastic_history
 from convexcontact.scene.toml import scene_from_dict
+from convexcontact.studies.benchmarks import bench, plastic_bench
 
-SURFACES = ("cc.Material", "reader toml", "cc.run_history", "cc.solve", "cc.prepare")
+SURFACES = ("cc.Material", "reader toml", "cc.run_history", "cc.solve", "cc.prepare", "convexcontact bench")
 
 STEEL = {"E": 1.0, "nu": 0.3}
 
@@ -136,3 +138,42 @@ def test_a_plastic_body_without_history_is_not_solved_as_elastic(entry):
 def test_a_plastic_subdomain_without_history_is_refused_too():
     scene = dataclasses.replace(block(PLASTIC, history=False), materials={"a": PLASTIC})
     raises(lambda: cc.solve(scene), "history", "drop yield_stress")
+
+
+@pytest.mark.parametrize(("options", "texts"), [
+    (["--dim", "3"], ["--dim: the plastic bench's punch is 2-D", "drop --dim 3"]),
+    (["--laws", "coulomb"], ["--laws: coulomb on a plastic body is not built", "--laws signorini tresca"]),
+    (["--formulation", "dual"], ["--formulation: 'dual'", "--formulation primal"]),
+    (["--solver", "osqp"], ["--solver: 'osqp' cannot take", "--solver clarabel"]),
+    (["--solver", "bogus"], ["solver: unknown 'bogus'", "use one of"]),
+    (["--sweep", "2"], ["--sweep: ", "drop --sweep"]),
+    (["--sizes", "50"], ["--sizes: 50 DOFs", "at least 100"]),
+    (["--sizes", "nan"], ["--sizes: ", "e.g."]),
+    (["--nodes", "1e3"], ["--nodes: ", "with --scenario whole-face"]),
+    (["--sizes", "1e9"], ["--sizes"]),
+    (["--out", "earlier"], ["--out: ", "--overwrite"]),
+])
+def test_the_plastic_bench_refuses_what_its_punch_is_not_built_for(capsys, tmp_path, monkeypatch, options, texts):
+    """``convexcontact bench --scenario plastic`` with an option its case cannot take: exit 2, ``error: --OPTION: …``
+    with a fix, before any case runs and with the earlier run's CSV untouched."""
+    monkeypatch.setattr(bench, "run", lambda *args, **kwargs: pytest.fail("the work started"))
+    monkeypatch.setattr(plastic_bench, "measure", lambda *args, **kwargs: pytest.fail("the work started"))
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "earlier").mkdir()
+    (tmp_path / "earlier" / "bench_2d_plastic.csv").write_text("an earlier run's")
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(["bench", "--scenario", "plastic", *options])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "error: " in err and "Traceback" not in err, err
+    for text in texts:
+        assert text in err, err
+    assert (tmp_path / "earlier" / "bench_2d_plastic.csv").read_text() == "an earlier run's"
+
+
+def test_the_return_mapping_baseline_refuses_friction():
+    """Its penalty contact is frictionless: a Tresca scene would be solved as a smooth one, so it is refused."""
+    from convexcontact.baselines import return_mapping_history
+
+    scene = block(PLASTIC, law=cc.Tresca(slip_bound=0.01))
+    raises(lambda: return_mapping_history(scene, 1e3), "contact.law", "cc.Signorini()")

@@ -10,6 +10,7 @@ conic one by the penalty's error, O(1/c).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +18,7 @@ import scipy.sparse as sp
 
 from ..fem.assembly import FEModel, assemble
 from ..fem.plasticity import PlasticPoints, material_per_element, plastic_points
-from ..scene.description import Scene, SceneError, of_type
+from ..scene.description import Scene, SceneError, Signorini, of_type
 from .penalty import check_inputs, newton
 
 
@@ -116,12 +117,14 @@ class ReturnMappingStep:
 
 @dataclass
 class ReturnMappingResult:
-    """The baseline's answer at every step (user units): displacements, contact pressures and the normal force."""
+    """The baseline's answer at every step (user units): displacements, contact pressures and the normal force; its
+    Newton steps and seconds per step."""
 
     displacement: list[np.ndarray]
     pressure: list[np.ndarray]
     normal_force: np.ndarray
     newton_steps: list[int]
+    seconds: list[float]
 
 
 def return_mapping_history(scene: Scene, penalty: float, tol: float = 1e-10, max_iter: int = 100):
@@ -129,15 +132,19 @@ def return_mapping_history(scene: Scene, penalty: float, tol: float = 1e-10, max
     displacement: relative to E/L) on its contact; rigid obstacle under displacement control, one body."""
     if of_type(scene, Scene, "scene", "build cc.Scene(...) with a history").history is None:
         raise SceneError("history", "the return-mapping baseline runs a load history", "give the scene a history")
+    if not isinstance(scene.contact.law, Signorini):
+        raise SceneError("contact.law", f"{type(scene.contact.law).__name__}: the return-mapping baseline's penalty "
+                         "contact is frictionless", "give the scene contact law cc.Signorini()")
     fem = assemble(scene.history.envelope(scene))
     check_inputs(fem.contact, penalty, 1.0)
     points = plastic_points(fem)
     sigma, eta = (points.per_point(values) for values in material_per_element(fem))
     radius, relaxation = np.sqrt(2 / 3) * sigma / fem.scaling.pressure, eta / fem.scaling.stress
     alpha, u = np.zeros(points.count * points.components), np.zeros(fem.free.size)
-    out = ReturnMappingResult([], [], np.zeros(len(scene.history)), [])
+    out = ReturnMappingResult([], [], np.zeros(len(scene.history)), [], [])
     times = (0.0, *scene.history.times)
     for k in range(len(scene.history)):
+        start = time.perf_counter()
         step_fem = fem.at(scene.history.scene(scene, k))
         step = ReturnMappingStep(step_fem, points, alpha, radius, relaxation / (times[k + 1] - times[k]), penalty)
         u, steps, converged, _ = newton(step.energy, step.gradient, step.hessian, u, step.force_scale, tol, max_iter,
@@ -145,6 +152,7 @@ def return_mapping_history(scene: Scene, penalty: float, tol: float = 1e-10, max
         if not converged:
             raise RuntimeError(f"return mapping: step {k + 1} did not converge in {max_iter} Newton steps")
         alpha = alpha + step.radial_return(step.strains(u)[1])[0].ravel()
+        out.seconds.append(time.perf_counter() - start)
         pressure = penalty * step.overlap(u)
         scaling = step_fem.scaling
         out.displacement.append(step_fem.full(u) * scaling.displacement)

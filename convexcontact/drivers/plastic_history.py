@@ -1,9 +1,11 @@
-"""Histories of elasto-viscoplastic bodies (von Mises, Perzyna): each step one conic program (docs/plasticity.md).
+"""Histories of elasto-viscoplastic bodies (von Mises, Perzyna): each step one convex program (docs/plasticity.md).
 
 The contact side is the elastic history's (:mod:`.history_run`: the step's loads and obstacle, friction on the slip
 increment, the primal program); :class:`PlasticProcess` carries the plastic strain α and the accumulated plastic
-strain from step to step, and :class:`PlasticStepper` extends each step's program with the plastic points
-(:func:`~convexcontact.formulations.plastic_step.plastic`), solves it and certifies the contact and the material law.
+strain from step to step, and :class:`PlasticStepper` solves each step — by Newton's method on the reduced step energy
+from the last step's answer where it applies (:mod:`.plastic_polish`), else, or where Newton fails, by the conic
+program extended with the plastic points (:func:`~convexcontact.formulations.plastic_step.plastic`) — and certifies
+the contact and the material law.
 """
 
 from __future__ import annotations
@@ -115,27 +117,73 @@ class PlasticProcess(Process):
 
 class PlasticStepper:
     """Solves a plastic step and certifies it: the contact certificate, with the plastic strain's nodal forces Gα
-    as a load, and the material law's residuals (:meth:`PlasticState.residuals`). Where Newton's method applies
-    (:mod:`.plastic_polish`) it finishes the interior point's answer."""
+    as a load, and the material law's residuals (:meth:`PlasticState.residuals`).
 
-    def __init__(self, process: PlasticProcess, solver: str, options: dict):
-        self.process, self.solver, self.options = process, solver, options
+    Where Newton's method applies (:mod:`.plastic_polish`) and ``fast``, the step is first solved by it from the last
+    step's answer; the conic program is solved only where that fails (``extra["fallback"]`` says why), and its answer
+    is finished by Newton as well. ``extra["path"]`` is "newton" or "conic"."""
+
+    def __init__(self, process: PlasticProcess, solver: str, options: dict, fast: bool = True):
+        self.process, self.solver, self.options, self.fast = process, solver, options, fast
+        self.previous: ContactFields | None = None  # the last step's answer (scaled): the fast path's start
+        self.increment: np.ndarray | None = None  # the last step's displacement increment (scaled, free DOFs)
+        self.factors: dict = {}  # the tangent's factorization, its ordering kept from step to step
+
+    def plastic(self) -> plastic_polish.Plastic:
+        process = self.process
+        return plastic_polish.Plastic(process.points, process.coupling, process.alpha, process.radius,
+                                      process.relaxation / process.dt, self.factors)
 
     def solve(self, model: Model, key, timings: dict) -> PlasticResult:
-        process = self.process
+        newton = plastic_polish.applies(model)
+        extra = {}
+        if newton and self.fast:
+            with timed(timings, "newton"):
+                outcome = plastic_polish.newton(model, self.plastic(), *self.start(model))
+            if outcome.fields is not None:
+                solution = ConicSolution(x=outcome.fields.u, z=np.zeros(0), s=np.zeros(0), status="solved",
+                                         solver_status="converged", iterations=outcome.steps,
+                                         solve_time=timings["newton"], solver="plastic-newton")
+                result = self.result(model, solution, outcome.fields, outcome.steps, timings, {"path": "newton"})
+                if result.status == "solved":
+                    return self.kept(result, outcome.fields)
+                outcome.reason = f"Newton's answer failed its certificate ({result.certificate.worst:.1e})"
+            extra = {"fallback": outcome.reason, "fallback_newton_steps": outcome.steps}
         with timed(timings, "formulation"):
-            program, contact = plastic(model.program, process.step(model))
+            program, contact = plastic(model.program, self.process.step(model))
         with timed(timings, "solve"):
             solution = contact(solvers.solve(program, self.solver, **self.options))
         with timed(timings, "postprocess"):
-            polished = None
-            if plastic_polish.applies(model) and solution.solved and np.isfinite(solution.x).all():
-                polished = plastic_polish.polish(model, process.points, process.coupling, process.alpha,
-                                                 process.radius, process.relaxation / process.dt, model.recover(solution))
-            return self.result(model, solution, *(polished or (None, 0)), timings)
+            outcome = plastic_polish.Outcome(None, 0)
+            if newton and solution.solved and np.isfinite(solution.x).all():
+                fields = model.recover(solution)
+                outcome = plastic_polish.newton(model, self.plastic(), fields.u, self.multipliers(model, fields))
+            result = self.result(model, solution, outcome.fields, outcome.steps, timings, {"path": "conic", **extra})
+        return self.kept(result, outcome.fields or (model.recover(solution) if result.status == "solved" else None))
+
+    def start(self, model: Model) -> tuple[np.ndarray, np.ndarray]:
+        """The fast path's guess: the last step's displacement, moved along its increment as far as the contact rows
+        closed then ask (:func:`~.plastic_polish.secant`), and its contact multipliers (zero at the first step)."""
+        rows = model.fem.contact.m + (model.friction.R.shape[0] if model.friction else 0)
+        if self.previous is None:
+            return np.zeros(model.fem.n_free), np.zeros(rows)
+        u, y = self.previous.u.copy(), self.multipliers(model, self.previous)
+        return u + plastic_polish.secant(model, u, y, self.increment), y
+
+    @staticmethod
+    def multipliers(model: Model, fields: ContactFields) -> np.ndarray:
+        """The contact multipliers (pressures, then friction tractions) of ``fields``, scaled."""
+        return np.concatenate([fields.pressure] + ([fields.friction] if model.friction else [])).astype(float)
+
+    def kept(self, result: PlasticResult, fields: ContactFields | None) -> PlasticResult:
+        """``result``, its fields kept as the next step's start."""
+        if fields is not None:
+            self.increment = fields.u - self.previous.u if self.previous is not None else fields.u
+            self.previous = fields
+        return result
 
     def result(self, model: Model, solution: ConicSolution, fields: ContactFields | None, newton_steps: int,
-               timings: dict):
+               timings: dict, extra: dict):
         """The certified result of the step from the solver's ``solution`` of its contact program, or from Newton's
         ``fields`` where they were found."""
         process, fem = self.process, model.fem
@@ -143,7 +191,7 @@ class PlasticStepper:
         state = process.state(u_full)
         loaded = keeping_K(replace(fem, f_full=fem.f_full + process.coupling @ state.alpha), fem)
         result = replace(model, fem=loaded).result(solution, timings, model.slip_bound, fields=fields,
-                                                   extra={"newton_steps": newton_steps})
+                                                   extra={"newton_steps": newton_steps, **extra})
         result.fem = fem
         if result.certificate is None:
             return result

@@ -1,34 +1,60 @@
-"""Newton's method on a plastic step's optimality system, from the interior point's answer (docs/plasticity.md).
+"""Newton's method on a plastic step's optimality system: the fast path from the last step, and the finish of the
+interior point's answer (docs/plasticity.md).
 
-The interior point leaves the step's equilibrium at about 1e-6 of the load near a limit state (P2 punch, Clarabel
-at tol 1e-10 to 1e-12). At fixed u the plastic strain is the radial return's closed form, so the step's optimality
-system is, in u and the pressures z_A of the active contact rows A,
+At fixed u the plastic strain is the radial return's closed form, so the step is the minimization over u alone of the
+reduced energy
 
-    K u − G α(u) − f + A_Aᵀ z_A = 0,    A_A u = b_A,
+    Φ(u) = ½uᵀKu − fᵀu + Σ_q w_q [ψ_q(Πᵀε_q − α_q^old) − μ‖Πᵀε_q‖²],
+    ψ(e) = min over Δα of μ‖e − Δα‖² + (η_p/2Δt)‖Δα‖² + r‖Δα‖,
 
-semismooth in u, its Jacobian K − Gᵀ-weighted consistent tangent (the Hessian of the convex step energy in u).
-From the interior point's u and active set, Newton's steps end at the exact discrete answer in a few sparse
-solves; the active set is corrected by the Signorini natural map (a primal-dual active set round) until it settles.
-Built for Signorini and 2-D exact Tresca friction (sticking points: equalities R_S u + o_S = 0; slipping points:
-their traction ±s fixed) against a rigid obstacle under displacement control (no compliance, no force control, no
-3-D friction: their rows are not equalities of u alone); the answer is kept only if it is feasible and settled.
+convex and C¹ with the semismooth gradient ∇Φ = Ku − G(α^old + Δα(u)) − f and the consistent tangent as generalized
+Hessian, under the contact rows. On a guess of the active contact rows A (closed nodes; sticking friction points,
+R_S u + o_S = 0; the slipping ones' tractions held at ±s, a linear term of Φ) Newton's step solves
+
+    [J  E_Aᵀ] [d]   [−∇Φ − E_fixedᵀ y_fixed]
+    [E_A  0 ] [z] = [e_A − E_A u           ]
+
+on one sparse Cholesky of J (its ordering kept from step to step): by eliminating the active rows' DOFs where each
+row moves one DOF of its own (nodes against a flat obstacle), else by the Schur complement E_A J⁻¹ E_Aᵀ. After the
+step that meets the rows, the iterates stay on them, and an Armijo line search on Φ — the merit a residual norm is
+not: a semismooth residual's norm need not decrease along Newton's direction where points start or stop flowing —
+makes the iteration globally convergent for a fixed A (a convex function on an affine set); primal-dual active-set
+rounds (the natural maps of Signorini's and Tresca's laws) correct A until it settles feasible.
+
+Built for Signorini and 2-D exact Tresca friction against a rigid obstacle under displacement control (no compliance,
+no force control, no 3-D friction: their rows are not equalities of u alone). :func:`newton` returns the answer
+or the reason it gave up; the caller falls back to the conic program.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..fem.factorization import factorize
 from ..fem.plasticity import PlasticPoints
 from ..formulations.fields import ContactFields
 from ..formulations.primal import carrying
 from ..results.plastic_state import radial_return
 
-ROUNDS, STEPS, LINE_SEARCH = 5, 12, 12
-"""Active-set rounds, Newton steps in each, halvings of a step."""
+ROUNDS, STEPS, LINE_SEARCH = 8, 30, 30
+"""Active-set rounds, Newton steps in all of them, halvings of a step: a bounded cost before the conic fallback."""
 CONVERGED = 1e-12
 """Largest equilibrium residual, relative to the largest nodal force, at which Newton stops."""
+SECANT = 10.0
+"""Largest multiple of the last increment the secant predictor takes."""
+ROUNDING = 1e-10
+"""Residual below which Newton also stops when a step no longer halves it (the Schur complement's rounding)."""
+ARMIJO = 1e-4
+"""Sufficient decrease of Φ along a step, in units of the directional derivative."""
+ROUNDOFF = 1e-13
+"""Changes of Φ below ROUNDOFF · |Φ| are rounding: near the answer the full step is taken."""
+PATTERN_FILL = 1e-300
+"""Weight of the structural entries added to J so that its first factorization holds every later J's pattern
+(the entries are below the floats' resolution of any J entry, so they change no value)."""
 
 
 def applies(model) -> bool:
@@ -53,27 +79,111 @@ def tangent(points: PlasticPoints, u_full, old, radius, viscosity) -> tuple[np.n
     blocks = scale[:, None, None] * ((1.0 - ratio)[:, None, None] * (np.eye(k) - outer) + outer)
     blocks *= flowing[:, None, None]
     count = blocks.shape[0]
-    return radial_return(points, u_full, old, radius, viscosity), sp.bsr_matrix((blocks, np.arange(count), np.arange(count + 1)),
-                                            shape=(count * k, count * k)).tocsr()
+    derivative = sp.bsr_matrix((blocks, np.arange(count), np.arange(count + 1)), shape=(count * k, count * k))
+    return radial_return(points, u_full, old, radius, viscosity), derivative.tocsr()
 
 
-def polish(model, points: PlasticPoints, coupling: sp.spmatrix, old, radius, viscosity, fields: ContactFields,
-           rounds: int = ROUNDS):
-    """The exact answer of the step from ``fields`` (the interior point's, scaled) and the Newton steps it took, or
-    None if Newton does not settle on a feasible one within ``rounds`` active-set rounds."""
-    fem, C, friction = model.fem, model.C, model.friction
+@dataclass
+class Plastic:
+    """The plastic data of a step (scaled): points, coupling G (full DOFs × k·points), α^old, r and η_p/Δt per point,
+    and a factorization of the tangent kept from step to step (its ordering)."""
+
+    points: PlasticPoints
+    coupling: sp.spmatrix
+    old: np.ndarray
+    radius: np.ndarray
+    viscosity: np.ndarray
+    factors: dict
+
+    def energy(self, u_full, increment) -> float:
+        """Σ_q w_q [ψ_q(e_q) − μ‖Πᵀε_q‖²] at the yielding points (elsewhere ψ_q(e) = μ‖Πᵀε‖²), Δα = ``increment``."""
+        p, k = self.points, self.points.components
+        yielding = np.isfinite(self.radius)
+        strain = (p.deviatoric @ u_full).reshape(-1, k)[yielding]
+        e = strain - self.old.reshape(-1, k)[yielding]
+        flow = increment.reshape(-1, k)[yielding]
+        size = np.linalg.norm(flow, axis=1)
+        shear = p.shear[yielding]
+        point = 0.5 * shear * (np.sum((e - flow) ** 2, axis=1) - np.sum(strain**2, axis=1)) \
+            + 0.5 * self.viscosity[yielding] * size**2 + self.radius[yielding] * size
+        return float(p.weights[yielding] @ point)
+
+
+def secant(model, u: np.ndarray, y: np.ndarray, increment: np.ndarray | None) -> np.ndarray:
+    """The secant predictor: s × the last step's ``increment``, s the least-squares fit of the gaps of the rows that
+    carried a pressure (y > 0) in the new step, within [0, SECANT]; 0 without such rows. The tangent predictor from
+    the last state (Newton's first step) pushed the punch's nodes in alone and made most points flow, then took
+    10–20 damped steps to recover (docs/plasticity.md)."""
+    contact = model.fem.contact
+    closed = y[: contact.m] > 0
+    if increment is None or not closed.any():
+        return np.zeros_like(u)
+    A = (model.C @ contact.N).tocsr()[closed]
+    gap = (contact.weighted_gap(model.C) - model.C @ contact.normal_offset)[closed] - A @ u
+    move = A @ increment
+    return float(np.clip(move @ gap / max(move @ move, np.finfo(float).tiny), 0.0, SECANT)) * increment
+
+
+def unit_rows(B: sp.spmatrix) -> tuple[np.ndarray, np.ndarray] | None:
+    """The DOF and the coefficient of each row of ``B`` where every row has one nonzero, on a DOF of its own; else
+    None. Such rows are eliminated from the Newton system like Dirichlet conditions: one solve per step instead of
+    the Schur complement's one per row."""
+    B = sp.csr_matrix(B, copy=True)
+    B.eliminate_zeros()
+    if B.shape[0] == 0 or (np.diff(B.indptr) != 1).any() or np.unique(B.indices).size != B.shape[0]:
+        return None
+    return B.indices, B.data
+
+
+def cholesky(plastic: Plastic, J: sp.spmatrix, G: sp.spmatrix, D: sp.spmatrix, dim: int):
+    """A Cholesky factorization of the tangent J (free DOFs), refactorizing the step's earlier one on its pattern (J's
+    pattern is K's with the points' k × k blocks coupled through G and D); None where J is singular."""
+    factors = plastic.factors
+    if "pattern" not in factors:
+        k, count = plastic.points.components, plastic.points.count
+        blocks = sp.kron(sp.eye(count), np.ones((k, k)))  # the tangent's blocks, full
+        pattern = (abs(J) + abs(G) @ blocks @ abs(D)).tocsr()
+        pattern.data[:] = 1.0
+        factors["pattern"] = pattern
+    J = J + PATTERN_FILL * factors["pattern"]
+    try:
+        if "J" in factors and factors["J"].size == J.shape[0]:
+            factors["J"].refactorize(J)
+        else:
+            factors["J"] = factorize(J, dim=dim)
+            factors["J"].size = J.shape[0]
+    except (ValueError, RuntimeError):  # SceneError (singular) is a ValueError; PARDISO's zero pivot a RuntimeError
+        factors.pop("J", None)
+        return None
+    return factors["J"]
+
+
+@dataclass
+class Outcome:
+    """Newton's answer (None if it gave up), the Newton steps taken and, if it gave up, why."""
+
+    fields: ContactFields | None
+    steps: int
+    reason: str = ""
+
+
+def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = ROUNDS) -> Outcome:
+    """The step's exact answer from the guess ``u`` (free DOFs) and contact multipliers ``y`` (pressures, then friction
+    tractions; scaled), by the globalized semismooth Newton of the module docstring."""
+    fem, friction = model.fem, model.friction
     contact = fem.contact
     # the contact rows E (normal: C N; friction: −R) with E u ≤ e (normal) or E u = e (sticking), multipliers y whose
     # force is Eᵀy: y = (pressures, friction tractions λ_T)
-    A = (C @ contact.N).tocsr()
+    A = (model.C @ contact.N).tocsr()
     m = A.shape[0]
     E = sp.vstack([A] + ([-friction.R] if friction else []), format="csr")
-    e = np.concatenate([contact.weighted_gap(C) - C @ contact.normal_offset] + ([friction.offset] if friction else []))
-    weights = contact.row_weights(C)
+    e = np.concatenate([contact.weighted_gap(model.C) - model.C @ contact.normal_offset]
+                       + ([friction.offset] if friction else []))
+    weights = contact.row_weights(model.C)
     bound = model.slip_bound if friction else np.zeros(0)
     rows = carrying(E)
-    G = coupling[fem.free]
-    force = max(np.abs(fem.f).max(initial=0.0), np.abs(fem.K @ fields.u).max(), contact.weights.max())
+    G, D = plastic.coupling[fem.free], plastic.points.deviatoric[:, fem.free].tocsr()
+    force = max(np.abs(fem.f).max(initial=0.0), np.abs(fem.K @ u).max(), contact.weights.max())
 
     def sets(u, y):
         """Active rows (closed nodes, sticking points) and the multipliers fixed by the law (slipping points' ±s),
@@ -87,42 +197,89 @@ def polish(model, points: PlasticPoints, coupling: sp.spmatrix, old, radius, vis
             fixed[m:] = np.where(rows[m:] & ~stick, bound * np.sign(trial), 0.0)
         return active, fixed
 
-    def residual(u, y, active):
-        """The optimality system's residual (equilibrium over the force scale, then the active rows' gaps) at u, y."""
-        increment, M = tangent(points, fem.full(u), old, radius, viscosity)
-        equilibrium = fem.K @ u - G @ (old + increment) - fem.f + E.T @ y
-        return np.concatenate([equilibrium / force, e[active] - E[active] @ u]), M
+    def state(u, fixed):
+        """Φ (with the slipping tractions' work), its gradient and the tangent's blocks at u."""
+        u_full = fem.full(u)
+        increment, M = tangent(plastic.points, u_full, plastic.old, plastic.radius, plastic.viscosity)
+        gradient = fem.K @ u - G @ (plastic.old + increment) - fem.f + E.T @ fixed
+        merit = 0.5 * u @ (fem.K @ u) - fem.f @ u + plastic.energy(u_full, increment) + fixed @ (E @ u)
+        return merit, gradient, M
 
-    u = fields.u.copy()
-    y = np.where(rows, np.concatenate([fields.pressure] + ([fields.friction] if friction else [])), 0.0)
-    (active, fixed), steps = sets(u, y), 0
+    def direction(M, gradient, active, u):
+        """Newton's step d and the active rows' multipliers z (None, None if the system is singular)."""
+        J, B, rhs = fem.K - G @ (M @ D), E[active], e[active] - E[active] @ u
+        unit = unit_rows(B)
+        if unit is not None:  # each active row moves one DOF (nodes against a flat obstacle): eliminated in J
+            dofs, values = unit
+            prescribed = np.zeros(u.size)
+            prescribed[dofs] = rhs / values
+            keep = np.ones(u.size)
+            keep[dofs] = 0.0
+            eliminated = sp.diags(keep) @ J @ sp.diags(keep) + sp.diags(1.0 - keep)
+            factors = cholesky(plastic, eliminated, G, D, fem.dim)
+            if factors is not None:
+                b = -gradient - J @ prescribed
+                b[dofs] = prescribed[dofs]
+                d = factors.solve(b)
+                return d, (-gradient - J @ d)[dofs] / values
+        factors = None if plastic.factors.get("saddle") else cholesky(plastic, J, G, D, fem.dim)
+        if factors is None:  # J singular (a body held by its contact alone): the saddle-point matrix is not
+            plastic.factors["saddle"] = True
+            try:
+                step = spla.splu(sp.bmat([[J, B.T], [B, None]], format="csc")).solve(np.concatenate([-gradient, rhs]))
+            except RuntimeError:  # "Factor is exactly singular"
+                return None, None
+            return step[: u.size], step[u.size:]
+        free = factors.solve(-gradient)
+        if not active.any():
+            return free, np.zeros(0)
+        try:
+            z = np.linalg.solve(factors.schur(B), B @ free - rhs)
+        except np.linalg.LinAlgError:
+            return None, None
+        return free - factors.solve(B.T @ z), z
+
+    (active, fixed), steps, weight = sets(u, y), 0, 0.0
     y = np.where(active, y, fixed)
     for _ in range(rounds):
-        r, M = residual(u, y, active)
-        for _ in range(STEPS):
-            if np.abs(r).max() <= CONVERGED:
-                break
-            J = fem.K - G @ M @ points.deviatoric[:, fem.free]
-            kkt = sp.bmat([[J, E[active].T], [E[active], None]], format="csc")
-            rhs = np.concatenate([-(r[: u.size] * force - E[active].T @ y[active]), r[u.size:]])
-            step = spla.splu(kkt).solve(rhs)
-            direction, target = step[: u.size], fixed.copy()
-            target[active] = step[u.size:]
-            steps += 1
-            for length in 0.5 ** np.arange(LINE_SEARCH):  # backtracking on ‖r‖: the points' flow switches on and off
-                trial_u, trial_y = u + length * direction, y + length * (target - y)
-                trial, trial_M = residual(trial_u, trial_y, active)
-                if np.linalg.norm(trial) < (1 - 1e-4 * length) * np.linalg.norm(r):
+        merit, gradient, M = state(u, fixed)
+        previous = np.inf
+        while True:
+            residual = np.abs(gradient + E[active].T @ y[active]).max() / force
+            violation = e[active] - E[active] @ u
+            met = np.abs(violation).max(initial=0.0) <= CONVERGED * max(1.0, np.abs(u).max())
+            if met and (residual <= CONVERGED or ROUNDING >= residual > previous / 2):
+                break  # converged, or stalled at the solves' rounding
+            if steps == STEPS:
+                return Outcome(None, steps, f"Newton did not converge in {STEPS} steps ({rounds} active-set rounds)")
+            d, z = direction(M, gradient, active, u)
+            if d is None:
+                return Outcome(None, steps, "the tangent (or its Schur complement on the active rows) is singular")
+            steps, previous = steps + 1, residual
+            # Armijo on Φ + ρ‖e_A − E_A u‖₁, exact for ρ > max |z|: the steps meeting the active rows are damped too
+            weight = max(weight, 2.0 * np.abs(z).max(initial=0.0))
+            slope = gradient @ d - weight * np.abs(violation).sum()
+            penalized = merit + weight * np.abs(violation).sum()
+            for length in 0.5 ** np.arange(LINE_SEARCH):
+                trial = state(u + length * d, fixed)
+                missed = (1 - length) * np.abs(violation).sum()  # the rows are linear: the violation shrinks so
+                if trial[0] + weight * missed <= penalized + ARMIJO * length * slope \
+                        + ROUNDOFF * max(abs(merit), abs(trial[0])):
                     break
-            u, y, r, M = trial_u, trial_y, trial, trial_M
-        if np.abs(r).max() > CONVERGED:
-            return None  # Newton does not settle on these sets
+            else:
+                return Outcome(None, steps, f"the line search on the step energy found no decrease in {LINE_SEARCH} "
+                               "halvings")
+            u = u + length * d
+            merit, gradient, M = trial
+            y[active] = z
         settled, law = sets(u, y)
-        slack = (e[:m] - A @ u) / weights
-        feasible = slack[rows[:m]].min(initial=0.0) >= -CONVERGED and y[:m].min(initial=0.0) >= 0 and \
-            (np.abs(y[m:]) <= bound * (1 + CONVERGED)).all()
+        slack = e[:m] - A @ u  # in the units of the rows' violation that stopped Newton
+        tolerance = CONVERGED * max(1.0, np.abs(y).max(initial=0.0))
+        feasible = slack[rows[:m]].min(initial=0.0) >= -CONVERGED * max(1.0, np.abs(u).max()) \
+            and y[:m].min(initial=0.0) >= -tolerance and (np.abs(y[m:]) <= bound + tolerance).all()
         if np.array_equal(settled, active) and np.array_equal(law, fixed) and feasible:
-            return ContactFields(u=u, pressure=y[:m], friction=y[m:] if friction else None), steps
+            pressure = np.maximum(y[:m], 0.0)  # a closed row's pressure may end at −1e-12 of the largest: rounding
+            return Outcome(ContactFields(u=u, pressure=pressure, friction=y[m:] if friction else None), steps)
         active, fixed = settled, law
         y = np.where(active, y, fixed)
-    return None
+    return Outcome(None, steps, f"the contact's active set did not settle in {rounds} rounds")

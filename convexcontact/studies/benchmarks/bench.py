@@ -2,7 +2,8 @@
 
 For each size and law (Signorini, Tresca, Coulomb) on the punch scene (or, with
 ``--scenario whole-face``, a block whose whole bottom face is in contact; ``two-body``, a punch on
-a foundation; ``shapes``, each scene of the family of :mod:`.shapes`), one fresh
+a foundation; ``shapes``, each scene of the family of :mod:`.shapes`; ``plastic``, a plastic step:
+:mod:`.plastic_bench`), one fresh
 process assembles the scene, then times (a) one linear elastic solve, K's sparse
 factorization plus u = K⁻¹f, and (b) the contact solve on the same assembly: the
 condensation (if the formulation condenses), the formulation, the solver (the whole
@@ -31,10 +32,11 @@ import numpy as np
 
 from ...results.output import check_folder_target, check_new_files
 from ..arguments import SECONDS_PER_DOF, check_duration, integer, named, number
+from . import plastic_bench
 
 LAWS = ("signorini", "tresca", "coulomb")
 SIZES = {2: (1e4, 1e5, 1e6), 3: (1e4, 1e5, 3e5)}
-SCENARIOS = ("punch", "whole-face", "two-body", "shapes")
+SCENARIOS = ("punch", "whole-face", "two-body", "shapes", "plastic")
 NODES = {2: (1e3, 4e3), 3: (1e3, 4e3)}
 """Contact nodes of the whole-face cases, by default (``--nodes``)."""
 COLUMNS = ("scenario", "dim", "law", "dofs", "contact_nodes", "unknowns", "formulation", "solver", "status", "iterations",
@@ -94,6 +96,8 @@ def scene_of(scenario: str, dim: int, law: str, dofs: float, nodes: float | None
         return two_body_scene(law, dofs)
     if scenario in SHAPES:
         return shape_scene(scenario, law_of(law), dofs)
+    if scenario == "plastic":
+        return plastic_bench.punch_scene(dofs, law)
     from ...scene.library import whole_face
 
     return whole_face(dim, int(nodes), dofs, law_of(law))
@@ -118,6 +122,8 @@ def _rss_mb(key: str) -> float:
 def measure(dim: int, law: str, dofs: float, formulation: str, solver: str, scenario: str = "punch",
             nodes: float | None = None) -> dict:
     """One benchmark case in this process (call it in a fresh one: see :func:`run`)."""
+    if scenario == "plastic":
+        return plastic_bench.measure(law, dofs, solver)
     from ... import solvers
     from ...drivers.prepared import formulate
     from ...drivers.rules import MATRIX_FREE
@@ -183,7 +189,7 @@ def run(dim: int, sizes, laws=LAWS, formulation: str = "auto", solver: str = "au
                 progress(f"{dim}-D {scene} {law} {dofs:.0e}: failed\n{done.stderr.strip()[-2000:]}")
                 continue
             rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
-            progress(format_row(rows[-1]))
+            progress((plastic_bench.format_row if scenario == "plastic" else format_row)(rows[-1]))
     return rows
 
 
@@ -223,11 +229,11 @@ def format_row(row: dict) -> str:
             f"certificate {row['certificate']:.1e}" + (f"  Newton {row['coulomb_newton']}" if row.get("coulomb_newton") else ""))
 
 
-def write_csv(rows: list, path) -> Path:
+def write_csv(rows: list, path, columns=COLUMNS) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as out:
-        writer = csv.DictWriter(out, fieldnames=COLUMNS, extrasaction="ignore")
+        writer = csv.DictWriter(out, fieldnames=columns, extrasaction="ignore")
         writer.writeheader()
         writer.writerows(rows)
     return path
@@ -264,6 +270,8 @@ def check_arguments(args) -> None:
     from ...scene.meshing import check_memory, check_size
 
     solvers.check_name(args.solver)
+    if args.scenario == "plastic":
+        plastic_bench.check_arguments(args)
     if args.formulation not in ("auto", "primal", "dual", "dual-matrix-free"):
         raise ValueError(f"--formulation: unknown {args.formulation!r}; use auto, primal, dual or dual-matrix-free")
     if args.sizes is not None and min(args.sizes) < 100:
@@ -317,11 +325,14 @@ def main(argv=None) -> list:
     parser.add_argument("--dim", type=int, choices=(2, 3), default=2)
     parser.add_argument("--sizes", type=number("1e4", positive=False), nargs="+", default=None,
                         help="target free DOFs (default: 1e4 … 1e6 in 2-D, 1e4 … 3e5 in 3-D)")
-    parser.add_argument("--laws", nargs="+", choices=LAWS, default=list(LAWS))
+    parser.add_argument("--laws", nargs="+", choices=LAWS, default=None,
+                        help="default: all three; signorini with --scenario plastic")
     parser.add_argument("--scenario", choices=SCENARIOS, default="punch",
                         help="punch (a small contact zone), whole-face (a block's whole bottom face in contact) "
                         "or two-body (a punch with its own mesh on an elastic foundation, mortar; 2-D) or shapes (a "
-                        "family: block, tall block, strips 20:1 to 400:1 with free or clamped ends, two bodies; 2-D)")
+                        "family: block, tall block, strips 20:1 to 400:1 with free or clamped ends, two bodies; 2-D), "
+                        "or plastic (a plastic step of Prandtl's punch: conic, Newton's fast path and return "
+                        "mapping; 2-D)")
     parser.add_argument("--nodes", type=number("1e3"), nargs="+", default=None,
                         help="whole-face: contact nodes (default: 1e3 4e3), each case at each of --sizes")
     parser.add_argument("--formulation", default="auto", help="auto | primal | dual | dual-matrix-free")
@@ -334,6 +345,7 @@ def main(argv=None) -> list:
                         "solves against one reused model")
     parser.add_argument("--case", help=argparse.SUPPRESS)  # internal: one case, in this process
     args = parser.parse_args(argv)
+    args.laws = args.laws or (["signorini"] if args.scenario == "plastic" else list(LAWS))
     if args.case:
         print(json.dumps(measure(*json.loads(args.case))))
         return []
@@ -348,7 +360,8 @@ def main(argv=None) -> list:
                scenario=args.scenario, nodes=nodes_of(args))
     if rows:
         name = csv_name(args)
-        print("wrote", write_csv(rows, args.out / f"{name}.csv"), plot(rows, args.out / f"{name}.png"))
+        columns = plastic_bench.COLUMNS if args.scenario == "plastic" else COLUMNS
+        print("wrote", write_csv(rows, args.out / f"{name}.csv", columns), plot(rows, args.out / f"{name}.png"))
     return rows
 
 
