@@ -9,6 +9,7 @@ import pytest
 import skfem as fe
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from refusals import raises
 
 import convexcontact as cc
 from convexcontact import cli
@@ -22,16 +23,6 @@ SURFACES = ("cc.History", "cc.run_history", "cc.HistoryResult", "cc.bodies_scene
 STEEL = cc.Material(1.0, 0.3)
 PATCH = cc.library.pressure_patch(nx=3)
 PUNCH = cc.library.hertz_punch(nx=8)  # force-controlled parabolic punch
-
-
-def raises(build, field: str, fix: str):
-    """``build()`` raises a ValueError whose message starts with ``field`` and carries ``fix``."""
-    with pytest.raises(ValueError) as error:
-        build()
-    message = str(error.value)
-    assert message.startswith(f"{field}: "), message
-    assert fix in message, message
-    return message
 
 
 def with_history(scene: cc.Scene, times, **values) -> cc.Scene:

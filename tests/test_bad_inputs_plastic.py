@@ -8,6 +8,7 @@ import math
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from refusals import raises
 
 import convexcontact as cc
 from convexcontact import cli
@@ -18,16 +19,6 @@ from convexcontact.studies.benchmarks import bench, plastic_bench
 SURFACES = ("cc.Material", "reader toml", "cc.run_history", "cc.solve", "cc.prepare", "convexcontact bench")
 
 STEEL = {"E": 1.0, "nu": 0.3}
-
-
-def raises(build, field: str, fix: str):
-    """``build()`` raises a ValueError whose message starts with ``field`` and carries ``fix``."""
-    with pytest.raises(ValueError) as error:
-        build()
-    message = str(error.value)
-    assert message.startswith(f"{field}: "), message
-    assert fix in message, message
-    return message
 
 
 def block(material: cc.Material, law=None, plane: str = "strain", history: bool = True) -> cc.Scene:
