@@ -293,7 +293,10 @@ def solves(Q: np.ndarray, q: np.ndarray, w: np.ndarray) -> bool:
 
 
 def pivoting(Q: np.ndarray, q: np.ndarray) -> np.ndarray | None:
-    """Murty's least-index principal pivoting: finite for a P-matrix Q; None if it does not end."""
+    """Murty's least-index principal pivoting: finite for a P-matrix Q; None if it does not end.
+
+    Written by hand: scipy has no complementarity solver, and Q (edges times lifts) need not be symmetric, so the
+    project's conic solvers (symmetric P) cannot pose it as a QP."""
     basis = np.zeros(q.size, bool)  # w_i basic (z_i = 0)
     for _ in range(PIVOTS):
         w = branch_slack(Q, q, basis)
