@@ -48,6 +48,21 @@ def test_without_yield_a_step_is_the_elastic_two_body_solve(law, both):
     assert step.max_equivalent_plastic_strain == 0.0
 
 
+def test_a_viscous_part_beside_a_plastic_one_keeps_its_viscous_step():
+    """A Kelvin–Voigt lower block under a plastic upper one (σ_Y far above every stress), the upper top held down for
+    three steps while the lower one creeps: the plastic history is the elastic–viscous one of the same pair."""
+    viscous = cc.Material(E, NU, viscosity=1.0)
+    scenes = [dataclasses.replace(pushed_blocks(upper, viscous, cc.Signorini()),
+                                  history=cc.History([0.5, 1.0, 2.0], {"dirichlet[upper.top].uy": [-0.005] * 3}))
+              for upper in (cc.Material(E, NU, yield_stress=1e3), cc.Material(E, NU))]
+    plastic, elastic = (cc.run_history(scene) for scene in scenes)
+    assert plastic.status == elastic.status == "solved"
+    moves = [np.abs(step.displacement - elastic.steps[0].displacement).max() for step in elastic.steps[1:]]
+    assert min(moves) > 1e-3 * np.abs(elastic.steps[0].displacement).max()  # it creeps
+    for a, b in zip(plastic.steps, elastic.steps, strict=True):
+        assert np.abs(a.displacement - b.displacement).max() < 1e-9 * np.abs(b.displacement).max()
+
+
 def stacked(depths, dim: int = 2, law=None) -> cc.Scene:
     """A plastic unit block on an elastic one, frictionless between them, compressed by moving the upper top down by
     ``depths``; rollers elsewhere (the lower bottom, one side of each block), so both are in homogeneous uniaxial

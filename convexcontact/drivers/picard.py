@@ -17,7 +17,8 @@ recorded in ``extra["picard"]["attempts"]``.
 The map stops when its relative change is below max(tol, NOISE × the inner solve's own
 residual): never below what the inner solver can reach. What no attempt solves is a
 reported outcome — with the best iterate, its Coulomb residuals and the whole history —
-never an exception and never a silent success.
+never an exception and never a silent success. A driver whose inner problem is no program of the
+model's (a plastic step) gives the map an :class:`InnerStep` in place of the solver session.
 """
 
 from __future__ import annotations

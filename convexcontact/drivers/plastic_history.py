@@ -5,7 +5,8 @@ increment, the primal program); :class:`PlasticProcess` carries the plastic stra
 strain from step to step, and :class:`PlasticStepper` solves each step — by Newton's method on the reduced step energy
 from the last step's answer where it applies (:mod:`.plastic_polish`), else, or where Newton fails, by the conic
 program extended with the plastic points (:func:`~convexcontact.formulations.plastic_step.plastic`) — and certifies
-the contact and the material law.
+the contact and the material law. A Coulomb step is the Picard map over such steps (:mod:`.plastic_coulomb`); a scene of
+several bodies is one mesh, its plastic parts' cells carrying the points.
 """
 
 from __future__ import annotations
