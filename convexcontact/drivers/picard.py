@@ -27,6 +27,7 @@ import hashlib
 import itertools
 import time
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -371,23 +372,20 @@ def paths(model: Model, solver: str, options: dict, timings: dict):
                     if name != solvers.resolve(solver, each.program) and not solvers.matrix_free(each.program))
 
 
-class InnerStep:
+class InnerStep(Protocol):
     """What a driver whose inner problem is no program of the model's gives the map in place of a solver session
     (:mod:`.plastic_coulomb`: a plastic Tresca step): ``solve(s)`` the inner answer for the slip bounds s (its fields
     then in ``fields``), ``residual(model, fields, bound)`` the worst residual of the whole certificate under
     ``bound``, ``result(solution, timings, bound, fields, extra)`` the certified result; ``name`` for the record."""
 
-    name = "inner"
-    fields = None
+    name: str
+    fields: object
 
-    def solve(self, s: np.ndarray) -> ConicSolution:
-        raise NotImplementedError
+    def solve(self, s: np.ndarray) -> ConicSolution: ...
 
-    def residual(self, model: Model, fields, bound: np.ndarray) -> float:
-        raise NotImplementedError
+    def residual(self, model: Model, fields, bound: np.ndarray) -> float: ...
 
-    def result(self, solution: ConicSolution, timings: dict, bound: np.ndarray, fields, extra: dict):
-        raise NotImplementedError
+    def result(self, solution: ConicSolution, timings: dict, bound: np.ndarray, fields, extra: dict): ...
 
 
 def coulomb(model: Model, solver: str = "clarabel", progress=None, inner: InnerStep | None = None, **options):
