@@ -120,3 +120,24 @@ def test_the_conic_inner_steps_give_newtons_answer():
         assert {entry["path"] for entry in b.extra["history"]} == {"conic"}
         assert a.extra["picard"]["iterations"] == len(a.extra["history"]) > 1
         assert np.abs(a.displacement - b.displacement).max() < 1e-7 * np.abs(b.displacement).max()
+
+
+def test_a_failing_inner_step_is_reported_not_raised(monkeypatch):
+    """Where every inner step fails (Newton not applicable, the conic solver returning no answer), the step is reported
+    with the solver's word and no answer — never an exception, never a silent success — and the history stops there."""
+    from convexcontact import solvers
+    from convexcontact.conic import ConicSolution
+    from convexcontact.drivers import plastic_polish
+
+    def failed(program, *args, **kwargs):
+        size = program.q.size
+        return ConicSolution(x=np.full(size, np.nan), z=np.full(program.b.size, np.nan), s=np.full(program.b.size, np.nan),
+                             status="failed", solver_status="NumericalError", iterations=0, solve_time=0.0,
+                             solver="clarabel")
+
+    monkeypatch.setattr(plastic_polish, "applies", lambda model: False)
+    monkeypatch.setattr(solvers, "solve", failed)
+    result = cc.run_history(punch(cc.Coulomb(friction=0.2)))
+    assert len(result.steps) == 1 and result.status == "failed"
+    assert result.steps[0].displacement is None and "NumericalError" in result.message
+    assert "inner solve NumericalError" in result.steps[0].extra["picard"]["outcome"]
