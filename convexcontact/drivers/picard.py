@@ -17,7 +17,8 @@ recorded in ``extra["picard"]["attempts"]``.
 The map stops when its relative change is below max(tol, NOISE × the inner solve's own
 residual): never below what the inner solver can reach. What no attempt solves is a
 reported outcome — with the best iterate, its Coulomb residuals and the whole history —
-never an exception and never a silent success.
+never an exception and never a silent success. A driver whose inner problem is no program of the
+model's (a plastic step) gives the map an :class:`InnerStep` in place of the solver session.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import hashlib
 import itertools
 import time
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -172,6 +174,7 @@ class Attempt:
     best: tuple | None = None  # (Coulomb residual, iteration, solution, fields, bound) of its best iterate
     last: tuple | None = None
     failed: tuple | None = None  # (inner solution, its slip bounds) of a solve that failed, if one did
+    inner: object | None = None  # a driver's own inner step (a plastic step: :class:`InnerStep`); None: the program's
 
     @property
     def answer(self) -> tuple | None:
@@ -231,7 +234,7 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
 
     try:
         newton = newton_session(model, attempt, opened) if attempt.newton else None
-        if newton is None:
+        if newton is None and attempt.inner is None:
             opened()
     except solvers.ConeNotSupported as error:  # OSQP and a 3-D cone: the user's choice is the user's error
         if attempt.required:
@@ -258,17 +261,21 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
                 s = s()
                 states.append(s)
                 start += time.perf_counter() - paused
-            opened().update(**model.bound_update(s))
-            solution = session.solve()
+            if attempt.inner is not None:
+                solution = attempt.inner.solve(s)
+            else:
+                opened().update(**model.bound_update(s))
+                solution = session.solve()
         inner = time.perf_counter() - start
         timings["solve"] = timings.get("solve", 0.0) + inner
         if not solution.solved:
             attempt.outcome, attempt.failed = f"failed (inner solve {solution.solver_status})", (solution, s)
             break
-        fields = model.recover(solution)
+        fields = model.recover(solution) if attempt.inner is None else attempt.inner.fields
         target = bound(fields.pressure)
         changes.append(float(np.abs(target - s).max() / max(np.abs(target).max(), unit_bound)))
-        coulomb_residual, inner_residual = residual(model, fields, target), residual(model, fields, s)
+        certificate = residual if attempt.inner is None else attempt.inner.residual
+        coulomb_residual, inner_residual = certificate(model, fields, target), certificate(model, fields, s)
         noise.append(inner_residual)
         attempt.stop = max(law.tol, NOISE * inner_residual)
         attempt.iterations += 1
@@ -365,9 +372,26 @@ def paths(model: Model, solver: str, options: dict, timings: dict):
                     if name != solvers.resolve(solver, each.program) and not solvers.matrix_free(each.program))
 
 
-def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
+class InnerStep(Protocol):
+    """What a driver whose inner problem is no program of the model's gives the map in place of a solver session
+    (:mod:`.plastic_coulomb`: a plastic Tresca step): ``solve(s)`` the inner answer for the slip bounds s (its fields
+    then in ``fields``), ``residual(model, fields, bound)`` the worst residual of the whole certificate under
+    ``bound``, ``result(solution, timings, bound, fields, extra)`` the certified result; ``name`` for the record."""
+
+    name: str
+    fields: object
+
+    def solve(self, s: np.ndarray) -> ConicSolution: ...
+
+    def residual(self, model: Model, fields, bound: np.ndarray) -> float: ...
+
+    def result(self, solution: ConicSolution, timings: dict, bound: np.ndarray, fields, extra: dict): ...
+
+
+def coulomb(model: Model, solver: str = "clarabel", progress=None, inner: InnerStep | None = None, **options):
     """Run the Picard map for the model's Coulomb law, adapting ω, solver and formulation as it fails;
-    return the result of the first certified fixed point, or of the best iterate of all attempts."""
+    return the result of the first certified fixed point, or of the best iterate of all attempts. ``inner``: the
+    inner step of a driver of its own (one path: only ω is adapted)."""
     law: Coulomb = model.law
     timings = dict(model.timings)
     with timed(timings, "initial"):
@@ -378,13 +402,13 @@ def coulomb(model: Model, solver: str = "clarabel", progress=None, **options):
             return pressure_bound[0](initial_pressure(model, solver, options))
 
     history, attempts = [], []
-    tries = paths(model, solver, options, timings)
+    tries = paths(model, solver, options, timings) if inner is None else iter([(model, inner.name, {})])
     path, relaxation, halvings = next(tries), law.relaxation, 0
     while path is not None and len(history) < law.max_iterations:
         # Newton's method once, in the first attempt, where the user left the solver to the driver (a study that
         # names a solver gets that solver's map)
-        newton = law.newton and not attempts and solver in ("auto", "newton-cg")
-        attempt = Attempt(*path, relaxation, required=not attempts, newton=newton)
+        newton = law.newton and not attempts and solver in ("auto", "newton-cg") and inner is None
+        attempt = Attempt(*path, relaxation, required=not attempts, newton=newton, inner=inner)
         attempts.append(attempt)
         start = time.perf_counter()
         end = iterate(attempt, s, range(len(history) + 1, law.max_iterations + 1), pressure_bound, history, timings,
@@ -416,7 +440,8 @@ def report(attempts: list[Attempt], history: list, timings: dict, law: Coulomb):
                         "tol": law.tol, "stop_change": final.stop, "reported_iteration": iteration,
                         "attempts": [attempt.record() for attempt in attempts]}, "history": history}
     with timed(timings, "postprocess"):
-        result = chosen.model.result(solution, timings, bound, fields=fields, extra=extra)
+        result = (chosen.model.result if chosen.inner is None else chosen.inner.result)(solution, timings, bound,
+                                                                                        fields=fields, extra=extra)
     if not final.solved and chosen.best is not None:  # else the failed inner solve's own status
         result.status = "not converged"
         result.message = failure_message(attempts, history, law)

@@ -5,7 +5,8 @@ increment, the primal program); :class:`PlasticProcess` carries the plastic stra
 strain from step to step, and :class:`PlasticStepper` solves each step — by Newton's method on the reduced step energy
 from the last step's answer where it applies (:mod:`.plastic_polish`), else, or where Newton fails, by the conic
 program extended with the plastic points (:func:`~convexcontact.formulations.plastic_step.plastic`) — and certifies
-the contact and the material law.
+the contact and the material law. A Coulomb step is the Picard map over such steps (:mod:`.plastic_coulomb`); a scene of
+several bodies is one mesh, its plastic parts' cells carrying the points.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from ..conic import ConicSolution
 from ..fem.plasticity import material_per_element, plastic_points
 from ..formulations.fields import ContactFields
 from ..formulations.plastic_step import PlasticStep, plastic
-from ..results.certificate import Certificate
+from ..results.certificate import Certificate, certify
 from ..results.plastic_state import PlasticResult, PlasticState
 from ..scene.bodies import Bodies
 from ..scene.description import Coulomb, Material, Scene, SceneError
@@ -42,14 +43,11 @@ def plastic_scene(scene: Scene) -> bool:
 def check_plastic_scene(scene: Scene, formulation: str, solver: str) -> None:
     """Refuse, before any assembly, what the plastic steps are not built for."""
     if scene.body.plane != "strain":  # 2-D only: a 3-D body refuses plane stress itself
-        raise SceneError("body.plane", "plasticity is built for plane strain and 3-D bodies (plane stress bends the "
+        field_name = "body.plane"
+        if isinstance(scene.body, Bodies):  # the parts share one hypothesis: named by the first plastic part's
+            field_name = next(f"parts[{part.name}].plane" for part in scene.body.parts if part.material.plastic)
+        raise SceneError(field_name, "plasticity is built for plane strain and 3-D bodies (plane stress bends the "
                          "yield surface of the in-plane stresses)", "give plane = 'strain' (the default)")
-    if isinstance(scene.body, Bodies):
-        raise SceneError("materials", "a yield stress in a scene of several bodies: plasticity is built for one body",
-                         "drop yield_stress from the parts' materials, or model one body against a rigid obstacle")
-    if isinstance(scene.contact.law, Coulomb):
-        raise SceneError("contact.law", "Coulomb friction on a plastic body is not built (each step would run the "
-                         "Picard map over a plastic program)", "use 'signorini' or 'tresca' with a plastic body")
     if formulation not in ("auto", "primal"):
         raise SceneError("formulation", f"{formulation!r}: a plastic body's strains couple all its DOFs, so its steps "
                          "are posed in the primal only", "use formulation='primal' or 'auto'")
@@ -89,6 +87,9 @@ class PlasticProcess(Process):
         self.columns = np.repeat(self.yielding, self.points.components)
         self.alpha = np.zeros(self.columns.size)
         self.accumulated = np.zeros(self.points.count)
+        # a Coulomb step's map starts from the last step's pressures; the first's from none (s = 0), so that its
+        # first inner step is the plastic Signorini step, not the elastic one
+        self.pressure = np.zeros(fem.contact.m)
 
     def step_model(self, k: int, timings: dict) -> Model:
         times = self.history.times
@@ -135,18 +136,30 @@ class PlasticStepper:
                                       process.relaxation / process.dt, self.factors)
 
     def solve(self, model: Model, key, timings: dict) -> PlasticResult:
+        if isinstance(model.law, Coulomb):
+            from .plastic_coulomb import coulomb_step
+
+            return coulomb_step(self, model, timings)
+        result, _, fields = self.answer(model, timings, *self.start(model))
+        return self.kept(result, fields if result.status == "solved" else None)
+
+    def answer(self, model: Model, timings: dict, u: np.ndarray, y: np.ndarray):
+        """The certified result of the step whose contact program is ``model``'s, its solution (Newton's as a
+        ConicSolution, its path in ``info["plastic"]``) and its fields (None without an answer); Newton from the
+        guess (``u``, ``y``) first where it applies, the conic program where it fails."""
         newton = plastic_polish.applies(model)
         extra = {}
         if newton and self.fast:
             with timed(timings, "newton"):
-                outcome = plastic_polish.newton(model, self.plastic(), *self.start(model))
+                outcome = plastic_polish.newton(model, self.plastic(), u, y)
             if outcome.fields is not None:
                 solution = ConicSolution(x=outcome.fields.u, z=np.zeros(0), s=np.zeros(0), status="solved",
                                          solver_status="converged", iterations=outcome.steps,
-                                         solve_time=timings["newton"], solver="plastic-newton")
-                result = self.result(model, solution, outcome.fields, outcome.steps, timings, {"path": "newton"})
+                                         solve_time=timings["newton"], solver="plastic-newton",
+                                         info={"plastic": {"path": "newton", "newton_steps": outcome.steps}})
+                result = self.result(model, solution, outcome.fields, timings)
                 if result.status == "solved":
-                    return self.kept(result, outcome.fields)
+                    return result, solution, outcome.fields
                 outcome.reason = f"Newton's answer failed its certificate ({result.certificate.worst:.1e})"
             extra = {"fallback": outcome.reason, "fallback_newton_steps": outcome.steps}
         with timed(timings, "formulation"):
@@ -155,11 +168,14 @@ class PlasticStepper:
             solution = contact(solvers.solve(program, self.solver, **self.options))
         with timed(timings, "postprocess"):
             outcome = plastic_polish.Outcome(None, 0)
-            if newton and solution.solved and np.isfinite(solution.x).all():
+            usable = solution.solved and np.isfinite(solution.x).all()
+            if newton and usable:
                 fields = model.recover(solution)
                 outcome = plastic_polish.newton(model, self.plastic(), fields.u, self.multipliers(model, fields))
-            result = self.result(model, solution, outcome.fields, outcome.steps, timings, {"path": "conic", **extra})
-        return self.kept(result, outcome.fields or (model.recover(solution) if result.status == "solved" else None))
+            solution = replace(solution, info={**solution.info, "plastic": {"path": "conic",
+                                                                             "newton_steps": outcome.steps, **extra}})
+            result = self.result(model, solution, outcome.fields, timings)
+        return result, solution, outcome.fields or (model.recover(solution) if usable else None)
 
     def start(self, model: Model) -> tuple[np.ndarray, np.ndarray]:
         """The fast path's guess: the last step's displacement, moved along its increment as far as the contact rows
@@ -182,16 +198,33 @@ class PlasticStepper:
             self.previous = fields
         return result
 
-    def result(self, model: Model, solution: ConicSolution, fields: ContactFields | None, newton_steps: int,
-               timings: dict, extra: dict):
+    def loaded(self, model: Model, u: np.ndarray) -> tuple[Model, PlasticState]:
+        """``model`` with the plastic strain's nodal forces Gα at the displacement ``u`` (free DOFs) as a load, and
+        the plastic state there."""
+        fem = model.fem
+        state = self.process.state(fem.full(u))
+        return replace(model, fem=keeping_K(replace(fem, f_full=fem.f_full + self.process.coupling @ state.alpha),
+                                            fem)), state
+
+    def residual(self, model: Model, fields: ContactFields, bound: np.ndarray) -> float:
+        """The worst residual of the step's whole certificate (contact under the slip bound ``bound``, material)."""
+        loaded, state = self.loaded(model, fields.u)
+        fem = loaded.fem
+        contact = certify(fem.K, fem.f, fem.contact, model.C, fields, model.friction, bound, model.epsilon,
+                          model.compliance)
+        return max([contact.worst, *state.residuals(fem.full(fields.u)).values()])
+
+    def result(self, model: Model, solution: ConicSolution, fields: ContactFields | None, timings: dict,
+               bound: np.ndarray | None = None, extra: dict | None = None):
         """The certified result of the step from the solver's ``solution`` of its contact program, or from Newton's
-        ``fields`` where they were found."""
-        process, fem = self.process, model.fem
-        u_full = fem.full(fields.u if fields is not None else solution.x[: fem.n_free])
-        state = process.state(u_full)
-        loaded = keeping_K(replace(fem, f_full=fem.f_full + process.coupling @ state.alpha), fem)
-        result = replace(model, fem=loaded).result(solution, timings, model.slip_bound, fields=fields,
-                                                   extra={"newton_steps": newton_steps, **extra})
+        ``fields`` where they were found; the friction law's slip bound ``bound`` (the model's where None: Coulomb's
+        is the answer's own); ``solution.info["plastic"]`` goes to ``extra`` (the path, the Newton steps)."""
+        fem = model.fem
+        u = fields.u if fields is not None else solution.x[: fem.n_free]
+        loaded, state = self.loaded(model, u)
+        u_full = fem.full(u)
+        result = loaded.result(solution, timings, model.slip_bound if bound is None else bound, fields=fields,
+                               extra={**solution.info.get("plastic", {}), **(extra or {})})
         result.fem = fem
         if result.certificate is None:
             return result

@@ -134,8 +134,9 @@ def check_arguments(args) -> None:
     if args.dim != 2:
         raise ValueError("--dim: the plastic bench's punch is 2-D (plane strain); drop --dim 3")
     if set(args.laws) - set(LAWS):
-        raise ValueError(f"--laws: {', '.join(sorted(set(args.laws) - set(LAWS)))} on a plastic body is not built; "
-                         "give --laws signorini tresca")
+        raise ValueError(f"--laws: {', '.join(sorted(set(args.laws) - set(LAWS)))} is not timed by the plastic bench "
+                         "(it times one step by three paths; a Coulomb step is a Picard map of plastic Tresca steps, "
+                         "measured in docs/plasticity.md); give --laws signorini tresca")
     if args.formulation not in ("auto", "primal"):
         raise ValueError(f"--formulation: {args.formulation!r}: plastic steps are posed in the primal only; "
                          "give --formulation primal or auto")
