@@ -32,8 +32,10 @@ CANDIDATES = 8
 """Old boundary facets (nearest by midpoint) tested as the parent of a new one."""
 
 
-GROWTH = 2.0
-"""The default least factor by which each level's DOFs grow (docs/estimate.md, "Fewer, bigger levels")."""
+GROWTH = None
+"""The default least factor by which each level's DOFs grow: none, Dörfler's cells alone. Measured (docs/estimate.md,
+"Fewer, bigger levels"): a floor of 1.5 or 2 costs DOFs and time on the flat punch, whose edges need many levels of
+local bisection, and changes nothing on Hertz, whose Dörfler levels already double."""
 
 
 def check_adapt_options(target, max_dofs, fraction, growth=GROWTH) -> tuple[float, int, float, float | None]:
