@@ -7,11 +7,14 @@ import itertools
 
 import numpy as np
 import pytest
+import skfem as fe
 from test_estimate import flat_punch
 
 import convexcontact as cc
 from convexcontact.drivers.adapt import adapt, dofs_of, refine
 from convexcontact.fem.estimate import dorfler
+from convexcontact.scene.library import hertz_punch
+from convexcontact.scene.meshing import build_mesh
 from convexcontact.studies.precision import refinement, work_precision
 
 
@@ -80,3 +83,17 @@ def test_the_growth_floor_refines_dorflers_cells_and_more():
     assert indicators[split].sum() >= 0.5 * indicators.sum()
     assert dofs_of(grown, "P1") >= 2 * dofs_of(mesh, "P1")
     assert refine(mesh, indicators, 0.5, 10.0).nelements == 4 * mesh.nelements
+
+
+def test_p2_displacements_are_prolonged_as_scikit_fem_evaluates_them():
+    """The true error of a P2 level interpolates it at a finer nested mesh's P2 nodes (vertices and edge midpoints):
+    the same values as scikit-fem's own probes, and zero error against the same answer on the finer mesh's nodes."""
+    scene = hertz_punch(nx=2, element="P2")
+    coarse = cc.solve(scene)
+    fine = cc.solve(refinement.on_mesh(scene, build_mesh(scene.body).refined()))
+    points, _ = refinement.scalar_dofs(fine.fem)
+    u = (coarse.displacement / coarse.fem.scaling.displacement).reshape(-1, 2)
+    probes = fe.CellBasis(coarse.fem.mesh, fe.ElementTriP2()).probes(points)
+    expected = np.column_stack([probes @ u[:, 0], probes @ u[:, 1]]).ravel()
+    assert np.allclose(refinement.prolong(coarse, points, np.zeros(points.shape[1], int)), expected, atol=1e-12)
+    assert refinement.true_errors([fine], fine) == [0.0] and 0 < refinement.true_errors([coarse], fine)[0] < 1

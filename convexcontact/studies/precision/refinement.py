@@ -198,8 +198,9 @@ def table(rows: Sequence[dict], front: Sequence[dict] = ()) -> str:
     return "\n".join(lines)
 
 
-def plot(rows: Sequence[dict], path, front: Sequence[dict] = (), title: str | None = None) -> Path:
-    """True error and estimate against DOFs (left) and against run time (right, with the Pareto ``front``)."""
+def plot(rows: Sequence[dict], path, front: Sequence[dict] = (), title: str | None = None, optimal: float = 0.5) -> Path:
+    """True error and estimate against DOFs (left, with the ``optimal`` rate N^−optimal: 1/2 for P1 in 2-D, 1 for P2)
+    and against run time (right, with the Pareto ``front``)."""
     from ...results.plots import plt, save_figure
 
     fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.4))
@@ -216,8 +217,8 @@ def plot(rows: Sequence[dict], path, front: Sequence[dict] = (), title: str | No
         axes[1].step([r["time"] for r in front], [r["error"] for r in front], "k-", where="post", lw=1.0,
                      label="Pareto front (true error)")
     ndof = np.array([r["ndof"] for r in rows], dtype=float)
-    optimal = rows[0]["error"] * (ndof.min() / np.sort(ndof)) ** 0.5
-    axes[0].loglog(np.sort(ndof), optimal, "k:", lw=0.8, label="N^(−1/2) (optimal, P1 in 2-D)")
+    axes[0].loglog(np.sort(ndof), rows[0]["error"] * (ndof.min() / np.sort(ndof)) ** optimal, "k:", lw=0.8,
+                   label=f"N^(−{optimal:g}) (optimal)")
     for ax, label in zip(axes, ("DOFs", "wall time, end to end [s]")):
         ax.set_xlabel(label)
         ax.set_ylabel("relative energy error")
