@@ -103,7 +103,7 @@ def prolong(result: ContactResult, points: np.ndarray, body: np.ndarray) -> np.n
     fem = result.fem
     mesh, element = fem.mesh, fem.basis.elem.elem
     label = bodies_of(mesh)
-    _, cell_dofs = scalar_dofs(fem)
+    cell_dofs = fe.assembly.Dofs(mesh, element).element_dofs
     u = (result.displacement / fem.scaling.displacement).reshape(-1, fem.dim)  # (scalar DOFs, d)
     out = np.zeros((points.shape[1], fem.dim))
     for b in np.unique(label):
