@@ -7,8 +7,14 @@ import itertools
 
 import numpy as np
 import pytest
+import skfem as fe
 from test_estimate import flat_punch
 
+import convexcontact as cc
+from convexcontact.drivers.adapt import adapt, dofs_of, refine
+from convexcontact.fem.estimate import dorfler
+from convexcontact.scene.library import hertz_punch
+from convexcontact.scene.meshing import build_mesh
 from convexcontact.studies.precision import refinement, work_precision
 
 
@@ -48,3 +54,46 @@ def test_the_pareto_front_of_error_against_time_is_not_dominated(rows):
     assert all(a["error"] > b["error"] for a, b in itertools.pairwise(front))
     for f in front:
         assert not any(o["time"] < f["time"] and o["error"] < f["error"] for o in rows)
+
+
+def refined_cells(coarse, fine) -> np.ndarray:
+    """The cells of ``coarse`` that ``fine`` (a refinement of it) splits: those holding more than one fine cell."""
+    cell, _ = refinement.locate(coarse, fine.p[:, fine.t].mean(axis=1))
+    return np.flatnonzero(np.bincount(cell, minlength=coarse.nelements) > 1)
+
+
+def test_each_level_grows_by_the_factor_until_the_dof_limit():
+    """growth = 2: every level has at least twice the DOFs of the one before (measured 72, 158, 332, 728, 1584), and
+    the loop stops, saying why, where the next mesh would exceed max_dofs."""
+    levels = adapt(flat_punch(), target=1e-9, max_dofs=3000, growth=2.0)
+    dofs = [r.fem.basis.N for r in levels]
+    assert len(levels) >= 4 and all(b >= 2 * a for a, b in itertools.pairwise(dofs))
+    assert all(r.status == "solved" for r in levels) and "max_dofs 3000" in levels[-1].message
+
+
+def test_the_growth_floor_refines_dorflers_cells_and_more():
+    """Dörfler's guarantee is kept: the cells split with growth = 2 include every cell Dörfler's 50 % marks (so they
+    carry at least half of η²); a growth beyond uniform refinement's (4 in 2-D) splits every cell."""
+    result = cc.solve(flat_punch())
+    mesh, indicators = result.fem.mesh, result.error_estimate.indicators
+    marked = dorfler(indicators, 0.5)
+    grown = refine(mesh, indicators, 0.5, 2.0)
+    split = refined_cells(mesh, grown)
+    assert set(marked) <= set(split) and len(split) > len(marked)
+    assert indicators[split].sum() >= 0.5 * indicators.sum()
+    assert dofs_of(grown, "P1") >= 2 * dofs_of(mesh, "P1")
+    assert refine(mesh, indicators, 0.5, 10.0).nelements == 4 * mesh.nelements
+
+
+def test_p2_displacements_are_prolonged_as_scikit_fem_evaluates_them():
+    """The true error of a P2 level interpolates it at a finer nested mesh's P2 nodes (vertices and edge midpoints):
+    the same values as scikit-fem's own probes, and zero error against the same answer on the finer mesh's nodes."""
+    scene = hertz_punch(nx=2, element="P2")
+    coarse = cc.solve(scene)
+    fine = cc.solve(refinement.on_mesh(scene, build_mesh(scene.body).refined()))
+    points, _ = refinement.scalar_dofs(fine.fem)
+    u = (coarse.displacement / coarse.fem.scaling.displacement).reshape(-1, 2)
+    probes = fe.CellBasis(coarse.fem.mesh, fe.ElementTriP2()).probes(points)
+    expected = np.column_stack([probes @ u[:, 0], probes @ u[:, 1]]).ravel()
+    assert np.allclose(refinement.prolong(coarse, points, np.zeros(points.shape[1], int)), expected, atol=1e-12)
+    assert refinement.true_errors([fine], fine) == [0.0] and 0 < refinement.true_errors([coarse], fine)[0] < 1

@@ -1,5 +1,6 @@
-"""Bad inputs of the adaptive run (``convexcontact run SCENE --adapt --target … --max-dofs …``): refused before any
-solve, exit code 2, the message naming the option and a fix."""
+"""Bad inputs of the adaptive run (``convexcontact run SCENE --adapt --target … --max-dofs …``; the Python
+``adapt(…, growth=…)`` and ``refinement.compare(…, growth=…, adaptive_dofs=…)``): refused before any solve, exit code 2
+or a ValueError, the message starting with the option's name and naming a fix."""
 
 from __future__ import annotations
 
@@ -8,8 +9,12 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from refusals import raises
 
 from convexcontact import cli
+from convexcontact.drivers.adapt import adapt
+from convexcontact.scene.library import hertz_punch
+from convexcontact.studies.precision import refinement
 
 SURFACES = ("convexcontact run",)
 
@@ -57,3 +62,31 @@ def test_adaptive_options_without_adapt_are_refused_not_ignored(capsys, option, 
 def test_adapt_with_every_solution_is_refused(capsys):
     message = refused(capsys, "--adapt", "--solutions", "all")
     assert "--adapt:" in message and "--solutions all" in message
+
+
+BAD_GROWTH = [1, 1.0, 0.5, 0, -2, float("nan"), float("inf"), "2", True, [2.0]]
+
+
+@pytest.mark.parametrize("value", BAD_GROWTH)
+def test_adapt_refuses_a_growth_that_is_no_factor_above_one(value, monkeypatch):
+    """A growth ≤ 1 would not grow, NaN and inf no factor, a string or a bool no number: refused before any solve."""
+    monkeypatch.setattr("convexcontact.drivers.adapt.solve", lambda *a, **k: pytest.fail("solved a bad input"))
+    raises(lambda: adapt(hertz_punch(nx=2), growth=value), "growth", "e.g. 2")
+
+
+@pytest.mark.parametrize("value", BAD_GROWTH)
+def test_refinement_comparison_refuses_a_bad_growth_before_any_solve(value, monkeypatch):
+    monkeypatch.setattr("convexcontact.studies.precision.refinement.solve", lambda *a, **k: pytest.fail("solved"))
+    raises(lambda: refinement.compare(hertz_punch(nx=2), 2, growth=value), "growth", "e.g. 2")
+
+
+@pytest.mark.parametrize("value", [0, -100, 2.5, float("nan"), "1e5", True])
+def test_refinement_comparison_refuses_adaptive_dofs_that_are_no_count(value, monkeypatch):
+    monkeypatch.setattr("convexcontact.studies.precision.refinement.solve", lambda *a, **k: pytest.fail("solved"))
+    raises(lambda: refinement.compare(hertz_punch(nx=2), 2, adaptive_dofs=value), "adaptive_dofs", "e.g. 100000")
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.one_of(st.floats(max_value=1.0), st.just(float("nan")), st.text(max_size=5)))
+def test_any_growth_that_is_no_number_above_one_is_refused(value):
+    raises(lambda: adapt(hertz_punch(nx=2), growth=value), "growth", "e.g. 2")

@@ -26,7 +26,7 @@ import skfem as fe
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ...drivers.adapt import adapt
+from ...drivers.adapt import GROWTH, adapt, check_adapt_options
 from ...drivers.solve import solve
 from ...results.result import ContactResult
 from ...scene.description import Body, Scene
@@ -89,32 +89,45 @@ def bodies_of(mesh: fe.Mesh) -> np.ndarray:
     return connected_components(edges, directed=False)[1]
 
 
+def scalar_dofs(fem) -> tuple[np.ndarray, np.ndarray]:
+    """The locations (2, n) of the scalar element's DOFs (u_h's nodes, in the order of ``u.reshape(-1, d)``) and
+    each cell's DOFs (shape functions × cells)."""
+    dofs = fe.assembly.Dofs(fem.mesh, fem.basis.elem.elem)
+    return fe.CellBasis(fem.mesh, fem.basis.elem.elem, intorder=1).doflocs, dofs.element_dofs
+
+
 def prolong(result: ContactResult, points: np.ndarray, body: np.ndarray) -> np.ndarray:
-    """The P1 displacement of ``result`` (scaled) at ``points`` (2, n), each point looked for in the cells of its own
-    ``body`` (two bodies touch at their contact: a point there lies in both)."""
+    """The P1 or P2 displacement of ``result`` (scaled) at ``points`` (2, n), each point looked for in the cells of
+    its own ``body`` (two bodies touch at their contact: a point there lies in both); the element's own shape
+    functions at the point's barycentric coordinates (exact for a finer nested mesh's nodes)."""
     fem = result.fem
-    mesh = fem.mesh
+    mesh, element = fem.mesh, fem.basis.elem.elem
     label = bodies_of(mesh)
-    u = (result.displacement / fem.scaling.displacement).reshape(-1, fem.dim)  # (vertices, d) for P1
+    cell_dofs = fe.assembly.Dofs(mesh, element).element_dofs
+    u = (result.displacement / fem.scaling.displacement).reshape(-1, fem.dim)  # (scalar DOFs, d)
     out = np.zeros((points.shape[1], fem.dim))
     for b in np.unique(label):
         at = np.flatnonzero(body == b)
-        cells = mesh.t[:, label[mesh.t[0]] == b]
-        cell, weights = locate(fe.MeshTri(mesh.p, cells), points[:, at])
-        out[at] = np.einsum("nm,nmd->nd", weights, u[cells[:, cell].T])
+        cells = np.flatnonzero(label[mesh.t[0]] == b)
+        cell, weights = locate(fe.MeshTri(mesh.p, mesh.t[:, cells]), points[:, at])
+        local = weights[:, 1:].T  # the reference triangle's coordinates (ξ, η) = (λ₁, λ₂)
+        dofs = cell_dofs[:, cells[cell]]  # (shape functions, points)
+        out[at] = sum(element.lbasis(local, k)[0][:, None] * u[dofs[k]] for k in range(dofs.shape[0]))
     return out.ravel()
 
 
 def true_errors(results: Sequence[ContactResult], reference: ContactResult) -> list[float]:
-    """‖u_ref − u_h‖_E / ‖u_ref‖_E of each P1 result, u_h interpolated at the reference's nodes (exact on nested
-    meshes; one body or several, each in its own cells)."""
+    """‖u_ref − u_h‖_E / ‖u_ref‖_E of each P1 or P2 result, u_h interpolated at the reference's nodes (exact on
+    nested meshes; one body or several, each in its own cells)."""
     fine = reference.fem
     u_ref = reference.displacement / fine.scaling.displacement
     norm = np.sqrt(u_ref @ (fine.K_full @ u_ref))
-    body = bodies_of(fine.mesh)
+    points, cell_dofs = scalar_dofs(fine)
+    body = np.zeros(points.shape[1], dtype=int)
+    body[cell_dofs] = bodies_of(fine.mesh)[fine.mesh.t[0]]
     out = []
     for result in results:
-        error = u_ref - prolong(result, fine.mesh.p, body)
+        error = u_ref - prolong(result, points, body)
         out.append(float(np.sqrt(error @ (fine.K_full @ error)) / norm))
     return out
 
@@ -130,14 +143,22 @@ def rows_of(method: str, results, seconds, errors, reference: str) -> list[dict]
     return out
 
 
-def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Callable | None = None) -> list[dict]:
-    """Rows (:data:`FIELDS`) of uniform and adaptive refinement of ``scene`` (one body, P1 triangles: the true error
-    interpolates them); ``progress(text)`` after each solve."""
+def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Callable | None = None,
+            growth: float | None = GROWTH, adaptive_dofs: int | None = None) -> list[dict]:
+    """Rows (:data:`FIELDS`) of uniform and adaptive refinement of ``scene`` (one body, P1 or P2 triangles: the true
+    error interpolates them); the adaptive loop (Dörfler ``fraction``, DOFs growing by ``growth`` per level) until the
+    next mesh would exceed ``adaptive_dofs`` (default: the finest uniform level's); ``progress(text)`` after each
+    solve."""
     if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or levels < 2:
         raise ValueError(f"levels: the number of uniform levels, an integer ≥ 2, got {levels!r}; e.g. 4")
-    if scene.body.element != "P1" or build_mesh(scene.body).t.shape[0] != 3:
-        raise ValueError(f"scene: the comparison measures P1 triangles (their true error is interpolated exactly), "
-                         f"got {scene.body.element}; give a 2-D P1 scene")
+    if scene.body.element not in ("P1", "P2") or build_mesh(scene.body).t.shape[0] != 3:
+        raise ValueError(f"scene: the comparison measures P1 or P2 triangles (their true error is interpolated "
+                         f"exactly), got {scene.body.element}; give a 2-D P1 or P2 scene")
+    if adaptive_dofs is not None and (isinstance(adaptive_dofs, bool) or not isinstance(adaptive_dofs, (int, np.integer))
+                                      or adaptive_dofs <= 0):
+        raise ValueError(f"adaptive_dofs: a positive number of DOFs, got {adaptive_dofs!r}; e.g. 100000 (None: the "
+                         "finest uniform level's)")
+    check_adapt_options(0.5, 1, fraction, growth)  # fraction and growth, before any solve
     say = progress or (lambda text: None)
     coarse = build_mesh(scene.body)
     solve(scene).error_budget  # noqa: B018 -- warm-up: the first solve of a process pays its imports, not timed
@@ -149,9 +170,9 @@ def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Call
         say(f"uniform level {k}: {result.ndof} DOFs, {spent:.2f} s")
     reference, _ = timed_solve(on_mesh(scene, coarse.refined(levels - 1 + REFERENCE_LEVELS)))
     say(f"uniform reference: {reference.ndof} DOFs")
-    adaptive = adapt(scene, target=1e-9, max_dofs=uniform[-1].fem.basis.N, fraction=fraction,
-                     progress=lambda k, r: say(f"adaptive level {k}: {r.ndof} DOFs, "
-                                               f"{r.extra['adaptive_seconds']:.2f} s so far"))
+    adaptive = adapt(scene, target=1e-9, max_dofs=adaptive_dofs or uniform[-1].fem.basis.N, fraction=fraction,
+                     growth=growth, progress=lambda k, r: say(f"adaptive level {k}: {r.ndof} DOFs, "
+                                                              f"{r.extra['adaptive_seconds']:.2f} s so far"))
     finest = build_mesh(adaptive[-1].scene.body)
     adaptive_reference, _ = timed_solve(on_mesh(scene, finest.refined(REFERENCE_LEVELS)))
     say(f"adaptive reference: {adaptive_reference.ndof} DOFs")
@@ -177,8 +198,9 @@ def table(rows: Sequence[dict], front: Sequence[dict] = ()) -> str:
     return "\n".join(lines)
 
 
-def plot(rows: Sequence[dict], path, front: Sequence[dict] = (), title: str | None = None) -> Path:
-    """True error and estimate against DOFs (left) and against run time (right, with the Pareto ``front``)."""
+def plot(rows: Sequence[dict], path, front: Sequence[dict] = (), title: str | None = None, optimal: float = 0.5) -> Path:
+    """True error and estimate against DOFs (left, with the ``optimal`` rate N^−optimal: 1/2 for P1 in 2-D, 1 for P2)
+    and against run time (right, with the Pareto ``front``)."""
     from ...results.plots import plt, save_figure
 
     fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.4))
@@ -195,8 +217,8 @@ def plot(rows: Sequence[dict], path, front: Sequence[dict] = (), title: str | No
         axes[1].step([r["time"] for r in front], [r["error"] for r in front], "k-", where="post", lw=1.0,
                      label="Pareto front (true error)")
     ndof = np.array([r["ndof"] for r in rows], dtype=float)
-    optimal = rows[0]["error"] * (ndof.min() / np.sort(ndof)) ** 0.5
-    axes[0].loglog(np.sort(ndof), optimal, "k:", lw=0.8, label="N^(−1/2) (optimal, P1 in 2-D)")
+    axes[0].loglog(np.sort(ndof), rows[0]["error"] * (ndof.min() / np.sort(ndof)) ** optimal, "k:", lw=0.8,
+                   label=f"N^(−{optimal:g}) (optimal)")
     for ax, label in zip(axes, ("DOFs", "wall time, end to end [s]")):
         ax.set_xlabel(label)
         ax.set_ylabel("relative energy error")
