@@ -93,6 +93,14 @@ DIRECT_LIMIT = 10_000
 systems took hundreds of unpreconditioned Krylov iterations per step (a mortar pair on graded meshes; the 3-D punch at
 2.8·10⁵ DOFs, ~5000 unknowns: 180–400 a step, 52 s against 8 s by Cholesky), and an inexact direction stalled the
 Coulomb Newton. 10,000 is ``auto``'s largest dense W; a Cholesky there is ~3·10¹¹ flops."""
+GROW = 10
+"""Times Newton's face may grow per step: the sets its point leaves are held too and the point solved for again, until
+it leaves none (a feasible point; :func:`_grown`). Tresca's slip zone was otherwise found a few nodes a step: Newton's
+point on too small a face overshoots the intervals of the nodes about to slip, its projection raises f, and the
+least f on the segment to it stops short of their bounds, where the next step's face is decided (tall 2-D block 1 : 4,
+51 bottom nodes, 2·10⁴ DOFs, matrix-free: 75 Newton steps and 720 products with P; with GROW 5 steps and 137, 24
+faces grown; the same block at 10⁵ DOFs failed after 100 steps, now 5; docs/performance.md). Each growth costs one
+Newton system; its face only grows, so it ends."""
 EPS = np.finfo(float).eps
 """A ball's radius at most EPS × ‖y‖ is a point to the Newton step (see :func:`_step`)."""
 GMRES_RESTART = 50
@@ -287,6 +295,19 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         p = _project(v - c * g, sets)
         return least_on_segment(v, g, p, move(v, g, p)[2])
 
+    def newton_point(v, y, target):
+        """Newton's point from v on the face y holds, grown by the sets that point leaves until it leaves none (at
+        most GROW times, and not where radii move: see GROW) and the CG iterations it took."""
+        newton, iterations = _step(P, program.q, sets, v, y, c, target, products, cache["precondition"], matrix)
+        for _ in range(GROW if sets.coupling is None else 0):
+            y = _grown(y, newton, sets)
+            if y is None:
+                break
+            newton, more = _step(P, program.q, sets, v, y, c, target, products, cache["precondition"], matrix)
+            iterations += more
+            faces[0] += 1
+        return newton, iterations
+
     def backtrack(v, g, towards, residual):
         """Without an f (moving balls), the first of 1, ½, …, 1/16 of the way to ``towards`` (projected)
         whose natural residual is below ``residual``; ``v`` itself where none is."""
@@ -301,6 +322,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     best, history = np.inf, []
     risen, kinds, descent = 0.0, dict.fromkeys(("residual", "newton", "arc", "segment", "gradient"), 0), []
     steps = cg_total = 0
+    faces = [0]  # the faces grown (see GROW)
     status, word = "failed", "max_iter"
     for steps in range(max_iter + 1):
         residual, y, size = _natural(v, g, c, sets, program.q)
@@ -322,8 +344,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if steps == max_iter:
             break
         target = FORCING * min(1.0, residual / first) * residual * size / np.max(c)
-        newton, iterations = _step(P, program.q, sets, v, y, c, max(target, 0.1 * tol * size / np.max(c)), products,
-                                   cache["precondition"], matrix)
+        newton, iterations = newton_point(v, y, max(target, 0.1 * tol * size / np.max(c)))
         cg_total += iterations
         best = min(best, residual)
         if sets.coupling is not None:
@@ -347,7 +368,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         descent.append((kind, change, cauchy))
     x = sets.shift + sets.scale * v
     info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history,
-            "steps": kinds, "descent": descent}
+            "steps": kinds, "descent": descent, "grown": faces[0]}
     if sets.coupling is not None:  # the program of the radii reached: x is its answer
         b = program.b.copy()
         b[form.ball_radius_rows] = info["radii"] = sets.radii(v)
@@ -452,6 +473,19 @@ def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
     if sets.balls.size:
         lengths[sets.balls] = lengths[sets.balls].min(axis=1, keepdims=True)
     return lengths
+
+
+def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds) -> np.ndarray | None:
+    """y (v − c∇f, whose outside sets :func:`_step` holds) with the sets it leaves free and Newton's point leaves
+    added, at Newton's point (so held on that side, a ball on its sphere through it); None where there are none."""
+    bounds = sets.bounds[(y[sets.bounds] >= 0) & (newton[sets.bounds] < 0)]
+    balls = sets.balls[(np.linalg.norm(y[sets.balls], axis=1) <= sets.radius)
+                       & (np.linalg.norm(newton[sets.balls], axis=1) > sets.radius)]
+    if not (bounds.size or balls.size):
+        return None
+    grown = y.copy()
+    grown[bounds], grown[balls] = newton[bounds], newton[balls]
+    return grown
 
 
 def _natural(v, g, c, sets: _Bounds, q):
