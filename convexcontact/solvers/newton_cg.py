@@ -24,6 +24,11 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
     least f on the segment [v, p(v)], which does with σ = min(½, 1/(2λ)), λ the largest eigenvalue of C^½ P̃ C^½
     (the exact line search of a quadratic on a feasible segment; no bound of P is needed to take it).
 
+Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
+way. With balls (friction) it is Newton's point on a face grown until the point is feasible (GROW): the face the
+natural map holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends,
+and a step solves at most GROW + 1 Newton systems.
+
 All points lie in {f ≤ f(v₀)}, so between two steps (a) the steps (b) with ‖p(v) − v‖_{C⁻¹} > ε number at most
 (f(v₀) − f*) / (σ ε²): the method stops for any tol > 0 after a bounded number of steps, and without a tol the
 least natural residual tends to 0 (p(v) = v is the convex program's optimality condition). This is the projected
@@ -296,14 +301,16 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         return least_on_segment(v, g, p, move(v, g, p)[2])
 
     def newton_point(v, y, target):
-        """Newton's point from v on the face y holds, grown by the sets that point leaves until it leaves none (at
-        most GROW times, and not where radii move: see GROW) and the CG iterations it took."""
+        """Newton's point from v on the face y holds and the CG iterations it took; with balls (friction) and fixed
+        radii the face grown by the sets that point leaves until it leaves none (at most GROW times; see GROW), each
+        solve started from the last point, projected."""
         newton, iterations = _step(P, program.q, sets, v, y, c, target, products, cache["precondition"], matrix)
-        for _ in range(GROW if sets.coupling is None else 0):
+        for _ in range(GROW if sets.coupling is None and sets.balls.size else 0):
             y = _grown(y, newton, sets)
             if y is None:
                 break
-            newton, more = _step(P, program.q, sets, v, y, c, target, products, cache["precondition"], matrix)
+            newton, more = _step(P, program.q, sets, _project(newton, sets), y, c, target, products,
+                                 cache["precondition"], matrix)
             iterations += more
             faces[0] += 1
         return newton, iterations
