@@ -99,13 +99,14 @@ systems took hundreds of unpreconditioned Krylov iterations per step (a mortar p
 2.8·10⁵ DOFs, ~5000 unknowns: 180–400 a step, 52 s against 8 s by Cholesky), and an inexact direction stalled the
 Coulomb Newton. 10,000 is ``auto``'s largest dense W; a Cholesky there is ~3·10¹¹ flops."""
 GROW = 10
-"""Times Newton's face may grow per step: the sets its point leaves are held too and the point solved for again, until
-it leaves none (a feasible point; :func:`_grown`). Tresca's slip zone was otherwise found a few nodes a step: Newton's
-point on too small a face overshoots the intervals of the nodes about to slip, its projection raises f, and the
-least f on the segment to it stops short of their bounds, where the next step's face is decided (tall 2-D block 1 : 4,
-51 bottom nodes, 2·10⁴ DOFs, matrix-free: 75 Newton steps and 720 products with P; with GROW 5 steps and 137, 24
-faces grown; the same block at 10⁵ DOFs failed after 100 steps, now 5; docs/performance.md). Each growth costs one
-Newton system; its face only grows, so it ends."""
+"""Times Newton's face may grow per step where the program has balls: the sets its point leaves are held too and the
+point solved for again, until it leaves none (a feasible point; :func:`_grown`). Tresca's slip zone was otherwise
+found a few nodes a step: Newton's point on too small a face overshoots the intervals of the nodes about to slip, its
+projection raises f, and the least f on the segment to it stops short of their bounds, where the next step's face is
+decided. Matrix-free (Newton steps / products with P, before → now): tall 2-D block 1 : 4 at 2·10⁴ DOFs 75 / 720 →
+5 / 118 (23 faces grown), at 10⁵ failed after 100 → 5 / 97; the two-body pair at 3·10⁴ DOFs 30 / 412 → 4 / 150, at
+10⁵ 47 / 1147 → 7 / 444; the dense W of the tall block 95 → 4 (docs/performance.md). Not for bounds alone: an opening
+zone grows as a front, a few nodes a solve (clamped strip 400 : 1, Signorini: 385 products against 54)."""
 EPS = np.finfo(float).eps
 """A ball's radius at most EPS × ‖y‖ is a point to the Newton step (see :func:`_step`)."""
 GMRES_RESTART = 50
