@@ -38,7 +38,8 @@ GPCG, SIAM J. Optim. 1, 1991, takes its Newton-like steps); Newton's steps are i
 (a) takes them where f's changes are round-off. Plain Newton on the natural map has no such property: it cycles on
 3-variable SPD box programs (tests/test_global_convergence.py; Ben Gharbia & Gilbert, Math. Program. 134, 2012, for
 P-matrices), and did on a tall 3-D Tresca block and the two-body duals applied matrix-free (docs/performance.md).
-``info["steps"]`` counts the steps of each kind, ``info["descent"]`` holds (kind, f's change, κ) of each.
+``info["steps"]`` counts the steps of each kind, ``info["descent"]`` holds (kind, f's change, κ) of each,
+``info["grown"]`` the faces grown.
 
 An operator P may carry ``approximation`` with sparse ``G``, ``H`` (SPD) and ``factorize`` such that
 P ≈ G H⁻¹ Gᵀ (a Delassus operator of a thin slab of the body and coarse functions beyond it): each Newton
