@@ -126,12 +126,15 @@ def decrease_fraction(problem: ConicProgram) -> float:
     return min(newton_cg.ARMIJO, 0.5, 1 / (2 * np.linalg.eigvalsh(scaled).max()))
 
 
+@pytest.mark.parametrize("grow", [newton_cg.GROW, 0])
 @pytest.mark.parametrize("seed, bounds, balls, size, condition", [
     (1, 12, 0, 1, 1e4), (2, 6, 6, 1, 1e5), (3, 4, 6, 2, 1e6), (4, 20, 0, 1, 1e2)])
-def test_every_step_lowers_f_as_the_argument_asks(seed, bounds, balls, size, condition):
+def test_every_step_lowers_f_as_the_argument_asks(seed, bounds, balls, size, condition, grow, monkeypatch):
     """The bounded cost, checked step by step: each step not taken by the residual rule lowers f by at least σ|κ|
     (κ the projected gradient's first-order change), f never rises above f(v₀), the residual rule's steps are at most
-    log₂(r₀/tol) + 1, and σ Σ|κ| over the other steps is at most (those steps + 1)(f(v₀) − f*)."""
+    log₂(r₀/tol) + 1, and σ Σ|κ| over the other steps is at most (those steps + 1)(f(v₀) − f*); with Newton's faces
+    grown (GROW, programs with balls) or not, and at most GROW growths a step."""
+    monkeypatch.setattr(newton_cg, "GROW", grow)
     cycling = program(CYCLING_P, CYCLING_Q, np.zeros(3), np.zeros((0, 1)), np.zeros(0), False)
     for problem, best in (planted(seed, bounds, balls, size, condition, operator=False),
                           (cycling, solvers.solve(cycling, "clarabel").x)):
@@ -149,6 +152,7 @@ def test_every_step_lowers_f_as_the_argument_asks(seed, bounds, balls, size, con
         residuals = answer.info["residuals"]
         assert by_residual <= np.log2(residuals[0] / newton_cg.TOL) + 1
         assert sigma * sum(-kappa for _, kappa in other) <= (by_residual + 1) * (start - optimum) + rounding
+        assert answer.info["grown"] <= grow * answer.iterations
 
 
 @pytest.mark.parametrize("scene, most_steps", [

@@ -24,6 +24,11 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
     least f on the segment [v, p(v)], which does with σ = min(½, 1/(2λ)), λ the largest eigenvalue of C^½ P̃ C^½
     (the exact line search of a quadratic on a feasible segment; no bound of P is needed to take it).
 
+Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
+way. With balls (friction) it is Newton's point on a face grown until the point is feasible (GROW): the face the
+natural map holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends,
+and a step solves at most GROW + 1 Newton systems.
+
 All points lie in {f ≤ f(v₀)}, so between two steps (a) the steps (b) with ‖p(v) − v‖_{C⁻¹} > ε number at most
 (f(v₀) − f*) / (σ ε²): the method stops for any tol > 0 after a bounded number of steps, and without a tol the
 least natural residual tends to 0 (p(v) = v is the convex program's optimality condition). This is the projected
@@ -33,7 +38,8 @@ GPCG, SIAM J. Optim. 1, 1991, takes its Newton-like steps); Newton's steps are i
 (a) takes them where f's changes are round-off. Plain Newton on the natural map has no such property: it cycles on
 3-variable SPD box programs (tests/test_global_convergence.py; Ben Gharbia & Gilbert, Math. Program. 134, 2012, for
 P-matrices), and did on a tall 3-D Tresca block and the two-body duals applied matrix-free (docs/performance.md).
-``info["steps"]`` counts the steps of each kind, ``info["descent"]`` holds (kind, f's change, κ) of each.
+``info["steps"]`` counts the steps of each kind, ``info["descent"]`` holds (kind, f's change, κ) of each,
+``info["grown"]`` the faces grown.
 
 An operator P may carry ``approximation`` with sparse ``G``, ``H`` (SPD) and ``factorize`` such that
 P ≈ G H⁻¹ Gᵀ (a Delassus operator of a thin slab of the body and coarse functions beyond it): each Newton
@@ -93,6 +99,15 @@ DIRECT_LIMIT = 10_000
 systems took hundreds of unpreconditioned Krylov iterations per step (a mortar pair on graded meshes; the 3-D punch at
 2.8·10⁵ DOFs, ~5000 unknowns: 180–400 a step, 52 s against 8 s by Cholesky), and an inexact direction stalled the
 Coulomb Newton. 10,000 is ``auto``'s largest dense W; a Cholesky there is ~3·10¹¹ flops."""
+GROW = 10
+"""Times Newton's face may grow per step where the program has balls: the sets its point leaves are held too and the
+point solved for again, until it leaves none (a feasible point; :func:`_grown`). Tresca's slip zone was otherwise
+found a few nodes a step: Newton's point on too small a face overshoots the intervals of the nodes about to slip, its
+projection raises f, and the least f on the segment to it stops short of their bounds, where the next step's face is
+decided. Matrix-free (Newton steps / products with P, before → now): tall 2-D block 1 : 4 at 2·10⁴ DOFs 75 / 720 →
+5 / 118 (23 faces grown), at 10⁵ failed after 100 → 5 / 97; the two-body pair at 3·10⁴ DOFs 30 / 412 → 4 / 150, at
+10⁵ 47 / 1147 → 7 / 444; the dense W of the tall block 95 → 4 (docs/performance.md). Not for bounds alone: an opening
+zone grows as a front, a few nodes a solve (clamped strip 400 : 1, Signorini: 385 products against 54)."""
 EPS = np.finfo(float).eps
 """A ball's radius at most EPS × ‖y‖ is a point to the Newton step (see :func:`_step`)."""
 GMRES_RESTART = 50
@@ -287,6 +302,21 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         p = _project(v - c * g, sets)
         return least_on_segment(v, g, p, move(v, g, p)[2])
 
+    def newton_point(v, y, target):
+        """Newton's point from v on the face y holds and the CG iterations it took; with balls (friction) and fixed
+        radii the face grown by the sets that point leaves until it leaves none (at most GROW times; see GROW), each
+        solve started from the last point, projected."""
+        newton, iterations = _step(P, program.q, sets, v, y, c, target, products, cache["precondition"], matrix)
+        for _ in range(GROW if sets.coupling is None and sets.balls.size else 0):
+            y = _grown(y, newton, sets)
+            if y is None:
+                break
+            newton, more = _step(P, program.q, sets, _project(newton, sets), y, c, target, products,
+                                 cache["precondition"], matrix)
+            iterations += more
+            faces[0] += 1
+        return newton, iterations
+
     def backtrack(v, g, towards, residual):
         """Without an f (moving balls), the first of 1, ½, …, 1/16 of the way to ``towards`` (projected)
         whose natural residual is below ``residual``; ``v`` itself where none is."""
@@ -301,6 +331,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     best, history = np.inf, []
     risen, kinds, descent = 0.0, dict.fromkeys(("residual", "newton", "arc", "segment", "gradient"), 0), []
     steps = cg_total = 0
+    faces = [0]  # the faces grown (see GROW)
     status, word = "failed", "max_iter"
     for steps in range(max_iter + 1):
         residual, y, size = _natural(v, g, c, sets, program.q)
@@ -322,8 +353,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if steps == max_iter:
             break
         target = FORCING * min(1.0, residual / first) * residual * size / np.max(c)
-        newton, iterations = _step(P, program.q, sets, v, y, c, max(target, 0.1 * tol * size / np.max(c)), products,
-                                   cache["precondition"], matrix)
+        newton, iterations = newton_point(v, y, max(target, 0.1 * tol * size / np.max(c)))
         cg_total += iterations
         best = min(best, residual)
         if sets.coupling is not None:
@@ -347,7 +377,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         descent.append((kind, change, cauchy))
     x = sets.shift + sets.scale * v
     info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history,
-            "steps": kinds, "descent": descent}
+            "steps": kinds, "descent": descent, "grown": faces[0]}
     if sets.coupling is not None:  # the program of the radii reached: x is its answer
         b = program.b.copy()
         b[form.ball_radius_rows] = info["radii"] = sets.radii(v)
@@ -452,6 +482,19 @@ def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
     if sets.balls.size:
         lengths[sets.balls] = lengths[sets.balls].min(axis=1, keepdims=True)
     return lengths
+
+
+def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds) -> np.ndarray | None:
+    """y (v − c∇f, whose outside sets :func:`_step` holds) with the sets it leaves free and Newton's point leaves
+    added, at Newton's point (so held on that side, a ball on its sphere through it); None where there are none."""
+    bounds = sets.bounds[(y[sets.bounds] >= 0) & (newton[sets.bounds] < 0)]
+    balls = sets.balls[(np.linalg.norm(y[sets.balls], axis=1) <= sets.radius)
+                       & (np.linalg.norm(newton[sets.balls], axis=1) > sets.radius)]
+    if not (bounds.size or balls.size):
+        return None
+    grown = y.copy()
+    grown[bounds], grown[balls] = newton[bounds], newton[balls]
+    return grown
 
 
 def _natural(v, g, c, sets: _Bounds, q):
