@@ -101,13 +101,10 @@ def indicator_rows(method: str):
 
 def test_mortar_tractions_equilibrate_both_blocks_of_the_patch_test():
     """Mortar passes the contact patch test: with each body's mortar traction as its Neumann datum the reconstruction
-    is exact in the upper block and at the interface (zero indicators to round-off); only the lower block's bottom
-    row, whose Dirichlet vertices keep RT0's free circulation, is not. Node to segment fails the patch test, and its
-    indicators show it in both blocks."""
-    result, mortar, height, middle = indicator_rows("mortar")
+    is exact in both blocks, at the interface and at the Dirichlet vertices (the circulations reproduce a constant
+    stress: η at round-off). Node to segment fails the patch test, and its indicators show it in both blocks."""
+    result = indicator_rows("mortar")[0]
     assert isinstance(result.error_estimate, FluxEstimate) and result.error_budget["algebraic"] < 1e-6
-    assert mortar[height > middle].max() < 1e-10 * mortar.sum()
-    bottom_rows = height < height[height > 0].min() * 2.5
-    assert mortar[(height < middle) & ~bottom_rows].max() < 1e-10 * mortar.sum()
+    assert result.error_estimate.relative < 1e-7
     _, segment, height, middle = indicator_rows("node_to_segment")
     assert segment[height > middle].max() > 0.01 * segment.sum()
