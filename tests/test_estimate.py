@@ -291,9 +291,9 @@ def test_cli_adapt_reports_every_level_and_why_it_stopped(tmp_path, capsys):
     summary = tmp_path / "summary.json"
     code = cli.main(["run", str(scene), "--adapt", "--target", "0.01", "--max-dofs", "7500", "--json", str(summary)])
     printed = capsys.readouterr().out
-    assert code == 0 and "level 0: 6480 DOFs" in printed and "level 1: 7026 DOFs" in printed
+    assert code == 0 and "level 0: 6480 DOFs" in printed and "level 1: 7008 DOFs" in printed
     written = json.loads(summary.read_text())
     levels = written["adaptive_levels"]
-    assert [level["ndof"] for level in levels] == [6480, 7026]
+    assert [level["ndof"] for level in levels] == [6480, 7008]
     assert levels[1]["discretization"] < levels[0]["discretization"]
     assert "stopped before the target" in written["message"] and written["refinement"].startswith("local")

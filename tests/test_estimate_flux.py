@@ -79,7 +79,7 @@ def test_cell_geometry_gradients_are_those_of_the_hat_functions():
 def test_weak_and_gauss_multipliers_equilibrate_through_their_nodal_forces(non_penetration):
     """Hild's weak rows and Gauss-point rows hold the contact through nodal forces F = Cᵀλ too: with the lumped
     traction F / w as the Neumann datum every patch problem is compatible (defect at round-off), and the bound is
-    within 10 % of the nodal rows' on the same mesh (measured: 0.551 nodal, 0.583 weak, 0.579 gauss)."""
+    within 10 % of the nodal rows' on the same mesh (measured: 0.561 nodal, 0.594 weak, 0.590 gauss)."""
     scene = hertz_punch(nx=16)
     nodal = cc.solve(scene).error_estimate
     other = cc.solve(dataclasses.replace(scene, contact=dataclasses.replace(
@@ -101,13 +101,10 @@ def indicator_rows(method: str):
 
 def test_mortar_tractions_equilibrate_both_blocks_of_the_patch_test():
     """Mortar passes the contact patch test: with each body's mortar traction as its Neumann datum the reconstruction
-    is exact in the upper block and at the interface (zero indicators to round-off); only the lower block's bottom
-    row, whose Dirichlet vertices keep RT0's free circulation, is not. Node to segment fails the patch test, and its
-    indicators show it in both blocks."""
-    result, mortar, height, middle = indicator_rows("mortar")
+    is exact in both blocks, at the interface and at the Dirichlet vertices (the circulations reproduce a constant
+    stress: η at round-off). Node to segment fails the patch test, and its indicators show it in both blocks."""
+    result = indicator_rows("mortar")[0]
     assert isinstance(result.error_estimate, FluxEstimate) and result.error_budget["algebraic"] < 1e-6
-    assert mortar[height > middle].max() < 1e-10 * mortar.sum()
-    bottom_rows = height < height[height > 0].min() * 2.5
-    assert mortar[(height < middle) & ~bottom_rows].max() < 1e-10 * mortar.sum()
+    assert result.error_estimate.relative < 1e-7
     _, segment, height, middle = indicator_rows("node_to_segment")
     assert segment[height > middle].max() > 0.01 * segment.sum()
