@@ -517,10 +517,10 @@ def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds) -> np.ndarray | Non
 
 
 def _affine(program: ConicProgram):
-    """x ↦ P x + q, and whether it is P's own: by P's own ``gradient_at(q)`` where it offers one for this q (a Delassus operator computes it from
-    the displacement the multipliers leave, K⁻¹(f − Bᵀx), as the answer's fields are recovered: P x and q cancel where
-    the loads bend a body its contact holds up, and their sum's rounding ε‖q‖ passed the gaps the certificate checks
-    (see :meth:`~convexcontact.fem.factorization.Delassus`), else P x + q."""
+    """x ↦ P x + q, and whether it is P's own: P's ``gradient_at(q)`` where it offers one for this q (the matrix-free
+    dual's computes it from the displacement its multipliers leave, K⁻¹(f − Bᵀx), as the answer's fields are recovered:
+    P x and q cancel where the loads bend a body its contact holds up, and the sum's rounding ε‖q‖ passed the gaps the
+    certificate checks; formulations/dual.py, ``_gradient_at``), else P x + q."""
     exact = getattr(program.P, "gradient_at", None)
     exact = exact and exact(program.q)
     if exact is not None:
