@@ -89,9 +89,9 @@ def dual(
         rows.append(sp.vstack(pick).tocsr()[order])
         b.append(np.concatenate([slip_bound, np.zeros((dim - 1) * count)])[order])
         cones += [soc(dim)] * count
-    if matrix_free:  # its own copy: a kept operator serves programs of other loads
-        P = copy.copy(P)
-        P.gradient_at = functools.partial(_gradient_at, q, lambda x: -(B @ factorization.solve(f - B.T @ x) + c))
+    P = copy.copy(P)  # its own copy: a kept operator serves programs of other loads
+    P.gradient_at = functools.partial(_gradient_at, q, lambda x: np.concatenate(
+        [-(B @ factorization.solve(f - B.T @ x[:m + tangential]) + c), q[m + tangential:]]))  # W's μ block is 0
     program = ConicProgram(P, q, sp.vstack(rows).tocsc(), np.concatenate(b), tuple(cones))
     bound_rows = equalities + m + np.arange(count) * dim
     carries = carrying(B)
