@@ -119,8 +119,9 @@ def _gradient_at(q: np.ndarray, minus_gap: Callable, q_now: np.ndarray) -> Calla
     """x ↦ W x + q as −(B u + c), u = K⁻¹(f − Bᵀx) the displacement the answer's fields recover (``minus_gap``), for
     the program's own q (None for another: a solver then forms W x + q). W x and q cancel where the loads bend a
     body its contact holds up: on a strip 400 : 1 clamped at its ends (2·10³ DOFs) the load alone would move it
-    ‖K⁻¹f‖ = 9·10⁵ where it moves 2·10⁻³, the sum's rounding (~1e-11) stood for the gradient where the certificate's gaps
-    need 1e-13, while f − Bᵀx (loads and contact forces on nodes of their own) loses nothing (docs/performance.md)."""
+    ‖K⁻¹f‖ = 9·10⁵ where it moves 2·10⁻³, and the sum's rounding (~1e-11) stood for the gradient where the
+    certificate's gaps need 1e-13; f − Bᵀx (loads and contact forces on nodes of their own) loses nothing
+    (docs/performance.md, "The clamped strip's certificates")."""
     return minus_gap if q_now is q or np.array_equal(q_now, q) else None
 
 

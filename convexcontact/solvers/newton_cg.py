@@ -517,7 +517,7 @@ def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds) -> np.ndarray | Non
 
 
 def _affine(program: ConicProgram):
-    """x ↦ P x + q, and whether it is P's own: P's ``gradient_at(q)`` where it offers one for this q (the matrix-free
+    """x ↦ P x + q, and whether it is P's own: P's ``gradient_at(q)`` where it offers one for this q (the contact
     dual's computes it from the displacement its multipliers leave, K⁻¹(f − Bᵀx), as the answer's fields are recovered:
     P x and q cancel where the loads bend a body its contact holds up, and the sum's rounding ε‖q‖ passed the gaps the
     certificate checks; formulations/dual.py, ``_gradient_at``), else P x + q."""
@@ -552,8 +552,9 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
 
 
 def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None):
-    """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v and the CG (GMRES, where radii move) iterations it took;
-    where P is a matrix (``matrix()`` = P̃) and the system has at most DIRECT_LIMIT unknowns, a dense LU instead."""
+    """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v and the CG
+    (GMRES, where radii move) iterations it took; where P is a matrix (``matrix()`` = P̃) and the system has at most
+    DIRECT_LIMIT unknowns, a dense LU instead."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
