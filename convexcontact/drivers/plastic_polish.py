@@ -48,6 +48,8 @@ SECANT = 10.0
 """Largest multiple of the last increment the secant predictor takes."""
 ROUNDING = 1e-10
 """Residual below which Newton also stops when a step no longer halves it (the Schur complement's rounding)."""
+NOISE = 1e-12
+"""Entries of the contact rows below NOISE × the largest are round-off (dropped)."""
 ARMIJO = 1e-4
 """Sufficient decrease of Φ along a step, in units of the directional derivative."""
 ROUNDOFF = 1e-13
@@ -203,6 +205,10 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
     A = (model.C @ contact.N).tocsr()
     m = A.shape[0]
     E = sp.vstack([A] + ([-friction.R] if friction else []), format="csr")
+    # entries at round-off (a mortar row's component along a DOF the rollers hold, 1e-16 of the others) carry nothing:
+    # kept, such a row is a constraint of noise (a singular Schur complement, a 3-D point slipping by 1e-17 forever)
+    E.data[np.abs(E.data) <= NOISE * np.abs(E.data).max(initial=0.0)] = 0.0
+    E.eliminate_zeros()
     e = np.concatenate([contact.weighted_gap(model.C) - model.C @ contact.normal_offset]
                        + ([friction.offset] if friction else []))
     weights = contact.row_weights(model.C)
