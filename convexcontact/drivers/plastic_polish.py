@@ -21,9 +21,13 @@ not: a semismooth residual's norm need not decrease along Newton's direction whe
 makes the iteration globally convergent for a fixed A (a convex function on an affine set); primal-dual active-set
 rounds (the natural maps of Signorini's and Tresca's laws) correct A until it settles feasible.
 
-Built for Signorini and 2-D exact Tresca friction against a rigid obstacle under displacement control (no compliance,
-no force control, no 3-D friction: their rows are not equalities of u alone). :func:`newton` returns the answer
-or the reason it gave up; the caller falls back to the conic program.
+In 3-D a slipping point's traction −s v/‖v‖ turns with its slip: it is not held fixed but its dissipation s‖R_k u + o_k‖
+joins Φ (convex, smooth where the point slips), with the curvature s/‖v‖ (I − nnᵀ) of the disc's projection in J; the
+sticking points are rows as in 2-D, and the natural map λ_T − v/ω against the disc sorts them each round.
+
+Built for Signorini and exact Tresca friction (2-D intervals, 3-D discs) against a rigid obstacle or between bodies,
+under displacement control (no compliance, no ε-regularized friction, no force control: their rows are not equalities
+of u alone). :func:`newton` returns the answer or the reason it gave up; the caller falls back to the conic program.
 """
 
 from __future__ import annotations
