@@ -68,7 +68,18 @@ def applies(model) -> bool:
     displacement control."""
     contact, friction = model.fem.contact, model.friction
     exact = friction is None or (model.epsilon is None and friction.coupling is None)
-    return exact and model.compliance is None and contact.obstacle_coupling is None
+    return exact and contact.obstacle_coupling is None  # compliance's p ≥ 1 (the law's own check): finite curvature
+
+
+def compliance(excess_rows: np.ndarray, weights: np.ndarray, law: tuple[float, float]):
+    """Normal compliance's energy Σ w c/(p+1) x^(p+1), x = ((E_N u − e_N)/w)₊ the excess of each row (``excess_rows``
+    = E_N u − e_N), as in the primal program: its value, the pressures c x^p (their force is E_Nᵀ·) and the diagonal of
+    its Hessian on the rows, c p x^(p−1)/w where x > 0."""
+    stiffness, exponent = law
+    excess = np.maximum(excess_rows / weights, 0.0)
+    pressure = stiffness * excess**exponent
+    curvature = np.where(excess > 0, stiffness * exponent * excess ** (exponent - 1) / weights, 0.0)
+    return float(weights @ (stiffness / (exponent + 1) * excess ** (exponent + 1))), pressure, curvature
 
 
 def dissipation(w: np.ndarray, dim: int, bound: np.ndarray, slipping: np.ndarray, floor, heading: np.ndarray):
@@ -164,17 +175,17 @@ def unit_rows(B: sp.spmatrix) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def cholesky(plastic: Plastic, J: sp.spmatrix, G: sp.spmatrix, D: sp.spmatrix, dim: int,
-             discs: sp.spmatrix | None = None):
+             curved: sp.spmatrix | None = None):
     """A Cholesky factorization of the tangent J (free DOFs), refactorizing the step's earlier one on its pattern (J's
-    pattern is K's with the points' k × k blocks coupled through G and D, and with 3-D friction the rows ``discs`` of
-    the slipping points' dissipation); None where J is singular."""
+    pattern is K's with the points' k × k blocks coupled through G and D, and the rows ``curved`` of the 3-D slipping
+    points' dissipation and of normal compliance); None where J is singular."""
     factors = plastic.factors
     if "pattern" not in factors:
         k, count = plastic.points.components, plastic.points.count
         blocks = sp.kron(sp.eye(count), np.ones((k, k)))  # the tangent's blocks, full
         pattern = (abs(J) + abs(G) @ blocks @ abs(D)).tocsr()
-        if discs is not None:
-            pattern = pattern + abs(discs).T @ abs(discs)
+        if curved is not None:
+            pattern = pattern + abs(curved).T @ abs(curved)
         pattern.data[:] = 1.0
         factors["pattern"] = pattern
     J = J + PATTERN_FILL * factors["pattern"]
@@ -219,6 +230,9 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
     bound = model.slip_bound if friction else np.zeros(0)
     dim = friction.dim if friction else 1
     rows = carrying(E)
+    compliant = model.compliance  # normal compliance: its rows are an energy of u, never active
+    # the rows with a curvature in J: compliance's, the 3-D discs'
+    curved = sp.vstack([E[:m]] * (compliant is not None) + [E[m:]] * (dim > 1)) if compliant is not None or dim > 1 else None
     # a 3-D slipping point's slip length at which it counts as stopped (its dissipation's curvature s/‖w‖ floored)
     floor = CONVERGED * max(1.0, np.abs(u).max()) * (friction.weights if friction else 1.0)
     G, D = plastic.coupling[fem.free], plastic.points.deviatoric[:, fem.free].tocsr()
@@ -229,6 +243,7 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
         and the 3-D slipping points with their natural maps' directions, by the natural maps of Signorini's and
         Tresca's laws."""
         active = rows & np.concatenate([y[:m] > (e[:m] - A @ u) / weights, np.zeros(E.shape[0] - m, bool)])
+        active[:m] &= compliant is None
         fixed, slipping, heading = np.zeros_like(y), np.zeros(bound.size, bool), None
         if friction:
             trial = y[m:] + (E[m:] @ u - e[m:]) / np.tile(friction.weights, dim)  # λ_T − v, v = (R u + o)/ω the slip
@@ -243,26 +258,29 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
         return active, fixed, slipping, heading
 
     def state(u, fixed, slipping, heading):
-        """Φ (with the slipping tractions' work, or the 3-D slipping points' dissipation), its gradient, the tangent's
-        blocks at u, the slipping points' tractions (all rows; 0 at the others) and the dissipation's Hessian on the
-        friction rows (None without 3-D slipping points)."""
+        """Φ (with the slipping tractions' work, the 3-D slipping points' dissipation, normal compliance's energy), its
+        gradient, the tangent's blocks at u, the multipliers these terms give (all rows; 0 at the others) and their
+        Hessian on the rows (None without 3-D slipping points or compliance)."""
         u_full = fem.full(u)
         increment, M = tangent(plastic.points, u_full, plastic.old, plastic.radius, plastic.viscosity)
         Eu = E @ u
         gradient = fem.K @ u - G @ (plastic.old + increment) - fem.f + E.T @ fixed
         merit = 0.5 * u @ (fem.K @ u) - fem.f @ u + plastic.energy(u_full, increment) + fixed @ Eu
-        traction, hessian = fixed, None
+        traction, curvature = fixed.copy(), [sp.csr_matrix((m, m)), sp.csr_matrix((E.shape[0] - m,) * 2)]
         if slipping.any():
-            value, discs, hessian = dissipation(Eu[m:] - e[m:], dim, bound, slipping, floor, heading)
-            traction = np.concatenate([fixed[:m], discs])
-            gradient, merit = gradient + E[m:].T @ discs, merit + value
+            value, traction[m:], curvature[1] = dissipation(Eu[m:] - e[m:], dim, bound, slipping, floor, heading)
+            gradient, merit = gradient + E[m:].T @ traction[m:], merit + value
+        if compliant is not None:
+            value, traction[:m], diagonal = compliance(Eu[:m] - e[:m], weights, compliant)
+            gradient, merit, curvature[0] = gradient + E[:m].T @ traction[:m], merit + value, sp.diags(diagonal)
+        hessian = sp.block_diag(curvature, format="csr") if slipping.any() or compliant is not None else None
         return merit, gradient, M, traction, hessian
 
     def direction(M, hessian, gradient, active, u):
         """Newton's step d and the active rows' multipliers z (None, None if the system is singular)."""
         J, B, rhs = fem.K - G @ (M @ D), E[active], e[active] - E[active] @ u
         if hessian is not None:
-            J = J + E[m:].T @ hessian @ E[m:]
+            J = J + E.T @ hessian @ E
         unit = unit_rows(B)
         if unit is not None:  # each active row moves one DOF (nodes against a flat obstacle): eliminated in J
             dofs, values = unit
@@ -271,13 +289,13 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
             keep = np.ones(u.size)
             keep[dofs] = 0.0
             eliminated = sp.diags(keep) @ J @ sp.diags(keep) + sp.diags(1.0 - keep)
-            factors = cholesky(plastic, eliminated, G, D, fem.dim, E[m:] if dim > 1 else None)
+            factors = cholesky(plastic, eliminated, G, D, fem.dim, curved)
             if factors is not None:
                 b = -gradient - J @ prescribed
                 b[dofs] = prescribed[dofs]
                 d = factors.solve(b)
                 return d, (-gradient - J @ d)[dofs] / values
-        factors = None if plastic.factors.get("saddle") else cholesky(plastic, J, G, D, fem.dim, E[m:] if dim > 1 else None)
+        factors = None if plastic.factors.get("saddle") else cholesky(plastic, J, G, D, fem.dim, curved)
         if factors is None:  # J singular (a body held by its contact alone): the saddle-point matrix is not
             plastic.factors["saddle"] = True
             try:
@@ -331,7 +349,8 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
         settled, law, slips, heading = sets(u, y)
         slack = e[:m] - A @ u  # in the units of the rows' violation that stopped Newton
         tolerance = CONVERGED * max(1.0, np.abs(y).max(initial=0.0))
-        feasible = slack[rows[:m]].min(initial=0.0) >= -CONVERGED * max(1.0, np.abs(u).max()) \
+        closed = slack[rows[:m]].min(initial=0.0) >= -CONVERGED * max(1.0, np.abs(u).max())
+        feasible = (compliant is not None or closed) \
             and y[:m].min(initial=0.0) >= -tolerance \
             and (np.linalg.norm(y[m:].reshape(dim, -1), axis=0) <= bound + tolerance).all()
         if np.array_equal(settled, active) and np.array_equal(law, fixed) and np.array_equal(slips, slipping) \
