@@ -1,4 +1,4 @@
-"""Issue 27, 3-D friction on plastic bodies by Newton's method (drivers/plastic_polish.py: the slipping points' discs by
+"""Issue 27, 3-D friction and normal compliance on plastic bodies by Newton's method (drivers/plastic_polish.py: the slipping points' discs by
 their dissipation s‖w‖, the sticking ones as rows). Before, these steps rested on the interior point alone, which left
 equilibrium at 1e-6 on the stacked blocks' first flowing step (Tresca: `inaccurate`; Coulomb: the map not converged);
 now each is certified to 1e-8 and equals the conic program's answer at a tight tolerance."""
@@ -9,6 +9,7 @@ from test_plasticity_bodies import stacked
 
 import convexcontact as cc
 from convexcontact.drivers import plastic_polish
+from convexcontact.studies.benchmarks import plastic_bench
 
 DEPTHS = [0.0018, 0.006, 0.012]  # elastic (0.9 × first yield), then flowing: the plastic block widens over the elastic
 BOUND, FRICTION = 4e-4, 0.2  # a fifth of the yield stress, which the interface pressure reaches
@@ -66,3 +67,20 @@ def test_a_3d_coulomb_step_on_a_plastic_block_is_certified(depths):
     last = result.steps[-1]
     assert last.max_equivalent_plastic_strain > 0 and np.char.startswith(last.contact.status.astype(str), "slip").any()
     assert all(entry["path"] == "newton" for entry in last.extra["history"][1:])
+
+
+def test_normal_compliance_on_a_plastic_punch_is_certified_by_newton(monkeypatch):
+    """Normal compliance (c_N = 100 E/L, p = 1) under Prandtl's punch (nx = 8, the bench's ten steps to the limit
+    load), and the 3-D stacked blocks with a compliant interface: every step by Newton (compliance's energy in Φ),
+    certified to 1e-10, where the interior point alone left 5e-10 to 6e-8 on the punch (3e-7 on the blocks); the
+    conic program's answers agree to its own accuracy (1e-6 of the displacement)."""
+    for scene in (plastic_bench.punch_scene(256, "signorini").with_law(cc.NormalCompliance(100.0)),
+                  stacked(DEPTHS, dim=3, law=cc.NormalCompliance(1.0))):
+        fast, conic = cc.run_history(scene), conic_only(scene, monkeypatch)
+        assert fast.status == "solved" and all(step.extra["path"] == "newton" for step in fast.steps)
+        assert max(step.certificate.worst for step in fast.steps) < 1e-10
+        assert max(step.certificate.worst for step in conic.steps) > 1e-8
+        assert fast.steps[-1].max_equivalent_plastic_strain > 0
+        scale = np.abs(conic.steps[-1].displacement).max()
+        for a, b in zip(fast.steps, conic.steps, strict=True):
+            assert np.abs(a.displacement - b.displacement).max() < 1e-6 * scale
