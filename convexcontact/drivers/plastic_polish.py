@@ -25,9 +25,10 @@ In 3-D a slipping point's traction −s v/‖v‖ turns with its slip: it is not
 joins Φ (convex, smooth where the point slips), with the curvature s/‖v‖ (I − nnᵀ) of the disc's projection in J; the
 sticking points are rows as in 2-D, and the natural map λ_T − v/ω against the disc sorts them each round.
 
-Built for Signorini and exact Tresca friction (2-D intervals, 3-D discs) against a rigid obstacle or between bodies,
-under displacement control (no compliance, no ε-regularized friction, no force control: their rows are not equalities
-of u alone). :func:`newton` returns the answer or the reason it gave up; the caller falls back to the conic program.
+Normal compliance's energy Σ w c/(p+1) ((C N u − C g)/w)₊^(p+1) joins Φ likewise (its rows never active).
+
+Built for Signorini, normal compliance and exact Tresca friction (2-D intervals, 3-D discs) against a rigid obstacle or
+between bodies, under displacement control (no ε-regularized friction, no force control: not built). :func:`newton` returns the answer or the reason it gave up; the caller falls back to the conic program.
 """
 
 from __future__ import annotations
