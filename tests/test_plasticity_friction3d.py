@@ -1,5 +1,5 @@
-"""Issue 27, 3-D friction and normal compliance on plastic bodies by Newton's method (drivers/plastic_polish.py: the slipping points' discs by
-their dissipation s‖w‖, the sticking ones as rows). Before, these steps rested on the interior point alone, which left
+"""Issue 27, 3-D friction and normal compliance on plastic bodies by Newton's method (drivers/plastic_polish.py: the
+slipping points' discs by their dissipation s‖w‖, the sticking ones as rows; compliance's energy). Before, these steps rested on the interior point alone, which left
 equilibrium at 1e-6 on the stacked blocks' first flowing step (Tresca: `inaccurate`; Coulomb: the map not converged);
 now each is certified to 1e-8 and equals the conic program's answer at a tight tolerance."""
 
@@ -23,8 +23,8 @@ def conic_only(scene, monkeypatch, **options):
 
 
 def test_a_3d_tresca_step_on_a_plastic_block_is_certified_and_is_the_conic_answer(monkeypatch):
-    """Tresca discs between the 3-D stacked blocks: the flowing steps (points slipping and sticking) by Newton, certified
-    to 1e-8 (the interior point alone at its default tolerance: 1.1e-6, `inaccurate`); the conic program at tol 1e-10
+    """Tresca discs between the 3-D stacked blocks: the flowing steps (points slipping and sticking) by Newton,
+    certified to 1e-8 (the interior point alone at its default tolerance: 1.1e-6, `inaccurate`); the conic program at tol 1e-10
     (Solved, equilibrium 4e-9 and 6e-8) gives the same displacements and friction tractions to 1e-7."""
     scene = stacked(DEPTHS, dim=3, law=cc.Tresca(slip_bound=BOUND))
     fast = cc.run_history(scene)

@@ -28,7 +28,8 @@ sticking points are rows as in 2-D, and the natural map λ_T − v/ω against th
 Normal compliance's energy Σ w c/(p+1) ((C N u − C g)/w)₊^(p+1) joins Φ likewise (its rows never active).
 
 Built for Signorini, normal compliance and exact Tresca friction (2-D intervals, 3-D discs) against a rigid obstacle or
-between bodies, under displacement control (no ε-regularized friction, no force control: not built). :func:`newton` returns the answer or the reason it gave up; the caller falls back to the conic program.
+between bodies, under displacement control (no ε-regularized friction, no force control: not built). :func:`newton`
+returns the answer or the reason it gave up; the caller falls back to the conic program.
 """
 
 from __future__ import annotations
@@ -65,8 +66,8 @@ PATTERN_FILL = 1e-300
 
 
 def applies(model) -> bool:
-    """Signorini or exact Tresca friction (2-D intervals, 3-D discs) against a rigid obstacle or between bodies, under
-    displacement control."""
+    """Signorini or normal compliance, with or without exact Tresca friction (2-D intervals, 3-D discs), against a rigid
+    obstacle or between bodies, under displacement control."""
     contact, friction = model.fem.contact, model.friction
     exact = friction is None or (model.epsilon is None and friction.coupling is None)
     return exact and contact.obstacle_coupling is None  # compliance's p ≥ 1 (the law's own check): finite curvature
@@ -233,8 +234,9 @@ def newton(model, plastic: Plastic, u: np.ndarray, y: np.ndarray, rounds: int = 
     rows = carrying(E)
     compliant = model.compliance  # normal compliance: its rows are an energy of u, never active
     # the rows with a curvature in J: compliance's, the 3-D discs'
-    curved = sp.vstack([E[:m]] * (compliant is not None) + [E[m:]] * (dim > 1)) if compliant is not None or dim > 1 else None
-    # a 3-D slipping point's slip length at which it counts as stopped (its dissipation's curvature s/‖w‖ floored)
+    with_curvature = [E[:m]] * (compliant is not None) + [E[m:]] * (dim > 1)
+    curved = sp.vstack(with_curvature) if with_curvature else None
+    # a 3-D slipping point's slip below which it has no direction of its own (its curvature s/‖w‖ floored there)
     floor = CONVERGED * max(1.0, np.abs(u).max()) * (friction.weights if friction else 1.0)
     G, D = plastic.coupling[fem.free], plastic.points.deviatoric[:, fem.free].tocsr()
     force = max(np.abs(fem.f).max(initial=0.0), np.abs(fem.K @ u).max(), contact.weights.max())
