@@ -99,3 +99,39 @@ def test_an_output_folder_that_is_a_file_is_refused(capsys, folder):
 def test_compare_refuses_levels_that_are_not_an_integer_of_at_least_two(levels):
     with pytest.raises(ValueError, match="^levels: "):
         refinement.compare(hertz_punch(nx=4), levels)
+
+
+@pytest.mark.parametrize("value", ["P3", "Q1", "p2", "2", ""])
+def test_the_element_is_one_the_comparison_knows(capsys, folder, value):
+    check(capsys, folder, STUDY + ["3", "--element", value], "argument --element: invalid choice", "P1", "P2")
+
+
+def test_the_element_without_refinement_is_refused(capsys, folder):
+    check(capsys, folder, ["study", "work-precision", "hertz", "--element", "P2"], "error: --element: ",
+          "drop --element or add --refinement LEVELS")
+
+
+def test_p2_counts_in_the_size_checks(capsys, folder, monkeypatch):
+    """The memory check counts P2's DOFs (about 4× P1's on one mesh): 6 levels from nx = 8 pass it with P1 (the work
+    starts) and are refused with P2 (its reference: 5.9·10⁶ DOFs, 30 GiB)."""
+    class Started(Exception):
+        pass
+
+    monkeypatch.setattr("convexcontact.studies.precision.refinement.compare",
+                        lambda *args, **kwargs: (_ for _ in ()).throw(Started()))
+    with pytest.raises(Started):
+        cli.main(STUDY + ["6", "--element", "P1"])
+    check(capsys, folder, STUDY + ["6", "--element", "P2"], "error: --refinement: ", "GiB")
+
+
+@pytest.mark.parametrize("element", ["P1", "P2"])
+def test_the_element_reaches_both_families(monkeypatch, tmp_path, element):
+    """--element sets the elements of the scene the comparison refines (the comparison itself stubbed)."""
+    seen = []
+    monkeypatch.setattr("convexcontact.studies.precision.refinement.compare",
+                        lambda scene, *args, **kwargs: seen.append(scene.body.element) or [])
+    monkeypatch.setattr("convexcontact.studies.precision.refinement.plot", lambda *args, **kwargs: None)
+    monkeypatch.setattr("convexcontact.studies.precision.refinement.table", lambda *args, **kwargs: "")
+    assert cli.main(["study", "work-precision", "flat-punch", "--refinement", "2", "--element", element,
+                     "--out", str(tmp_path)]) == 0
+    assert seen == [element]

@@ -395,9 +395,14 @@ def main(argv=None) -> list[dict]:
     parser.add_argument("--refinement", type=integer(2, 4), default=None, metavar="LEVELS",
                         help="instead: uniform against adaptive refinement from the first --size (default nx 8), "
                              "LEVELS uniform levels; writes NAME_refinement.csv/png/txt")
+    parser.add_argument("--element", choices=tuple(OPTIMAL_RATE), default=None,
+                        help="with --refinement: the elements of both families (default: the scene's, P1)")
     args = parser.parse_args(argv)
     if args.refinement is not None:
         return refinement_main(args)
+    if args.element is not None:
+        raise ValueError("--element: the elements are chosen for the refinement comparison only (the other studies "
+                         "compare solvers on the scene's own mesh); drop --element or add --refinement LEVELS")
     for solver in args.solvers:
         try:
             solver_paths.check_name(solver)
@@ -429,6 +434,8 @@ def main(argv=None) -> list[dict]:
 
 REFINEMENT_BASE = 8
 """The coarsest mesh (nx) of the refinement comparison when no --size is given."""
+OPTIMAL_RATE = {"P1": 0.5, "P2": 1.0}
+"""The refinement comparison's elements, each with its optimal rate in DOFs in 2-D (N^−1/2, N^−1): the plot's line."""
 
 
 def refinement_main(args) -> list[dict]:
@@ -447,7 +454,11 @@ def refinement_main(args) -> list[dict]:
     if len(args.size) > 1:
         raise ValueError("--size: --refinement starts from one mesh and refines it; give one --size")
     size = args.size[0] if args.size[0] is not None else (REFINEMENT_BASE if args.scene != "punch" else None)
-    dofs = library_dofs(args.scene, size, "--size")
+    scene = library_scene(args.scene, size)
+    element = args.element or scene.body.element
+    if element != scene.body.element:
+        scene = dataclasses.replace(scene, body=dataclasses.replace(scene.body, element=element))
+    dofs = library_dofs(args.scene, size, "--size") * (4.0 if element == "P2" else 1.0)  # P2: ~4× P1's on one mesh
     finest = dofs * 4.0 ** (args.refinement - 1 + refinement.REFERENCE_LEVELS)
     check_memory(finest, 2, "--refinement", f"{args.scene}'s reference mesh", "give fewer levels or a coarser --size")
     check_duration("--refinement", 3, SECONDS_PER_DOF * finest, "reference and finest solves",
@@ -455,7 +466,7 @@ def refinement_main(args) -> list[dict]:
     extensions = ("csv", "png", "txt")
     check_new_files(args.out, [f"{args.scene}_refinement.{extension}" for extension in extensions], "--out",
                     args.overwrite)
-    rows = refinement.compare(library_scene(args.scene, size), args.refinement, progress=print)
+    rows = refinement.compare(scene, args.refinement, progress=print)
     path = args.out / f"{args.scene}_refinement.csv"
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as stream:
@@ -463,7 +474,7 @@ def refinement_main(args) -> list[dict]:
         writer.writeheader()
         writer.writerows({k: "" if row.get(k) is None else row[k] for k in refinement.FIELDS} for row in rows)
     front = pareto(rows)
-    refinement.plot(rows, args.out / f"{args.scene}_refinement.png", front)
+    refinement.plot(rows, args.out / f"{args.scene}_refinement.png", front, optimal=OPTIMAL_RATE.get(element, 0.5))
     text = refinement.table(rows, front)
     (args.out / f"{args.scene}_refinement.txt").write_text(text + "\n")
     print(text)
