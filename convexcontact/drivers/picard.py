@@ -26,6 +26,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -174,7 +175,7 @@ class Attempt:
     best: tuple | None = None  # (Coulomb residual, iteration, solution, fields, bound) of its best iterate
     last: tuple | None = None
     failed: tuple | None = None  # (inner solution, its slip bounds) of a solve that failed, if one did
-    inner: object | None = None  # a driver's own inner step (a plastic step: :class:`InnerStep`); None: the program's
+    inner: InnerStep | None = None  # its inner step: a driver's own (a plastic step), else the program's (iterate)
 
     @property
     def answer(self) -> tuple | None:
@@ -232,10 +233,11 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
             model.seed(session, attempt.solver, attempt.options)
         return session
 
+    step = attempt.inner = attempt.inner or ProgramStep(model, opened)
     try:
         newton = newton_session(model, attempt, opened) if attempt.newton else None
-        if newton is None and attempt.inner is None:
-            opened()
+        if newton is None:
+            step.open()
     except solvers.ConeNotSupported as error:  # OSQP and a 3-D cone: the user's choice is the user's error
         if attempt.required:
             raise
@@ -261,21 +263,16 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
                 s = s()
                 states.append(s)
                 start += time.perf_counter() - paused
-            if attempt.inner is not None:
-                solution = attempt.inner.solve(s)
-            else:
-                opened().update(**model.bound_update(s))
-                solution = session.solve()
+            solution = step.solve(s)
         inner = time.perf_counter() - start
         timings["solve"] = timings.get("solve", 0.0) + inner
         if not solution.solved:
             attempt.outcome, attempt.failed = f"failed (inner solve {solution.solver_status})", (solution, s)
             break
-        fields = model.recover(solution) if attempt.inner is None else attempt.inner.fields
+        fields = step.recover(solution)
         target = bound(fields.pressure)
         changes.append(float(np.abs(target - s).max() / max(np.abs(target).max(), unit_bound)))
-        certificate = residual if attempt.inner is None else attempt.inner.residual
-        coulomb_residual, inner_residual = certificate(model, fields, target), certificate(model, fields, s)
+        coulomb_residual, inner_residual = step.residual(model, fields, target), step.residual(model, fields, s)
         noise.append(inner_residual)
         attempt.stop = max(law.tol, NOISE * inner_residual)
         attempt.iterations += 1
@@ -373,19 +370,46 @@ def paths(model: Model, solver: str, options: dict, timings: dict):
 
 
 class InnerStep(Protocol):
-    """What a driver whose inner problem is no program of the model's gives the map in place of a solver session
-    (:mod:`.plastic_coulomb`: a plastic Tresca step): ``solve(s)`` the inner answer for the slip bounds s (its fields
-    then in ``fields``), ``residual(model, fields, bound)`` the worst residual of the whole certificate under
-    ``bound``, ``result(solution, timings, bound, fields, extra)`` the certified result; ``name`` for the record."""
+    """The map's inner problem: ``open()`` before the first solve (where it can refuse), ``solve(s)`` its answer for
+    the slip bounds s, ``recover(solution)`` the answer's fields, ``residual(model, fields, bound)`` the worst residual
+    of the whole certificate under ``bound``, ``result(solution, timings, bound, fields, extra)`` the certified result;
+    ``name`` for the record. :class:`ProgramStep` is the model's program's; a driver whose inner problem is no program
+    of the model's gives its own (:mod:`.plastic_coulomb`: a plastic Tresca step)."""
 
-    name: str
-    fields: object
+    name: str | None
+
+    def open(self) -> None: ...
 
     def solve(self, s: np.ndarray) -> ConicSolution: ...
+
+    def recover(self, solution: ConicSolution): ...
 
     def residual(self, model: Model, fields, bound: np.ndarray) -> float: ...
 
     def result(self, solution: ConicSolution, timings: dict, bound: np.ndarray, fields, extra: dict): ...
+
+
+class ProgramStep:
+    """The model's own program as the map's inner step, solved in the session ``opened()`` makes where it is needed."""
+
+    name = None
+
+    def __init__(self, model: Model, opened: Callable):
+        self.model, self.open = model, opened
+
+    def solve(self, s: np.ndarray) -> ConicSolution:
+        session = self.open()
+        session.update(**self.model.bound_update(s))
+        return session.solve()
+
+    def recover(self, solution: ConicSolution):
+        return self.model.recover(solution)
+
+    def residual(self, model: Model, fields, bound: np.ndarray) -> float:
+        return residual(model, fields, bound)
+
+    def result(self, solution: ConicSolution, timings: dict, bound: np.ndarray, fields, extra: dict):
+        return self.model.result(solution, timings, bound, fields=fields, extra=extra)
 
 
 def coulomb(model: Model, solver: str = "clarabel", progress=None, inner: InnerStep | None = None, **options):
@@ -440,8 +464,7 @@ def report(attempts: list[Attempt], history: list, timings: dict, law: Coulomb):
                         "tol": law.tol, "stop_change": final.stop, "reported_iteration": iteration,
                         "attempts": [attempt.record() for attempt in attempts]}, "history": history}
     with timed(timings, "postprocess"):
-        result = (chosen.model.result if chosen.inner is None else chosen.inner.result)(solution, timings, bound,
-                                                                                        fields=fields, extra=extra)
+        result = chosen.inner.result(solution, timings, bound, fields=fields, extra=extra)
     if not final.solved and chosen.best is not None:  # else the failed inner solve's own status
         result.status = "not converged"
         result.message = failure_message(attempts, history, law)

@@ -44,6 +44,12 @@ class PlasticTresca(InnerStep):
             self.start = self.fields.u, self.stepper.multipliers(model, self.fields)
         return solution
 
+    def open(self) -> None:
+        """Nothing to open: each inner step poses its own plastic program."""
+
+    def recover(self, solution: ConicSolution) -> ContactFields:
+        return self.fields  # the inner step's own (Newton's, or the conic program's recovered)
+
     def residual(self, model: Model, fields: ContactFields, bound: np.ndarray) -> float:
         return self.stepper.residual(model, fields, bound)
 
