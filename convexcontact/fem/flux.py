@@ -62,81 +62,162 @@ def supported(fem: FEModel) -> bool:
     return fem.dim == 2 and fem.scene.body.element == "P1" and fem.mesh.t.shape[0] == 3
 
 
+def triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertex coordinates (x, k, cells), the Jacobian determinants (cells,) and the barycentric gradients ∇λ_k
+    (x, k, cells). Laid out with the cells last, every small contraction here is a loop over whole columns (a
+    broadcast sum over a short last axis, einsum's generic loop or matmul on stacks of 3 × 2 matrices cost several
+    times more)."""
+    xy = mesh.p[:, mesh.t]
+    ahead, behind = xy[:, [1, 2, 0]], xy[:, [2, 0, 1]]  # p_{k+1}, p_{k+2}
+    det = (xy[0, 1] - xy[0, 0]) * (xy[1, 2] - xy[1, 0]) - (xy[1, 1] - xy[1, 0]) * (xy[0, 2] - xy[0, 0])
+    # ∇λ_k = rot(p_{k+1} − p_{k+2}) / det, oriented by the sign of det
+    return xy, det, np.stack([ahead[1] - behind[1], behind[0] - ahead[0]]) / det
+
+
 def cell_geometry(mesh):
-    """Vertex coordinates (cells, 3, 2), areas (cells,) and the barycentric gradients (cells, 3, 2)."""
-    corners = mesh.p[:, mesh.t].transpose(2, 1, 0)
-    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    grads = np.empty_like(corners)
-    # ∇λ_k = rot(opposite edge) / det, oriented by the sign of det
-    for k in range(3):
-        a, b = corners[:, (k + 1) % 3], corners[:, (k + 2) % 3]
-        grads[:, k, 0], grads[:, k, 1] = (a[:, 1] - b[:, 1]) / det, (b[:, 0] - a[:, 0]) / det
-    return corners, 0.5 * np.abs(det), grads
+    """Vertex coordinates (cells, 3, 2), areas (cells,) and the barycentric gradients (cells, 3, 2) (views of
+    :func:`triangles`' arrays)."""
+    xy, det, grads = triangles(mesh)
+    return xy.transpose(2, 1, 0), 0.5 * np.abs(det), grads.transpose(2, 1, 0)
 
 
 def opposite_facets(mesh) -> np.ndarray:
     """(cells, 3): the facet of each cell opposite its local vertex k (scikit-fem numbers a triangle's facets
     (v0 v1), (v1 v2), (v0 v2): opposite v2, v0, v1; checked, and found by search where a mesh numbers otherwise)."""
     t, facets, edges = mesh.t, mesh.facets, mesh.t2f
-    out = edges[[1, 2, 0]].T
-    ends = facets[:, out]  # (2, cells, 3)
-    if not ((ends != t.T[None]).all(axis=0)).all():
+    out = edges[[1, 2, 0]]  # (k, cells)
+    if ((facets[0, out] == t) | (facets[1, out] == t)).any():
         for l in range(3):
             e = edges[l]
             for k in range(3):
                 away = (facets[0, e] != t[k]) & (facets[1, e] != t[k])
-                out[away, k] = e[away]
-    return np.ascontiguousarray(out)
+                out[k, away] = e[away]
+    return out.T
 
 
 def elastic_stress(fem: FEModel, u_components: np.ndarray, grads: np.ndarray) -> np.ndarray:
-    """σ(u_h) per cell (cells, 2, 2) of the P1 displacement ``u_components`` (d, vertices)."""
+    """σ(u_h) per cell (cells, 2, 2; a view of a (2, 2, cells) array) of the P1 displacement ``u_components``
+    (d, vertices)."""
     lam, mu = fem.lame
-    nodal = u_components[:, fem.mesh.t].transpose(2, 0, 1)  # (cells, a, k)
-    grad_u = (nodal[:, :, :, None] * grads[:, None]).sum(axis=2)  # (cells, a, x): Σ_k u_a(p_k) ∇λ_k
-    strain = 0.5 * (grad_u + grad_u.transpose(0, 2, 1))
-    trace = strain[:, 0, 0] + strain[:, 1, 1]
-    return 2 * mu[:, None, None] * strain + (lam * trace)[:, None, None] * np.eye(2)
+    nodal = u_components[:, fem.mesh.t]  # (a, k, cells)
+    grad_u = (nodal[:, None] * grads.transpose(2, 1, 0)[None]).sum(axis=2)  # (a, x, cells): Σ_k u_a(p_k) ∂_x λ_k
+    stress = mu * (grad_u + grad_u.transpose(1, 0, 2))
+    trace = lam * (grad_u[0, 0] + grad_u[1, 1])
+    stress[0, 0] += trace
+    stress[1, 1] += trace
+    return stress.transpose(2, 0, 1)
 
 
-def patch_pairs(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The facet opposite each local vertex (cells, 3), the sign of its normal seen from the cell (outward +1), and
-    the pair index 2E + side of (vertex j of the cell, facet opposite k) (cells, 3, 3): the flux of σ_a, a the vertex,
-    through E along E's normal (outward of ``f2t[0]``)."""
-    opposite = opposite_facets(mesh)
-    sign = np.where(mesh.f2t[0, opposite] == np.arange(mesh.nelements)[:, None], 1.0, -1.0)
-    pair = 2 * opposite[:, None, :] + (mesh.facets[1, opposite][:, None, :] == mesh.t.T[:, :, None])
-    return opposite, sign, pair.astype(np.int32)  # 32-bit indices: half the memory traffic of the gathers
+def sort_by_vertex_and_angle(vertex: np.ndarray, angle: np.ndarray, nvertices: int) -> np.ndarray:
+    """The permutation sorting the corners by ``vertex``, then by ``angle`` in [0, 4). One sort of packed 64-bit
+    keys (vertex, angle quantized, index): SIMD-sorted, ~20× faster than np.lexsort; lexsort where the quantization
+    would tie two corners of a vertex (cells of angles ≲ 10⁻⁶ rad, or meshes of more than ~10⁸ cells)."""
+    index_bits, vertex_bits = int(vertex.size - 1).bit_length(), int(nvertices - 1).bit_length()
+    angle_bits = 62 - index_bits - vertex_bits
+    if angle_bits >= 8:
+        quantized = np.minimum((angle * 2.0 ** (angle_bits - 2)).astype(np.int64), 2**angle_bits - 1)
+        key = ((vertex.astype(np.int64) << angle_bits | quantized) << index_bits) | np.arange(vertex.size)
+        key.sort()
+        if (np.diff(key >> index_bits) > 0).all():
+            return key & ((1 << index_bits) - 1)
+    return np.lexsort((angle, vertex))
 
 
-def propagate(first, second, s1, s2, rhs, known, values) -> None:
-    """Solve the divergence constraints s1 x[first] + s2 x[second] = rhs of all patches at once, in place: each
-    constraint with one of its two fluxes known gives the other, sweep after sweep along the chains of cells around
-    each vertex (about half as many sweeps as the largest patch has cells). ``values`` (columns: right-hand sides) and
-    ``known`` hold the seeds."""
-    active = np.arange(first.size, dtype=np.int32)
-    while active.size:
-        f, g = first[active], second[active]
-        known_f, known_g = known[f], known[g]
-        forward, backward = known_f & ~known_g, known_g & ~known_f
-        if not (forward.any() or backward.any()):
-            return
-        a, b = active[forward], active[backward]
-        values[second[a]] = (rhs[a] - s1[a, None] * values[first[a]]) / s2[a, None]
-        values[first[b]] = (rhs[b] - s2[b, None] * values[second[b]]) / s1[b, None]
-        known[second[a]] = True
-        known[first[b]] = True
-        active = active[~(known_f & known_g | forward | backward)]  # constraints still waiting for a flux
+@dataclass(frozen=True)
+class Chains:
+    """The corners (k, c) of the cells (flat index k · cells + c, vertex t[k, c]) in chain order: by vertex, then
+    counterclockwise around it, a boundary vertex's chain starting at the cell whose clockwise facet at the vertex is
+    a boundary facet. ``order`` the flat index at each position, ``starts`` each chain's first position, ``segment``
+    the chain of each corner (flat); per chain its ``vertex`` and the boundary facet it starts at and ends at
+    (``first_facet``, ``last_facet``; −1 for the closed chains around interior vertices)."""
+
+    order: np.ndarray
+    starts: np.ndarray
+    segment: np.ndarray
+    vertex: np.ndarray
+    first_facet: np.ndarray
+    last_facet: np.ndarray
+
+    @property
+    def lasts(self) -> np.ndarray:
+        return np.append(self.starts[1:], self.order.size) - 1
 
 
-def rt0_mass(corners: np.ndarray, area: np.ndarray) -> np.ndarray:
-    """∫_T φ_k · φ_l (cells, 3, 3) of the RT0 functions φ_k = (x − p_k) / 2|T| (unit outward flux through the facet
-    opposite vertex k). With x − p_k = Σ_m λ_m (p_m − p_k), ∫ λ_m λ_n = |T| (1 + δ_mn) / 12 and the vertices c_m taken
-    from the centroid (Σ c_m = 0) it reduces to (Σ_m |c_m|² / 12 + c_k · c_l) / 4|T|."""
-    centred = corners - corners.mean(axis=1, keepdims=True)
-    gram = (centred[:, :, None, :] * centred[:, None, :, :]).sum(axis=3)  # c_m · c_n
-    return (gram + (gram[:, 0, 0] + gram[:, 1, 1] + gram[:, 2, 2])[:, None, None] / 12.0) / (4.0 * area[:, None, None])
+def patch_chains(mesh, xy: np.ndarray, det: np.ndarray) -> Chains:
+    """The chains of cells around each vertex (:class:`Chains`); consecutive cells share their facet at the vertex,
+    checked (a mesh whose cells overlap or are inverted is refused)."""
+    ahead, behind = [1, 2, 0], [2, 0, 1]
+    opposite = opposite_facets(mesh).T
+    # counterclockwise around vertex k a cell enters through its facet (k, k+1) and leaves through (k, k+2)
+    # (opposite k+2 and k+1), the other way round for a cell numbered clockwise
+    positive = det > 0
+    entering = np.where(positive, opposite[behind], opposite[ahead]).ravel()
+    leaving = np.where(positive, opposite[ahead], opposite[behind]).ravel()
+    outside = mesh.f2t[1] == -1
+    begins = outside[entering]
+    vertex = mesh.t.ravel()
+    # a pseudo-angle of the direction to the cell's centroid (increasing with the angle, in [−1, 3); no arctan2),
+    # measured from a boundary vertex's first cell
+    direction = xy[:, ahead] + xy[:, behind] - 2.0 * xy
+    dx, dy = direction[0].ravel(), direction[1].ravel()
+    ratio = dy / (np.abs(dx) + np.abs(dy))
+    angle = np.where(dx < 0, 2.0 - ratio, ratio)
+    reference = np.zeros(mesh.nvertices)
+    reference[vertex[begins]] = angle[begins]
+    order = sort_by_vertex_and_angle(vertex, (angle - reference[vertex]) % 4.0, mesh.nvertices)
+    around = vertex[order]
+    new = begins[order]
+    new[0] = True
+    new[1:] |= around[1:] != around[:-1]
+    starts = np.flatnonzero(new)
+    lasts = np.append(starts[1:], order.size) - 1
+    into, out_of = entering[order], leaving[order]
+    if not ((out_of[:-1] == into[1:]) | new[1:]).all() or not (
+            outside[out_of[lasts]] | (out_of[lasts] == into[starts])).all():
+        raise ValueError("mesh: the cells around a vertex do not form a chain of cells sharing facets (overlapping, "
+                         "inverted or degenerate cells); check the mesh, e.g. with skfem's Mesh.is_valid()")
+    segment = np.empty(order.size, dtype=np.int64)
+    segment[order] = np.cumsum(new) - 1
+    first_facet = np.where(begins[order[starts]], into[starts], -1)
+    last_facet = np.where(outside[out_of[lasts]], out_of[lasts], -1)
+    return Chains(order, starts, segment.reshape(3, -1), around[starts], first_facet, last_facet)
+
+
+def chain_fluxes(chains: Chains, rhs: np.ndarray, first: np.ndarray, last: np.ndarray, first_known: np.ndarray,
+                 last_known: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The fluxes of all patch problems through each corner's two facets, counterclockwise around its vertex:
+    entering y_in and leaving y_out (rows, ordered corners), with y_out − y_in = ``rhs`` (rows, ordered corners) at
+    every corner and y_in = the previous corner's y_out along a chain. Each chain starts from its known flux: the
+    outward ``first`` flux of its first facet (y_in = −first) where ``first_known``, else the outward ``last`` flux
+    of its last facet where ``last_known``, else 0 (the chain's circulation, chosen after). A cycle closes on its own
+    start, a chain known at both ends on its last flux: the last corner carries the data's incompatibility (the
+    defect, round-off for the exact discrete solution).
+
+    The recurrence y_out = y_in + rhs along a chain is a cumulative sum: one np.cumsum over all chains, each
+    chain's partial sums taken from its start."""
+    starts, lasts = chains.starts, chains.lasts
+    partial = np.cumsum(rhs, axis=1)
+    before = np.where(starts > 0, partial[:, starts - 1], 0.0)  # the sums of the chains before each chain
+    total = partial[:, lasts] - before
+    entering = np.where(first_known, -first, np.where(last_known, last - total, 0.0))
+    leaving = partial + np.repeat(entering - before, np.diff(np.append(starts, rhs.shape[1])), axis=1)
+    leaving[:, lasts] = np.where(last_known, last, entering + np.where(chains.last_facet < 0, 0.0, total))
+    y_in = np.empty_like(leaving)
+    y_in[:, 1:] = leaving[:, :-1]
+    y_in[:, starts] = entering
+    return y_in, leaving
+
+
+def boundary_fluxes(mesh, facet_moments: np.ndarray, held: np.ndarray, facet: np.ndarray, vertex: np.ndarray):
+    """Per row and chain, whether the outward flux through the chain's end ``facet`` (−1: none) at ``vertex`` is
+    prescribed (not held) and its value ∫_E ψ_a g_i (``facet_moments``)."""
+    on = np.flatnonzero(facet >= 0)
+    facets = facet[on]
+    known = np.zeros((2, facet.size), dtype=bool)
+    value = np.zeros((2, facet.size))
+    known[:, on] = ~held[:, facets]
+    value[:, on] = facet_moments[(mesh.facets[1, facets] == vertex[on]).astype(np.int64), :, facets].T
+    return known, value
 
 
 def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarray, held: np.ndarray) -> Equilibrated:
@@ -147,107 +228,92 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     fluxes are free).
 
     In RT0 a patch problem is a chain of cells around its vertex, one divergence constraint per cell on the two
-    fluxes through its facets at the vertex: the fluxes follow from one known flux (a Neumann facet) by propagation,
-    and where none is known (interior and Dirichlet vertices) up to one free circulation, chosen to minimize the
-    patch's share of σ̂ − σ_h (a scalar quadratic per patch, :func:`optimal_circulation`). No linear system is solved."""
+    fluxes through its facets at the vertex: the fluxes follow from one known flux (a Neumann facet) by a
+    cumulative sum along the chain (:func:`chain_fluxes`), and where none is known (interior and Dirichlet
+    vertices) up to one free circulation, chosen to minimize the patch's share of σ̂ − σ_h (a scalar quadratic per
+    patch, :func:`circulations`). No linear system is solved."""
     mesh = fem.mesh
     lam, mu = fem.lame
-    corners, area, grads = cell_geometry(mesh)
+    xy, det, gradients = triangles(mesh)
+    area, grads = 0.5 * np.abs(det), gradients.transpose(2, 1, 0)
     sigma_h = elastic_stress(fem, u_components, grads)
     body_force = np.asarray(fem.scene.body_force, dtype=float) * fem.scaling.length / fem.scaling.pressure
-    opposite, sign, pair = patch_pairs(mesh)
-    npairs, patch = 2 * mesh.nfacets, mesh.t.T  # patch[c, j]: the vertex whose patch (c, j) belongs to
-    mass = rt0_mass(corners, area)
-    # the two facets at vertex j of each cell: (c, j) → the pairs (j, facet k1) and (j, facet k2), k1, k2 ≠ j
-    k1, k2 = np.array([1, 0, 0]), np.array([2, 2, 1])
-    cells = np.arange(mesh.nelements)[:, None]
-    first, second = pair[cells, np.arange(3), k1], pair[cells, np.arange(3), k2]
-    s1, s2 = sign[:, k1], sign[:, k2]
-    boundary = mesh.f2t[1] == -1
-    # both rows at once: row i's pairs are offset by i·npairs
-    rhs = -area[None, :, None] * (body_force[:, None, None] / 3.0 - against_rows(grads, sigma_h))
-    known = np.zeros((2, npairs), dtype=bool)
-    values = np.zeros((2, npairs, 2))  # a particular solution and the patch's circulation (where no flux is known)
-    any_pair = np.empty(mesh.nvertices, dtype=np.int64)
-    any_pair[patch.ravel()] = first.ravel()
-    for i in range(2):
-        neumann = np.flatnonzero(boundary & ~held[i])
-        for side in range(2):
-            known[i, 2 * neumann + side] = True
-            values[i, 2 * neumann + side, 0] = facet_moments[side, i, neumann]
-        # a seed per patch without a known flux: a Dirichlet facet's pair if it has one, else any pair of the patch
-        has_known = np.zeros(mesh.nvertices, dtype=bool)
-        has_known[mesh.facets[:, neumann].ravel()] = True
-        dirichlet = np.flatnonzero(boundary & held[i])
-        seed = any_pair.copy()
-        seed[mesh.facets[:, dirichlet].ravel()] = np.concatenate([2 * dirichlet, 2 * dirichlet + 1])
-        seeded = seed[~has_known]
-        known[i, seeded] = True
-        values[i, seeded, 1] = 1.0
-    both = np.zeros((rhs.size, 2))
-    both[:, 0] = rhs.ravel()
-    flat_values = values.reshape(-1, 2)
-    f, g = first.ravel(), second.ravel()
-    propagate(np.concatenate([f, f + npairs]), np.concatenate([g, g + npairs]), np.tile(s1.ravel(), 2),
-              np.tile(s2.ravel(), 2), both, known.ravel(), flat_values)
-    values = flat_values.reshape(2, npairs, 2)
-    x = optimal_circulation(values, first, second, s1, s2, mass, area, grads, sigma_h, mesh)
-    flux = sign[None] * (x[:, 2 * opposite] + x[:, 2 * opposite + 1])  # outward flux of σ̂ row i (i, c, k)
+    chains = patch_chains(mesh, xy, det)
+    # w_a, the RT0 interpolant of ψ_a σ_h,i: its outward flux through the facet opposite k is −|T| σ_h,i · ∇λ_k at
+    # both vertices a of the facet (i, k, cells)
+    target = -area * (sigma_h.transpose(1, 2, 0)[:, :, None] * gradients[None]).sum(axis=1)
+    # the divergence constraint at corner k: the outward fluxes through its facets opposite k+1 and k+2 sum to
+    # Π_0(ψ_a f − ∇ψ_a · σ_h) |T| = w's (−target_k) less |T| f / 3
+    rhs = -target - (area / 3.0) * body_force[:, None, None]
+    first = boundary_fluxes(mesh, facet_moments, held, chains.first_facet, chains.vertex)
+    last = boundary_fluxes(mesh, facet_moments, held, chains.last_facet, chains.vertex)
+    y_in, y_out = chain_fluxes(chains, rhs.reshape(2, -1)[:, chains.order], first[1], last[1], first[0], last[0])
+    natural = np.empty((2, 2, y_in.shape[1]))
+    natural[:, 0][:, chains.order], natural[:, 1][:, chains.order] = y_in, y_out
+    y_in, y_out = natural.reshape(2, 2, 3, -1).transpose(1, 0, 2, 3)
+    # outward fluxes through the facets opposite k+1 (ahead) and k+2 (behind) of each corner k
+    positive = det > 0
+    ahead, behind = np.where(positive, y_out, -y_in), np.where(positive, -y_in, y_out)
+    orientation = np.where(positive, 1.0, -1.0)
+    free = ~(first[0] | last[0])
+    circulation = circulations(chains, xy, area, orientation, ahead - target[:, [1, 2, 0]],
+                               behind - target[:, [2, 0, 1]], free)
+    ahead += orientation * circulation
+    behind -= orientation * circulation
+    x = behind[:, [1, 2, 0]] + ahead[:, [2, 0, 1]]  # outward flux through facet k (i, k, cells)
+    flux = x.transpose(0, 2, 1)  # (i, c, k)
     residual = flux.sum(axis=2) + area * body_force[:, None]  # ∫_T (div σ̂ + f)
     scale = np.abs(area[None] * body_force[:, None]).max() + np.abs(flux).max()
     defect = float(np.abs(residual).max() / scale) if scale > 0 else 0.0
-    # σ̂ row i at vertex m: Σ_k F_k (p_m − p_k) / 2|T|
-    vertex_stress = (flux.sum(axis=2)[:, None, :, None] * corners.transpose(2, 0, 1)[None]
-                     - (flux[..., None] * corners[None]).sum(axis=2).transpose(0, 2, 1)[..., None]
-                     ) / (2.0 * area[None, None, :, None])
+    vertex_stress = vertex_values(x, xy, area)
     symmetric, skew = cell_norms(vertex_stress, sigma_h, lam, mu, area)
     return Equilibrated(vertex_stress, symmetric, skew, defect)
 
 
-def against_rows(vectors: np.ndarray, sigma_h: np.ndarray) -> np.ndarray:
-    """(rows i, cells, 3): vectors (cells, 3, 2) dotted with row i of σ_h per cell (written out, as the other small
-    contractions here are broadcast sums: einsum's generic loop, and matmul's on stacks of 3 × 2 matrices, took a
-    third of the estimate's time)."""
-    return np.stack([vectors[..., 0] * sigma_h[:, i, None, 0] + vectors[..., 1] * sigma_h[:, i, None, 1]
-                     for i in range(2)])
+def circulations(chains: Chains, xy, area, orientation, ahead, behind, free) -> np.ndarray:
+    """The circulation c (rows, k, cells: each corner's chain's) minimizing per row and free chain Σ_T ‖σ_a − w_a‖²_T,
+    ``ahead``, ``behind`` (rows, k, cells) the outward fluxes of σ_a − w_a through the facets opposite k+1 and k+2 of
+    corner k, c adding (1, −1) · ``orientation`` to them (0 on the chains with a known flux, ``free`` False).
+
+    With M the RT0 mass matrix of the two facets' functions, M_kl = (c_k · c_l + Σ_m |c_m|² / 12) / 4|T| (c the
+    vertices from the centroid), the patch's energy is quadratic in c, curvature |e_k|² / 4|T| (e_k = p_{k+1} −
+    p_{k+2}) and slope (e_k · c_{k+1} z_ahead + e_k · c_{k+2} z_behind) / 4|T| per corner.
+
+    w_a is the cellwise RT0 interpolant of ψ_a σ_h,i. Σ_a w_a = σ_h cell by cell, so σ̂ − σ_h = Σ_a (σ_a − w_a):
+    each patch minimizes its own share, and a stress σ_h constant over a patch is reproduced exactly on any mesh
+    (the textbook target ψ_a σ_h is not in RT0, and its projection leaves a circulation that does not vanish on
+    graded or locally refined meshes: η / ‖σ_h‖ ≈ 10 % for a constant stress on the graded punch mesh,
+    docs/estimate.md)."""
+    centred = xy - xy.mean(axis=1, keepdims=True)
+    edge = xy[:, [1, 2, 0]] - xy[:, [2, 0, 1]]
+    weight = orientation / (4.0 * area)
+    slope = ((edge * centred[:, [1, 2, 0]]).sum(axis=0) * weight * ahead
+             + (edge * centred[:, [2, 0, 1]]).sum(axis=0) * weight * behind)
+    segment, count = chains.segment, chains.starts.size
+    curvature = np.bincount(segment.ravel(), ((edge**2).sum(axis=0) / (4.0 * area)).ravel(), count)
+    per_chain = np.stack([np.bincount(segment.ravel(), s.ravel(), count) for s in slope])
+    return np.where(free, -per_chain / curvature, 0.0)[:, segment]
 
 
-def optimal_circulation(values, first, second, s1, s2, mass, area, grads, sigma_h, mesh) -> np.ndarray:
-    """The fluxes x (rows, pairs) = particular + c circulation (``values`` (rows, pairs, 2)), c minimizing per row
-    and patch Σ_T ‖σ_a − w_a‖²_T over the patch's two fluxes k = k1, k2 at its vertex a in each cell (``first``,
-    ``second``: their pairs, (cells, j)); w_a the cellwise RT0 interpolant of ψ_a σ_h,i, fluxes ∫_E ψ_a σ_h,i|_T · n
-    = −|T| σ_h,i · ∇λ_k through the facets E ∋ a. Σ_a w_a = σ_h cell by cell, so σ̂ − σ_h = Σ_a (σ_a − w_a): each
-    patch minimizes its own share, and a stress σ_h constant over a patch is reproduced exactly on any mesh (the
-    textbook target ψ_a σ_h is not in RT0, and its projection leaves a circulation that does not vanish on graded or
-    locally refined meshes: η / ‖σ_h‖ ≈ 10 % for a constant stress on the graded punch mesh, docs/estimate.md)."""
-    k, l = np.array([1, 0, 0]), np.array([2, 2, 1])
-    xk, xl = values[:, first] * s1[..., None], values[:, second] * s2[..., None]  # (rows, c, j, 2 columns)
-    mkk, mkl, mll = mass[:, k, k, None], mass[:, k, l, None], mass[:, l, l, None]
-    qk, ql = mkk * xk + mkl * xl, mkl * xk + mll * xl  # Q applied to both columns
-    wk = -area[None, :, None] * against_rows(grads[:, k], sigma_h)  # (rows, c, j): w_a's outward fluxes
-    wl = -area[None, :, None] * against_rows(grads[:, l], sigma_h)
-    load_k = mkk[..., 0] * wk + mkl[..., 0] * wl
-    load_l = mkl[..., 0] * wk + mll[..., 0] * wl
-    h_k, h_l = xk[..., 1], xl[..., 1]
-    nv = mesh.nvertices
-    patch = (mesh.t.T[None] + np.array([0, nv])[:, None, None]).ravel()  # (row, cell, j) → row · nv + vertex
-    curvature = np.bincount(patch, (h_k * qk[..., 1] + h_l * ql[..., 1]).ravel(), 2 * nv)
-    slope = np.bincount(patch, (h_k * (qk[..., 0] - load_k) + h_l * (ql[..., 0] - load_l)).ravel(), 2 * nv)
-    circulation = (-slope / np.where(curvature > 0, curvature, np.inf)).reshape(2, nv)
-    owner = mesh.facets.T.ravel()  # pair 2E + side belongs to the patch of vertex facets[side, E]
-    return values[..., 0] + circulation[:, owner] * values[..., 1]
+def vertex_values(flux: np.ndarray, xy: np.ndarray, area: np.ndarray) -> np.ndarray:
+    """σ̂ row i at the vertices m of each cell (i, x, cells, m; a view of an (i, x, m, cells) array) from the outward
+    fluxes F_k through the facets opposite k (i, k, cells): Σ_k F_k (p_m − p_k) / 2|T|."""
+    total = flux.sum(axis=1)
+    moment = (flux[:, None] * xy[None]).sum(axis=2)  # Σ_k F_k p_k (i, x, cells)
+    return ((total[:, None, None] * xy[None] - moment[:, :, None]) / (2.0 * area)).transpose(0, 1, 3, 2)
 
 
 def cell_norms(vertex_stress, sigma_h, lam, mu, area):
     """‖C^{-½}(sym σ̂ − σ_h)‖²_T and ‖(2μ)^{-½} skew σ̂‖²_T per cell, by the facet-midpoint rule (exact: the integrands
     are quadratic), component by component."""
-    mid = 0.5 * (vertex_stress + vertex_stress[..., [1, 2, 0]])  # (i, x, c, 3 midpoints)
-    a, d = mid[0, 0] - sigma_h[:, 0, 0, None], mid[1, 1] - sigma_h[:, 1, 1, None]
-    b = 0.5 * (mid[0, 1] + mid[1, 0]) - sigma_h[:, 0, 1, None]
+    at = vertex_stress.transpose(0, 1, 3, 2)  # (i, x, m, cells)
+    mid = 0.5 * (at + at[:, :, [1, 2, 0]])
+    a, d = mid[0, 0] - sigma_h[:, 0, 0], mid[1, 1] - sigma_h[:, 1, 1]
+    b = 0.5 * (mid[0, 1] + mid[1, 0]) - sigma_h[:, 0, 1]
     w = 0.5 * (mid[0, 1] - mid[1, 0])
     # C⁻¹τ : τ = (|τ|² − λ/(2μ + 2λ) (tr τ)²) / 2μ for σ = 2με + λ tr ε I in 2-D
-    energy = (a * a + d * d + 2 * b * b).sum(axis=1) - lam / (2 * mu + 2 * lam) * ((a + d) ** 2).sum(axis=1)
-    return area * energy / (6 * mu), area * 2 * (w * w).sum(axis=1) / (6 * mu)
+    energy = (a * a + d * d + 2 * b * b).sum(axis=0) - lam / (2 * mu + 2 * lam) * ((a + d) ** 2).sum(axis=0)
+    return area * energy / (6 * mu), area * 2 * (w * w).sum(axis=0) / (6 * mu)
 
 
 def contact_facets(fem: FEModel) -> np.ndarray:
