@@ -24,9 +24,10 @@ C_K Korn's constant of the body and its Dirichlet boundary (‖∇v‖ ≤ C_K �
 boundary). :func:`flux_estimate` adds the complementarity and friction terms of the contact (Weiss–Wohlmuth).
 
 Written by hand (not with scikit-fem's RT elements): a patch problem in RT0 is the chain of cells around a, one
-divergence constraint per cell on the two fluxes through its facets at a, solved by propagation from one known flux,
-with one free circulation where none is known; assembling scikit-fem forms would be one Python call per patch. Here
-every patch is solved at once with NumPy, no linear system.
+divergence constraint per cell on the two fluxes through its facets at a, solved by a cumulative sum from one known
+flux, with one free circulation where none is known; assembling scikit-fem forms would be one Python call per patch.
+Here the cells of all patches are sorted into their chains once, and every patch is solved at once by one
+np.cumsum per row of the stress: no linear system, no loop over patches or sweeps.
 """
 
 from __future__ import annotations
@@ -64,14 +65,21 @@ def supported(fem: FEModel) -> bool:
 
 def triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertex coordinates (x, k, cells), the Jacobian determinants (cells,) and the barycentric gradients ∇λ_k
-    (x, k, cells). Laid out with the cells last, every small contraction here is a loop over whole columns (a
+    (x, k, cells).
+
+    Arrays here are laid out with the cells last, so that every small contraction is a loop over whole columns (a
     broadcast sum over a short last axis, einsum's generic loop or matmul on stacks of 3 × 2 matrices cost several
-    times more)."""
-    xy = mesh.p[:, mesh.t]
-    ahead, behind = xy[:, [1, 2, 0]], xy[:, [2, 0, 1]]  # p_{k+1}, p_{k+2}
-    det = (xy[0, 1] - xy[0, 0]) * (xy[1, 2] - xy[1, 0]) - (xy[1, 1] - xy[1, 0]) * (xy[0, 2] - xy[0, 0])
-    # ∇λ_k = rot(p_{k+1} − p_{k+2}) / det, oriented by the sign of det
-    return xy, det, np.stack([ahead[1] - behind[1], behind[0] - ahead[0]]) / det
+    times more), and gathered with np.take or 1-D fancy indexing: numpy indexes a 2-D array by a slice and a large
+    index array 10–100× slower (17 ms for the coordinates of 10⁵ cells, against 1 ms)."""
+    xy = np.take(mesh.p, mesh.t, axis=1)
+    x, y = xy
+    det = (x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0])
+    grads = np.empty_like(xy)
+    for k in range(3):  # ∇λ_k = rot(p_{k+1} − p_{k+2}) / det, oriented by the sign of det
+        ahead, behind = (k + 1) % 3, (k + 2) % 3
+        np.divide(y[ahead] - y[behind], det, out=grads[0, k])
+        np.divide(x[behind] - x[ahead], det, out=grads[1, k])
+    return xy, det, grads
 
 
 def cell_geometry(mesh):
@@ -86,11 +94,11 @@ def opposite_facets(mesh) -> np.ndarray:
     (v0 v1), (v1 v2), (v0 v2): opposite v2, v0, v1; checked, and found by search where a mesh numbers otherwise)."""
     t, facets, edges = mesh.t, mesh.facets, mesh.t2f
     out = edges[[1, 2, 0]]  # (k, cells)
-    if ((facets[0, out] == t) | (facets[1, out] == t)).any():
+    if ((facets[0][out] == t) | (facets[1][out] == t)).any():
         for l in range(3):
             e = edges[l]
             for k in range(3):
-                away = (facets[0, e] != t[k]) & (facets[1, e] != t[k])
+                away = (facets[0][e] != t[k]) & (facets[1][e] != t[k])
                 out[k, away] = e[away]
     return out.T
 
@@ -99,7 +107,7 @@ def elastic_stress(fem: FEModel, u_components: np.ndarray, grads: np.ndarray) ->
     """σ(u_h) per cell (cells, 2, 2; a view of a (2, 2, cells) array) of the P1 displacement ``u_components``
     (d, vertices)."""
     lam, mu = fem.lame
-    nodal = u_components[:, fem.mesh.t]  # (a, k, cells)
+    nodal = np.take(u_components, fem.mesh.t, axis=1)  # (a, k, cells)
     grad_u = (nodal[:, None] * grads.transpose(2, 1, 0)[None]).sum(axis=2)  # (a, x, cells): Σ_k u_a(p_k) ∂_x λ_k
     stress = mu * (grad_u + grad_u.transpose(1, 0, 2))
     trace = lam * (grad_u[0, 0] + grad_u[1, 1])
@@ -109,15 +117,15 @@ def elastic_stress(fem: FEModel, u_components: np.ndarray, grads: np.ndarray) ->
 
 
 def sort_by_vertex_and_angle(vertex: np.ndarray, angle: np.ndarray, nvertices: int) -> np.ndarray:
-    """The permutation sorting the corners by ``vertex``, then by ``angle`` in [0, 4). One sort of packed 64-bit
-    keys (vertex, angle quantized, index): SIMD-sorted, ~20× faster than np.lexsort; lexsort where the quantization
-    would tie two corners of a vertex (cells of angles ≲ 10⁻⁶ rad, or meshes of more than ~10⁸ cells)."""
+    """The permutation sorting the corners by ``vertex``, then by ``angle`` in [0, 4): one stable sort of packed
+    64-bit keys (vertex, angle quantized, index), ~15× faster than np.lexsort; lexsort where the quantization would
+    tie two corners of a vertex (cells with angles of ≲ 10⁻⁶ rad, or meshes of ~10⁸ cells)."""
     index_bits, vertex_bits = int(vertex.size - 1).bit_length(), int(nvertices - 1).bit_length()
     angle_bits = 62 - index_bits - vertex_bits
     if angle_bits >= 8:
         quantized = np.minimum((angle * 2.0 ** (angle_bits - 2)).astype(np.int64), 2**angle_bits - 1)
         key = ((vertex.astype(np.int64) << angle_bits | quantized) << index_bits) | np.arange(vertex.size)
-        key.sort()
+        key.sort(kind="stable")  # timsort: the keys come in runs (a mesh's cells number nearby vertices together)
         if (np.diff(key >> index_bits) > 0).all():
             return key & ((1 << index_bits) - 1)
     return np.lexsort((angle, vertex))
@@ -125,41 +133,46 @@ def sort_by_vertex_and_angle(vertex: np.ndarray, angle: np.ndarray, nvertices: i
 
 @dataclass(frozen=True)
 class Chains:
-    """The corners (k, c) of the cells (flat index k · cells + c, vertex t[k, c]) in chain order: by vertex, then
-    counterclockwise around it, a boundary vertex's chain starting at the cell whose clockwise facet at the vertex is
-    a boundary facet. ``order`` the flat index at each position, ``starts`` each chain's first position, ``segment``
-    the chain of each corner (flat); per chain its ``vertex`` and the boundary facet it starts at and ends at
-    (``first_facet``, ``last_facet``; −1 for the closed chains around interior vertices)."""
+    """The patches' cells in chain order. A corner (k, c) of a cell (flat index k · cells + c) lies in the patch of
+    vertex t[k, c]; going counterclockwise around the vertex it enters the cell through one of its two facets at the
+    vertex and leaves through the other, into the next corner of the chain. ``order``: the corners by vertex, then
+    counterclockwise, a boundary vertex's chain starting at the corner that enters from a boundary facet (flat index
+    at each position); ``starts``, ``lengths`` of the chains in it; per facet slot (k, cells), the facet opposite k,
+    the positions of the corners ``leaving`` and ``entering`` through it; per chain its ``vertex`` and the boundary
+    facets it starts and ends at (``first_facet``, ``last_facet``; −1 for the closed chains around interior
+    vertices)."""
 
     order: np.ndarray
     starts: np.ndarray
-    segment: np.ndarray
+    lengths: np.ndarray
+    leaving: np.ndarray
+    entering: np.ndarray
     vertex: np.ndarray
     first_facet: np.ndarray
     last_facet: np.ndarray
 
     @property
     def lasts(self) -> np.ndarray:
-        return np.append(self.starts[1:], self.order.size) - 1
+        return self.starts + self.lengths - 1
 
 
 def patch_chains(mesh, xy: np.ndarray, det: np.ndarray) -> Chains:
-    """The chains of cells around each vertex (:class:`Chains`); consecutive cells share their facet at the vertex,
-    checked (a mesh whose cells overlap or are inverted is refused)."""
+    """The chains of cells around the vertices (:class:`Chains`), sorted once by vertex and the angle of the cells'
+    centroids around it. Consecutive corners of a chain sharing their facet is checked: a mesh whose cells overlap
+    is refused."""
     ahead, behind = [1, 2, 0], [2, 0, 1]
     opposite = opposite_facets(mesh).T
-    # counterclockwise around vertex k a cell enters through its facet (k, k+1) and leaves through (k, k+2)
-    # (opposite k+2 and k+1), the other way round for a cell numbered clockwise
+    # counterclockwise around its vertex k a cell enters through its facet (k, k+1), opposite k+2, and leaves through
+    # (k, k+2), opposite k+1; the other way round on a cell numbered clockwise
     positive = det > 0
-    entering = np.where(positive, opposite[behind], opposite[ahead]).ravel()
-    leaving = np.where(positive, opposite[ahead], opposite[behind]).ravel()
+    enters = np.where(positive, opposite[behind], opposite[ahead]).ravel()
+    leaves = np.where(positive, opposite[ahead], opposite[behind]).ravel()
     outside = mesh.f2t[1] == -1
-    begins = outside[entering]
+    begins = outside[enters]
     vertex = mesh.t.ravel()
-    # a pseudo-angle of the direction to the cell's centroid (increasing with the angle, in [−1, 3); no arctan2),
-    # measured from a boundary vertex's first cell
-    direction = xy[:, ahead] + xy[:, behind] - 2.0 * xy
-    dx, dy = direction[0].ravel(), direction[1].ravel()
+    # a pseudo-angle of the direction from the vertex to the cell's centroid (increasing with the angle, in
+    # [−1, 3); no arctan2), measured from a boundary vertex's first corner
+    dx, dy = (xy.mean(axis=1)[:, None] - xy).reshape(2, -1)
     ratio = dy / (np.abs(dx) + np.abs(dy))
     angle = np.where(dx < 0, 2.0 - ratio, ratio)
     reference = np.zeros(mesh.nvertices)
@@ -170,54 +183,105 @@ def patch_chains(mesh, xy: np.ndarray, det: np.ndarray) -> Chains:
     new[0] = True
     new[1:] |= around[1:] != around[:-1]
     starts = np.flatnonzero(new)
-    lasts = np.append(starts[1:], order.size) - 1
-    into, out_of = entering[order], leaving[order]
-    if not ((out_of[:-1] == into[1:]) | new[1:]).all() or not (
-            outside[out_of[lasts]] | (out_of[lasts] == into[starts])).all():
-        raise ValueError("mesh: the cells around a vertex do not form a chain of cells sharing facets (overlapping, "
-                         "inverted or degenerate cells); check the mesh, e.g. with skfem's Mesh.is_valid()")
-    segment = np.empty(order.size, dtype=np.int64)
-    segment[order] = np.cumsum(new) - 1
-    first_facet = np.where(begins[order[starts]], into[starts], -1)
-    last_facet = np.where(outside[out_of[lasts]], out_of[lasts], -1)
-    return Chains(order, starts, segment.reshape(3, -1), around[starts], first_facet, last_facet)
+    lengths = np.diff(np.append(starts, order.size))
+    lasts = starts + lengths - 1
+    into, out_of = enters[order], leaves[order]
+    if not (((out_of[:-1] == into[1:]) | new[1:]).all() and (outside[out_of[lasts]] | (out_of[lasts] == into[starts])).all()):
+        raise ValueError("mesh: the cells around a vertex do not form a chain of neighbours (overlapping or "
+                         "degenerate cells); check the mesh (skfem's Mesh.is_valid(), or a fresh one from the geometry)")
+    position = np.empty(order.size, dtype=np.int64)
+    position[order] = np.arange(order.size)
+    position = position.reshape(3, -1)
+    # facet k is left by the cell's corner k+2 and entered by its corner k+1 (counterclockwise cells)
+    return Chains(order, starts, lengths, np.where(positive, position[behind], position[ahead]),
+                  np.where(positive, position[ahead], position[behind]), around[starts],
+                  np.where(begins[order[starts]], into[starts], -1), np.where(outside[out_of[lasts]], out_of[lasts], -1))
 
 
-def chain_fluxes(chains: Chains, rhs: np.ndarray, first: np.ndarray, last: np.ndarray, first_known: np.ndarray,
-                 last_known: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The fluxes of all patch problems through each corner's two facets, counterclockwise around its vertex:
-    entering y_in and leaving y_out (rows, ordered corners), with y_out − y_in = ``rhs`` (rows, ordered corners) at
-    every corner and y_in = the previous corner's y_out along a chain. Each chain starts from its known flux: the
-    outward ``first`` flux of its first facet (y_in = −first) where ``first_known``, else the outward ``last`` flux
-    of its last facet where ``last_known``, else 0 (the chain's circulation, chosen after). A cycle closes on its own
-    start, a chain known at both ends on its last flux: the last corner carries the data's incompatibility (the
-    defect, round-off for the exact discrete solution).
+def chain_fluxes(chains: Chains, rhs: np.ndarray, first: np.ndarray, last: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One row's fluxes of all patch problems through each corner's two facets, counterclockwise around its vertex:
+    entering y_in and leaving y_out (ordered corners), with y_out − y_in = ``rhs`` (ordered corners) and y_in = the
+    previous corner's y_out along each chain. A chain starts from its known flux, ``first`` = (known, value) per
+    chain of its first facet's outward flux (y_in = −value), else ``last``'s of its last facet, else 0 (the chain's
+    circulation, chosen after). A cycle closes on its own start, a chain known at both ends on its last flux: the
+    last corner carries the data's incompatibility (the defect; round-off for the exact discrete solution).
 
     The recurrence y_out = y_in + rhs along a chain is a cumulative sum: one np.cumsum over all chains, each
-    chain's partial sums taken from its start."""
+    chain's partial sums counted from its start."""
+    (first_known, first_flux), (last_known, last_flux) = first, last
     starts, lasts = chains.starts, chains.lasts
-    partial = np.cumsum(rhs, axis=1)
-    before = np.where(starts > 0, partial[:, starts - 1], 0.0)  # the sums of the chains before each chain
-    total = partial[:, lasts] - before
-    entering = np.where(first_known, -first, np.where(last_known, last - total, 0.0))
-    leaving = partial + np.repeat(entering - before, np.diff(np.append(starts, rhs.shape[1])), axis=1)
-    leaving[:, lasts] = np.where(last_known, last, entering + np.where(chains.last_facet < 0, 0.0, total))
-    y_in = np.empty_like(leaving)
-    y_in[:, 1:] = leaving[:, :-1]
-    y_in[:, starts] = entering
-    return y_in, leaving
+    partial = np.cumsum(rhs)
+    before = np.concatenate([[0.0], partial[starts[1:] - 1]])  # the sums of the chains before each chain
+    total = partial[lasts] - before
+    entering = np.where(first_known, -first_flux, np.where(last_known, last_flux - total, 0.0))
+    y_out = partial + np.repeat(entering - before, chains.lengths)
+    y_out[lasts] = np.where(last_known, last_flux, entering + np.where(chains.last_facet < 0, 0.0, total))
+    y_in = np.empty_like(y_out)
+    y_in[1:] = y_out[:-1]
+    y_in[starts] = entering
+    return y_in, y_out
 
 
 def boundary_fluxes(mesh, facet_moments: np.ndarray, held: np.ndarray, facet: np.ndarray, vertex: np.ndarray):
     """Per row and chain, whether the outward flux through the chain's end ``facet`` (−1: none) at ``vertex`` is
-    prescribed (not held) and its value ∫_E ψ_a g_i (``facet_moments``)."""
+    prescribed (not held) (rows, chains) and its value ∫_E ψ_a g_i (``facet_moments``)."""
     on = np.flatnonzero(facet >= 0)
     facets = facet[on]
     known = np.zeros((2, facet.size), dtype=bool)
     value = np.zeros((2, facet.size))
     known[:, on] = ~held[:, facets]
-    value[:, on] = facet_moments[(mesh.facets[1, facets] == vertex[on]).astype(np.int64), :, facets].T
+    value[:, on] = facet_moments[(mesh.facets[1][facets] == vertex[on]).astype(np.int64), :, facets].T
     return known, value
+
+
+@dataclass(frozen=True)
+class Circulation:
+    """A chain's share of Σ_T ‖σ_a − w_a‖²_T as a function of its circulation c (added to every y_in and y_out of the
+    chain): the ``curvature`` per chain; the slope's weights of y_out and y_in at the ordered corners (``leaving``,
+    ``entering``), and of w_a's outward fluxes through the facets opposite k+1 and k+2 of each corner k (``ahead``,
+    ``behind``; k, cells)."""
+
+    curvature: np.ndarray
+    leaving: np.ndarray
+    entering: np.ndarray
+    ahead: np.ndarray
+    behind: np.ndarray
+
+
+def circulation_weights(chains: Chains, xy: np.ndarray, det: np.ndarray) -> Circulation:
+    """:class:`Circulation` of the mesh. At corner k, σ_a − w_a has the outward fluxes z = F − w through the facets
+    opposite k+1 and k+2 (z_ahead, z_behind), and c adds ±(1, −1) to them (+ on counterclockwise cells, where F_ahead
+    = y_out and F_behind = −y_in; else F_ahead = −y_in, F_behind = y_out). With the RT0 mass matrix of the two
+    facets' functions M_kl = (c_k · c_l + Σ_m |c_m|² / 12) / 4|T| (c the vertices from the centroid), the energy is
+    quadratic in c: curvature |e_k|² / 4|T| (e_k = p_{k+1} − p_{k+2}) and slope ±(g_ahead z_ahead + g_behind
+    z_behind), g_ahead = e_k · c_{k+1} / 4|T|, g_behind = e_k · c_{k+2} / 4|T|, per corner."""
+    ahead, behind = [1, 2, 0], [2, 0, 1]
+    centred = xy - xy.mean(axis=1, keepdims=True)
+    edge = xy[:, ahead] - xy[:, behind]
+    quarter = 0.5 / np.abs(det)  # 1 / 4|T|
+    g_ahead = (edge * centred[:, ahead]).sum(axis=0) * quarter
+    g_behind = (edge * centred[:, behind]).sum(axis=0) * quarter
+    curvature = ((edge**2).sum(axis=0) * quarter).ravel()[chains.order]
+    positive = det > 0
+    return Circulation(np.add.reduceat(curvature, chains.starts),
+                       np.where(positive, g_ahead, -g_behind).ravel()[chains.order],
+                       np.where(positive, g_behind, -g_ahead).ravel()[chains.order],
+                       np.where(positive, g_ahead, -g_ahead), np.where(positive, g_behind, -g_behind))
+
+
+def row_fluxes(chains: Chains, weights: Circulation, rhs: np.ndarray, target: np.ndarray, first, last) -> np.ndarray:
+    """The outward fluxes of σ̂ row i through the facets opposite k of each cell (k, cells): :func:`chain_fluxes` of
+    the corners' ``rhs`` (k, cells) from the chains' known boundary fluxes (``first``, ``last``), each free chain's
+    circulation minimizing Σ_T ‖σ_a − w_a‖²_T (``target``: w's outward fluxes through the facets opposite k;
+    :class:`Circulation`)."""
+    y_in, y_out = chain_fluxes(chains, rhs.ravel()[chains.order], first, last)
+    own = weights.ahead * target[[1, 2, 0]] + weights.behind * target[[2, 0, 1]]  # w's part of the slopes
+    slope = np.add.reduceat(weights.leaving * y_out - weights.entering * y_in - own.ravel()[chains.order],
+                            chains.starts)
+    circulation = np.repeat(np.where(first[0] | last[0], 0.0, -slope / weights.curvature), chains.lengths)
+    y_in += circulation
+    y_out += circulation
+    return y_out[chains.leaving] - y_in[chains.entering]
 
 
 def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarray, held: np.ndarray) -> Equilibrated:
@@ -231,7 +295,13 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     fluxes through its facets at the vertex: the fluxes follow from one known flux (a Neumann facet) by a
     cumulative sum along the chain (:func:`chain_fluxes`), and where none is known (interior and Dirichlet
     vertices) up to one free circulation, chosen to minimize the patch's share of σ̂ − σ_h (a scalar quadratic per
-    patch, :func:`circulations`). No linear system is solved."""
+    patch, :func:`circulation_weights`). No linear system is solved.
+
+    The target w_a is the cellwise RT0 interpolant of ψ_a σ_h,i. Σ_a w_a = σ_h cell by cell, so σ̂ − σ_h = Σ_a (σ_a −
+    w_a): each patch minimizes its own share, and a stress σ_h constant over a patch is reproduced exactly on any
+    mesh (the textbook target ψ_a σ_h is not in RT0, and its projection leaves a circulation that does not vanish on
+    graded or locally refined meshes: η / ‖σ_h‖ ≈ 10 % for a constant stress on the graded punch mesh,
+    docs/estimate.md)."""
     mesh = fem.mesh
     lam, mu = fem.lame
     xy, det, gradients = triangles(mesh)
@@ -239,28 +309,16 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     sigma_h = elastic_stress(fem, u_components, grads)
     body_force = np.asarray(fem.scene.body_force, dtype=float) * fem.scaling.length / fem.scaling.pressure
     chains = patch_chains(mesh, xy, det)
-    # w_a, the RT0 interpolant of ψ_a σ_h,i: its outward flux through the facet opposite k is −|T| σ_h,i · ∇λ_k at
-    # both vertices a of the facet (i, k, cells)
-    target = -area * (sigma_h.transpose(1, 2, 0)[:, :, None] * gradients[None]).sum(axis=1)
+    weights = circulation_weights(chains, xy, det)
+    # w_a's outward flux through the facet opposite k is −|T| σ_h,i · ∇λ_k at both vertices a of the facet
+    target = -area * (sigma_h.transpose(1, 2, 0)[:, :, None] * gradients[None]).sum(axis=1)  # (i, k, cells)
     # the divergence constraint at corner k: the outward fluxes through its facets opposite k+1 and k+2 sum to
-    # Π_0(ψ_a f − ∇ψ_a · σ_h) |T| = w's (−target_k) less |T| f / 3
+    # ∫_T Π_0(ψ_a f − ∇ψ_a · σ_h) = w's (−target_k) less |T| f / 3
     rhs = -target - (area / 3.0) * body_force[:, None, None]
     first = boundary_fluxes(mesh, facet_moments, held, chains.first_facet, chains.vertex)
     last = boundary_fluxes(mesh, facet_moments, held, chains.last_facet, chains.vertex)
-    y_in, y_out = chain_fluxes(chains, rhs.reshape(2, -1)[:, chains.order], first[1], last[1], first[0], last[0])
-    natural = np.empty((2, 2, y_in.shape[1]))
-    natural[:, 0][:, chains.order], natural[:, 1][:, chains.order] = y_in, y_out
-    y_in, y_out = natural.reshape(2, 2, 3, -1).transpose(1, 0, 2, 3)
-    # outward fluxes through the facets opposite k+1 (ahead) and k+2 (behind) of each corner k
-    positive = det > 0
-    ahead, behind = np.where(positive, y_out, -y_in), np.where(positive, -y_in, y_out)
-    orientation = np.where(positive, 1.0, -1.0)
-    free = ~(first[0] | last[0])
-    circulation = circulations(chains, xy, area, orientation, ahead - target[:, [1, 2, 0]],
-                               behind - target[:, [2, 0, 1]], free)
-    ahead += orientation * circulation
-    behind -= orientation * circulation
-    x = behind[:, [1, 2, 0]] + ahead[:, [2, 0, 1]]  # outward flux through facet k (i, k, cells)
+    x = np.stack([row_fluxes(chains, weights, rhs[i], target[i], (first[0][i], first[1][i]), (last[0][i], last[1][i]))
+                  for i in range(2)])  # the outward flux of σ̂ row i through the facet opposite k (i, k, cells)
     flux = x.transpose(0, 2, 1)  # (i, c, k)
     residual = flux.sum(axis=2) + area * body_force[:, None]  # ∫_T (div σ̂ + f)
     scale = np.abs(area[None] * body_force[:, None]).max() + np.abs(flux).max()
@@ -270,50 +328,34 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     return Equilibrated(vertex_stress, symmetric, skew, defect)
 
 
-def circulations(chains: Chains, xy, area, orientation, ahead, behind, free) -> np.ndarray:
-    """The circulation c (rows, k, cells: each corner's chain's) minimizing per row and free chain Σ_T ‖σ_a − w_a‖²_T,
-    ``ahead``, ``behind`` (rows, k, cells) the outward fluxes of σ_a − w_a through the facets opposite k+1 and k+2 of
-    corner k, c adding (1, −1) · ``orientation`` to them (0 on the chains with a known flux, ``free`` False).
-
-    With M the RT0 mass matrix of the two facets' functions, M_kl = (c_k · c_l + Σ_m |c_m|² / 12) / 4|T| (c the
-    vertices from the centroid), the patch's energy is quadratic in c, curvature |e_k|² / 4|T| (e_k = p_{k+1} −
-    p_{k+2}) and slope (e_k · c_{k+1} z_ahead + e_k · c_{k+2} z_behind) / 4|T| per corner.
-
-    w_a is the cellwise RT0 interpolant of ψ_a σ_h,i. Σ_a w_a = σ_h cell by cell, so σ̂ − σ_h = Σ_a (σ_a − w_a):
-    each patch minimizes its own share, and a stress σ_h constant over a patch is reproduced exactly on any mesh
-    (the textbook target ψ_a σ_h is not in RT0, and its projection leaves a circulation that does not vanish on
-    graded or locally refined meshes: η / ‖σ_h‖ ≈ 10 % for a constant stress on the graded punch mesh,
-    docs/estimate.md)."""
-    centred = xy - xy.mean(axis=1, keepdims=True)
-    edge = xy[:, [1, 2, 0]] - xy[:, [2, 0, 1]]
-    weight = orientation / (4.0 * area)
-    slope = ((edge * centred[:, [1, 2, 0]]).sum(axis=0) * weight * ahead
-             + (edge * centred[:, [2, 0, 1]]).sum(axis=0) * weight * behind)
-    segment, count = chains.segment, chains.starts.size
-    curvature = np.bincount(segment.ravel(), ((edge**2).sum(axis=0) / (4.0 * area)).ravel(), count)
-    per_chain = np.stack([np.bincount(segment.ravel(), s.ravel(), count) for s in slope])
-    return np.where(free, -per_chain / curvature, 0.0)[:, segment]
-
-
 def vertex_values(flux: np.ndarray, xy: np.ndarray, area: np.ndarray) -> np.ndarray:
     """σ̂ row i at the vertices m of each cell (i, x, cells, m; a view of an (i, x, m, cells) array) from the outward
     fluxes F_k through the facets opposite k (i, k, cells): Σ_k F_k (p_m − p_k) / 2|T|."""
-    total = flux.sum(axis=1)
-    moment = (flux[:, None] * xy[None]).sum(axis=2)  # Σ_k F_k p_k (i, x, cells)
-    return ((total[:, None, None] * xy[None] - moment[:, :, None]) / (2.0 * area)).transpose(0, 1, 3, 2)
+    out = np.empty((2, 2, *xy.shape[1:]))
+    half = 0.5 / area
+    for i in range(2):
+        total = flux[i].sum(axis=0)
+        for x in range(2):
+            np.multiply(xy[x], total, out=out[i, x])
+            out[i, x] -= (flux[i] * xy[x]).sum(axis=0)
+            out[i, x] *= half
+    return out.transpose(0, 1, 3, 2)
 
 
 def cell_norms(vertex_stress, sigma_h, lam, mu, area):
-    """‖C^{-½}(sym σ̂ − σ_h)‖²_T and ‖(2μ)^{-½} skew σ̂‖²_T per cell, by the facet-midpoint rule (exact: the integrands
-    are quadratic), component by component."""
+    """‖C^{-½}(sym σ̂ − σ_h)‖²_T and ‖(2μ)^{-½} skew σ̂‖²_T per cell, exact for σ̂ linear per cell: ∫_T q(τ) = |T|
+    (Σ_m q(τ_m) + q(Σ_m τ_m)) / 12 for a quadratic form q of a linear τ (τ_m its values at the vertices)."""
     at = vertex_stress.transpose(0, 1, 3, 2)  # (i, x, m, cells)
-    mid = 0.5 * (at + at[:, :, [1, 2, 0]])
-    a, d = mid[0, 0] - sigma_h[:, 0, 0], mid[1, 1] - sigma_h[:, 1, 1]
-    b = 0.5 * (mid[0, 1] + mid[1, 0]) - sigma_h[:, 0, 1]
-    w = 0.5 * (mid[0, 1] - mid[1, 0])
-    # C⁻¹τ : τ = (|τ|² − λ/(2μ + 2λ) (tr τ)²) / 2μ for σ = 2με + λ tr ε I in 2-D
-    energy = (a * a + d * d + 2 * b * b).sum(axis=0) - lam / (2 * mu + 2 * lam) * ((a + d) ** 2).sum(axis=0)
-    return area * energy / (6 * mu), area * 2 * (w * w).sum(axis=0) / (6 * mu)
+    a, d = at[0, 0] - sigma_h[:, 0, 0], at[1, 1] - sigma_h[:, 1, 1]
+    b = 0.5 * (at[0, 1] + at[1, 0]) - sigma_h[:, 0, 1]
+    w = 0.5 * (at[0, 1] - at[1, 0])
+    trace_weight = lam / (2 * mu + 2 * lam)
+
+    def compliance(a, d, b):  # 2μ C⁻¹τ : τ = |τ|² − λ/(2μ + 2λ) (tr τ)² for σ = 2με + λ tr ε I in 2-D
+        return a * a + d * d + 2 * b * b - trace_weight * (a + d) ** 2
+
+    symmetric = compliance(a, d, b).sum(axis=0) + compliance(a.sum(axis=0), d.sum(axis=0), b.sum(axis=0))
+    return area * symmetric / (24 * mu), area * ((w * w).sum(axis=0) + w.sum(axis=0) ** 2) / (12 * mu)
 
 
 def contact_facets(fem: FEModel) -> np.ndarray:
