@@ -96,9 +96,12 @@ def interpolate(basis: fe.AbstractBasis, nodal: np.ndarray, field: str = "value"
     estimate's time at 10⁵ P2 DOFs."""
     out = 0.0
     for j in range(basis.Nbfun):
-        shape = getattr(basis.basis[j][0], field)
+        shape = basis.basis[j][0]  # a DiscreteField: the values, with .grad
         coefficients = np.take(nodal, basis.element_dofs[j], axis=-1)[..., None]
-        out = out + (coefficients[..., None, :, :] if field == "grad" else coefficients) * shape
+        if field == "grad":
+            out = out + coefficients[..., None, :, :] * shape.grad
+        else:
+            out = out + coefficients * np.asarray(shape)
     return out
 
 
