@@ -63,6 +63,16 @@ def supported(fem: FEModel) -> bool:
     return fem.dim == 2 and fem.scene.body.element == "P1" and fem.mesh.t.shape[0] == 3
 
 
+BLOCK = 16_384
+"""Cells per block of the cell-wise arithmetic (the circulations' weights, σ̂ at the vertices, the norms): its temporaries then
+stay in the processor's caches (2× faster at 10⁶ cells than whole arrays)."""
+
+
+def blocks(count: int):
+    for start in range(0, count, BLOCK):
+        yield slice(start, start + BLOCK)
+
+
 def triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertex coordinates (x, k, cells), the Jacobian determinants (cells,) and the barycentric gradients ∇λ_k
     (x, k, cells).
@@ -256,14 +266,17 @@ def circulation_weights(chains: Chains, xy: np.ndarray, det: np.ndarray) -> Circ
     quadratic in c: curvature |e_k|² / 4|T| (e_k = p_{k+1} − p_{k+2}) and slope ±(g_ahead z_ahead + g_behind
     z_behind), g_ahead = e_k · c_{k+1} / 4|T|, g_behind = e_k · c_{k+2} / 4|T|, per corner."""
     ahead, behind = [1, 2, 0], [2, 0, 1]
-    centred = xy - xy.mean(axis=1, keepdims=True)
-    edge = xy[:, ahead] - xy[:, behind]
-    quarter = 0.5 / np.abs(det)  # 1 / 4|T|
-    g_ahead = (edge * centred[:, ahead]).sum(axis=0) * quarter
-    g_behind = (edge * centred[:, behind]).sum(axis=0) * quarter
-    curvature = ((edge**2).sum(axis=0) * quarter).ravel()[chains.order]
+    g_ahead, g_behind, curvature = np.empty((3, *xy.shape[1:]))
+    for cells in blocks(det.size):
+        corners = xy[..., cells]
+        centred = corners - corners.mean(axis=1, keepdims=True)
+        edge = corners[:, ahead] - corners[:, behind]
+        quarter = 0.5 / np.abs(det[cells])  # 1 / 4|T|
+        g_ahead[:, cells] = (edge * centred[:, ahead]).sum(axis=0) * quarter
+        g_behind[:, cells] = (edge * centred[:, behind]).sum(axis=0) * quarter
+        curvature[:, cells] = (edge**2).sum(axis=0) * quarter
     positive = det > 0
-    return Circulation(np.add.reduceat(curvature, chains.starts),
+    return Circulation(np.add.reduceat(curvature.ravel()[chains.order], chains.starts),
                        np.where(positive, g_ahead, -g_behind).ravel()[chains.order],
                        np.where(positive, g_behind, -g_ahead).ravel()[chains.order],
                        np.where(positive, g_ahead, -g_ahead), np.where(positive, g_behind, -g_behind))
@@ -332,13 +345,16 @@ def vertex_values(flux: np.ndarray, xy: np.ndarray, area: np.ndarray) -> np.ndar
     """σ̂ row i at the vertices m of each cell (i, x, cells, m; a view of an (i, x, m, cells) array) from the outward
     fluxes F_k through the facets opposite k (i, k, cells): Σ_k F_k (p_m − p_k) / 2|T|."""
     out = np.empty((2, 2, *xy.shape[1:]))
-    half = 0.5 / area
-    for i in range(2):
-        total = flux[i].sum(axis=0)
-        for x in range(2):
-            np.multiply(xy[x], total, out=out[i, x])
-            out[i, x] -= (flux[i] * xy[x]).sum(axis=0)
-            out[i, x] *= half
+    for cells in blocks(area.size):
+        half = 0.5 / area[cells]
+        for i in range(2):
+            fluxes = flux[i, :, cells]
+            total = fluxes.sum(axis=0)
+            for x in range(2):
+                corners = xy[x, :, cells]
+                np.multiply(corners, total, out=out[i, x, :, cells])
+                out[i, x, :, cells] -= (fluxes * corners).sum(axis=0)
+                out[i, x, :, cells] *= half
     return out.transpose(0, 1, 3, 2)
 
 
@@ -346,6 +362,13 @@ def cell_norms(vertex_stress, sigma_h, lam, mu, area):
     """‖C^{-½}(sym σ̂ − σ_h)‖²_T and ‖(2μ)^{-½} skew σ̂‖²_T per cell, exact for σ̂ linear per cell: ∫_T q(τ) = |T|
     (Σ_m q(τ_m) + q(Σ_m τ_m)) / 12 for a quadratic form q of a linear τ (τ_m its values at the vertices)."""
     at = vertex_stress.transpose(0, 1, 3, 2)  # (i, x, m, cells)
+    out = np.empty((2, area.size))
+    for cells in blocks(area.size):
+        out[:, cells] = block_norms(at[..., cells], sigma_h[cells], lam[cells], mu[cells], area[cells])
+    return out[0], out[1]
+
+
+def block_norms(at, sigma_h, lam, mu, area):
     a, d = at[0, 0] - sigma_h[:, 0, 0], at[1, 1] - sigma_h[:, 1, 1]
     b = 0.5 * (at[0, 1] + at[1, 0]) - sigma_h[:, 0, 1]
     w = 0.5 * (at[0, 1] - at[1, 0])
