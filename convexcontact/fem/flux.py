@@ -64,8 +64,8 @@ def supported(fem: FEModel) -> bool:
 
 
 BLOCK = 16_384
-"""Cells per block of the cell-wise arithmetic (the circulations' weights, σ̂ at the vertices, the norms): its temporaries then
-stay in the processor's caches (2× faster at 10⁶ cells than whole arrays)."""
+"""Cells per block of the cell-wise arithmetic (the circulations' weights, σ̂ at the vertices, the norms): its
+temporaries then stay in the processor's caches (2× faster at 10⁶ cells than whole arrays)."""
 
 
 def blocks(count: int):
@@ -168,8 +168,8 @@ class Chains:
 
 def patch_chains(mesh, xy: np.ndarray, det: np.ndarray) -> Chains:
     """The chains of cells around the vertices (:class:`Chains`), sorted once by vertex and the angle of the cells'
-    centroids around it. Consecutive corners of a chain sharing their facet is checked: a mesh whose cells overlap
-    is refused."""
+    centroids around it. That consecutive corners of a chain share their facet is checked: a mesh whose cells
+    overlap is refused."""
     ahead, behind = [1, 2, 0], [2, 0, 1]
     opposite = opposite_facets(mesh).T
     # counterclockwise around its vertex k a cell enters through its facet (k, k+1), opposite k+2, and leaves through
