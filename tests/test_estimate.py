@@ -243,7 +243,7 @@ def test_local_refinement_keeps_every_named_boundary_whole(scene):
     length or area as before, every new boundary facet carries a name, and the mesh got finer only where marked."""
     result = cc.solve(scene)
     coarse = build_mesh(result.scene.body)
-    fine = refine(coarse, result.error_estimate.indicators, 0.5)
+    fine, = refine([coarse], result.error_estimate.indicators, 0.5)
     assert boundary_measures(fine).keys() == boundary_measures(coarse).keys()
     np.testing.assert_allclose(list(boundary_measures(fine).values()), list(boundary_measures(coarse).values()),
                                rtol=1e-12)
