@@ -166,7 +166,8 @@ def adapt(scene: Scene, target: float = 1e-2, max_dofs: int = 200_000, fraction:
     """Solve ``scene`` on meshes refined where the error indicators are largest, until the estimated relative
     discretization error (``result.error_budget["discretization"]``) is at most ``target`` or the next mesh would
     exceed ``max_dofs``. Each level marks Dörfler's cells (``fraction`` of η²) and more, by indicator, until its
-    DOFs grow by ``growth`` at least (None: Dörfler's alone). Returns every level's certified result;
+    DOFs grow by ``growth`` at least (None: Dörfler's alone). Several bodies (2-D P1 triangles: their bound) are
+    marked together and each refined where its cells are. Returns every level's certified result;
     ``progress(level, result)`` after each."""
     of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
     target, max_dofs, fraction, growth = check_adapt_options(target, max_dofs, fraction, growth)
