@@ -43,60 +43,67 @@ def admissible_stream_functions(mesh, held: np.ndarray) -> np.ndarray:
 
 
 class StreamOperator:
-    """J's Hessian (½ of it) and the midpoint values of τ for the coefficients of φ (rows, facets + vertices).
+    """J's Hessian (half of it) and τ at the facet midpoints for the coefficients x (rows, facets + vertices) of φ.
 
-    ``curls`` curl λ_k per cell (cells, 3, 2); ``weight`` |T| / 3 (the midpoint rule); ``lame`` (λ, μ) per cell."""
+    Arrays are laid out (…, 3, cells): the small axes first, every operation over long contiguous rows (numpy's
+    reductions over a trailing axis of length 3 cost 10× more). ``curls`` curl λ_k (x, 3, cells); ``weight`` |T| / 3
+    (the midpoint rule); ``lame`` (λ, μ) per cell."""
 
     def __init__(self, mesh, opposite, curls, weight, lame, korn):
         self.nfacets, self.nvertices = mesh.nfacets, mesh.nvertices
-        self.facets, self.vertices, self.curls = opposite, mesh.t.T, curls
+        self.facets, self.vertices, self.curls = np.ascontiguousarray(opposite.T), mesh.t, curls
         lam, mu = lame
         self.kappa = lam / (2 * mu + 2 * lam)
-        self.normal = weight / (2 * mu)  # |T|/3 · 1/2μ
+        self.weight = weight / (2 * mu)  # |T|/3 · 1/2μ
         self.gamma = korn**2 - 1
 
     def midpoints(self, x: np.ndarray) -> np.ndarray:
-        """τ (rows, cells, 3 midpoints, 2) of the coefficients x (rows, facets + vertices)."""
-        bubble = x[:, self.facets]  # (rows, cells, k)
-        hat = x[:, self.nfacets + self.vertices]
-        scale = 2.0 * (bubble.sum(axis=2)[..., None] - 2.0 * bubble)
-        constant = (hat[..., None] * self.curls[None]).sum(axis=2)  # (rows, cells, 2)
-        return scale[..., None] * self.curls[None] + constant[:, :, None, :]
+        """τ (rows, x, 3 midpoints, cells) of the coefficients x: at the midpoint opposite vertex k the bubbles give
+        2 (Σ_e c_e − 2 c_k) curl λ_k, the hats Σ_a c_a curl λ_a."""
+        out = np.empty((2, *self.curls.shape))
+        for i in range(2):
+            bubble = np.take(x[i, :self.nfacets], self.facets)
+            hat = np.take(x[i, self.nfacets:], self.vertices)
+            scale = 2.0 * bubble.sum(axis=0) - 4.0 * bubble
+            for c in range(2):
+                out[i, c] = scale * self.curls[c] + (hat * self.curls[c]).sum(axis=0)
+        return out
 
     def weighted_form(self, X: np.ndarray) -> np.ndarray:
-        """|T|/3 · Q X (rows, cells, 3, 2), X : Q X = C⁻¹ sym X : sym X + (C_K² − 1)/2μ |skew X|² pointwise."""
-        k, w = self.kappa[:, None], self.normal[:, None]
+        """|T|/3 · Q X, X : Q X = C⁻¹ sym X : sym X + (C_K² − 1)/2μ |skew X|² pointwise (2-D: C⁻¹ τ : τ =
+        (|τ|² − λ/(2μ + 2λ) (tr τ)²) / 2μ)."""
+        k, w, g = self.kappa, self.weight, self.gamma
         out = np.empty_like(X)
-        out[0, ..., 0] = w * ((1 - k) * X[0, ..., 0] - k * X[1, ..., 1])
-        out[1, ..., 1] = w * ((1 - k) * X[1, ..., 1] - k * X[0, ..., 0])
-        out[0, ..., 1] = 0.5 * w * ((1 + self.gamma) * X[0, ..., 1] + (1 - self.gamma) * X[1, ..., 0])
-        out[1, ..., 0] = 0.5 * w * ((1 - self.gamma) * X[0, ..., 1] + (1 + self.gamma) * X[1, ..., 0])
+        out[0, 0] = w * ((1 - k) * X[0, 0] - k * X[1, 1])
+        out[1, 1] = w * ((1 - k) * X[1, 1] - k * X[0, 0])
+        out[0, 1] = 0.5 * w * ((1 + g) * X[0, 1] + (1 - g) * X[1, 0])
+        out[1, 0] = 0.5 * w * ((1 - g) * X[0, 1] + (1 + g) * X[1, 0])
         return out
 
     def adjoint(self, Y: np.ndarray) -> np.ndarray:
-        """The transpose of :meth:`midpoints`: Y (rows, cells, 3, 2) → (rows, facets + vertices)."""
-        along = (Y * self.curls[None]).sum(axis=3)  # curl λ_k · Y_k
-        bubble = 2.0 * (along.sum(axis=2)[..., None] - 2.0 * along)
-        hat = (Y.sum(axis=2)[:, :, None, :] * self.curls[None]).sum(axis=3)
+        """The transpose of :meth:`midpoints`: Y (rows, x, 3, cells) → (rows, facets + vertices)."""
         out = np.empty((2, self.nfacets + self.nvertices))
         for i in range(2):
-            out[i, :self.nfacets] = np.bincount(self.facets.ravel(), bubble[i].ravel(), self.nfacets)
-            out[i, self.nfacets:] = np.bincount(self.vertices.ravel(), hat[i].ravel(), self.nvertices)
+            along = Y[i, 0] * self.curls[0] + Y[i, 1] * self.curls[1]  # curl λ_k · Y_k
+            bubble = 2.0 * along.sum(axis=0) - 4.0 * along
+            hat = Y[i, 0].sum(axis=0) * self.curls[0] + Y[i, 1].sum(axis=0) * self.curls[1]
+            out[i, :self.nfacets] = np.bincount(self.facets.ravel(), bubble.ravel(), self.nfacets)
+            out[i, self.nfacets:] = np.bincount(self.vertices.ravel(), hat.ravel(), self.nvertices)
         return out
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         return self.adjoint(self.weighted_form(self.midpoints(x)))
 
     def diagonal(self) -> np.ndarray:
-        """The operator's diagonal: a bubble's τ is ±2 curl λ_k at the cell's three midpoints, a hat's curl λ_a."""
-        k, w, c = self.kappa[:, None], self.normal[:, None], self.curls
-        row = [w * ((1 - k) * c[..., 0] ** 2 + 0.5 * (1 + self.gamma) * c[..., 1] ** 2),
-               w * (0.5 * (1 + self.gamma) * c[..., 0] ** 2 + (1 - k) * c[..., 1] ** 2)]  # (cells, 3) per row
+        """The operator's diagonal: a bubble's τ is ±2 curl λ_k at the three midpoints of each of its cells, a hat's
+        curl λ_a."""
+        w, k, g, (cx, cy) = self.weight, self.kappa, self.gamma, self.curls
+        rows = (w * ((1 - k) * cx**2 + 0.5 * (1 + g) * cy**2), w * (0.5 * (1 + g) * cx**2 + (1 - k) * cy**2))
         out = np.empty((2, self.nfacets + self.nvertices))
-        for i in range(2):
-            out[i, :self.nfacets] = np.bincount(self.facets.ravel(), np.repeat(4 * row[i].sum(axis=1), 3),
+        for i, row in enumerate(rows):  # (3, cells): Q_ii applied to curl λ_k
+            out[i, :self.nfacets] = np.bincount(self.facets.ravel(), np.tile(4.0 * row.sum(axis=0), 3),
                                                 self.nfacets)
-            out[i, self.nfacets:] = np.bincount(self.vertices.ravel(), 3 * row[i].ravel(), self.nvertices)
+            out[i, self.nfacets:] = np.bincount(self.vertices.ravel(), 3.0 * row.ravel(), self.nvertices)
         return out
 
 
@@ -126,13 +133,13 @@ def corrected(vertex_stress, sigma_h, grads, area, lame, mesh, opposite, held, k
     (None: :data:`ITERATIONS`). ``vertex_stress`` as in :class:`convexcontact.fem.flux.Equilibrated`, ``held`` its
     (rows, facets) mask of held components, ``korn`` C_K; the other arguments are ``equilibrate``'s per-cell data."""
     iterations = ITERATIONS if iterations is None else iterations
-    curls = np.stack([grads[..., 1], -grads[..., 0]], axis=-1)
+    curls = np.stack([grads[..., 1].T, -grads[..., 0].T])  # curl λ_k = (∂_y λ_k, −∂_x λ_k): (x, 3, cells)
     operator = StreamOperator(mesh, opposite, curls, area / 3.0, lame, korn)
-    # σ̂ − σ_h at the midpoint opposite vertex k: (rows, cells, k, x)
-    opposite_mid = 0.5 * (vertex_stress[..., [1, 2, 0]] + vertex_stress[..., [2, 0, 1]])
-    misfit = opposite_mid.transpose(0, 2, 3, 1) - sigma_h.transpose(1, 0, 2)[:, :, None, :]
+    # σ̂ − σ_h at the midpoint opposite vertex k: (rows, x, k, cells)
+    opposite_mid = 0.5 * (vertex_stress[..., [1, 2, 0]] + vertex_stress[..., [2, 0, 1]]).transpose(0, 1, 3, 2)
+    misfit = opposite_mid - sigma_h.transpose(1, 2, 0)[:, :, None, :]
     load = operator.adjoint(operator.weighted_form(misfit))
     x = conjugate_gradients(operator, load, operator.diagonal(), admissible_stream_functions(mesh, held), iterations)
     tau = operator.midpoints(x)  # a linear field's vertex values from its midpoints: V_k = M_{k+1} + M_{k+2} − M_k
     at_vertices = tau[:, :, [1, 2, 0]] + tau[:, :, [2, 0, 1]] - tau
-    return vertex_stress + at_vertices.transpose(0, 3, 1, 2)
+    return vertex_stress + at_vertices.transpose(0, 1, 3, 2)
