@@ -18,7 +18,7 @@ every iterate keeps the bound valid (any coefficients do), so an inexact minimiz
 
 At the midpoint of the facet opposite vertex k of a cell, the bubbles of its three facets with coefficients c_e give
 2 (Σ_e c_e − 2 c_k) curl λ_k, the hats Σ_a c_a curl λ_a (constant): the operator is a few products per cell, written
-out here because it is (scikit-fem's forms would assemble a P2 matrix per call).
+by hand and applied matrix-free (assembling the P2 matrix, with scikit-fem or by hand, costs more than the steps).
 """
 
 from __future__ import annotations
@@ -61,13 +61,13 @@ class StreamOperator:
         self.normal, self.trace, self.shear, self.skew = w * (1 - kappa), -w * kappa, 0.5 * w * (1 + gamma), \
             0.5 * w * (1 - gamma)
         self.field, self.weighted = np.empty((2, *curls.shape)), np.empty((2, *curls.shape))
-        self.per_corner, self.spare, self.per_corner_spare = (np.empty((2, *curls.shape[1:])) for _ in range(3))
-        self.per_cell, self.term = np.empty((2, curls.shape[2])), np.empty((2, curls.shape[2]))
+        self.corner = tuple(np.empty((2, *curls.shape[1:])) for _ in range(3))  # (rows, k, cells)
+        self.cell = tuple(np.empty((2, curls.shape[2])) for _ in range(2))  # (rows, cells)
 
     def midpoints(self, x: np.ndarray) -> np.ndarray:
         """τ (rows, x, 3 midpoints, cells) of the coefficients x: at the midpoint opposite vertex k the bubbles give
         2 (Σ_e c_e − 2 c_k) curl λ_k, the hats Σ_a c_a curl λ_a. Returns a work array (valid until the next call)."""
-        out, total, term = self.field, self.per_cell, self.term
+        out, (total, term) = self.field, self.cell
         scale = np.take(x[:, :self.nfacets], self.facets, axis=1)  # take into ``out=`` is 6× slower
         np.sum(scale, axis=1, out=total)
         scale *= -4.0
@@ -86,7 +86,7 @@ class StreamOperator:
     def weighted_form(self, X: np.ndarray) -> np.ndarray:
         """|T|/3 · Q X, X : Q X = C⁻¹ sym X : sym X + (C_K² − 1)/2μ |skew X|² pointwise (2-D: C⁻¹ τ : τ =
         (|τ|² − λ/(2μ + 2λ) (tr τ)²) / 2μ). Returns a work array."""
-        out, spare = self.weighted, self.spare
+        out, spare = self.weighted, self.corner[1]
         for i, j in ((0, 1), (1, 0)):
             np.multiply(X[i, i], self.normal, out=out[i, i])
             np.multiply(X[j, j], self.trace, out=spare[i])
@@ -98,7 +98,7 @@ class StreamOperator:
 
     def adjoint(self, Y: np.ndarray) -> np.ndarray:
         """The transpose of :meth:`midpoints`: Y (rows, x, 3, cells) → (rows, facets + vertices)."""
-        along, hat, total, term = self.per_corner, self.spare, self.per_cell, self.term
+        (along, hat, spare), (total, term) = self.corner, self.cell
         np.multiply(Y[:, 0], self.curls[0], out=along)
         np.multiply(Y[:, 1], self.curls[1], out=hat)
         along += hat  # curl λ_k · Y_k (rows, k, cells)
@@ -109,7 +109,7 @@ class StreamOperator:
         np.sum(Y[:, 0], axis=1, out=total)
         np.sum(Y[:, 1], axis=1, out=term)
         np.multiply(total[:, None], self.curls[0], out=hat)
-        hat += np.multiply(term[:, None], self.curls[1], out=self.per_corner_spare)
+        hat += np.multiply(term[:, None], self.curls[1], out=spare)
         out = np.empty((2, self.nfacets + self.nvertices))
         for i in range(2):
             out[i, :self.nfacets] = np.bincount(self.facets.ravel(), along[i].ravel(), self.nfacets)
