@@ -37,6 +37,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..scene.meshing import check_boundary
+from . import flux_correction
 from .assembly import FEModel
 from .estimate import ContactState, applied_traction, components, held_components
 
@@ -200,6 +201,7 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     vertex_stress = (flux.sum(axis=2)[:, None, :, None] * corners.transpose(2, 0, 1)[None]
                      - (flux[..., None] * corners[None]).sum(axis=2).transpose(0, 2, 1)[..., None]
                      ) / (2.0 * area[None, None, :, None])
+    vertex_stress = flux_correction.corrected(vertex_stress, sigma_h, grads, area, fem.lame, mesh, opposite, held, KORN)
     symmetric, skew = cell_norms(vertex_stress, sigma_h, lam, mu, area)
     return Equilibrated(vertex_stress, symmetric, skew, defect)
 
