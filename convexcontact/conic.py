@@ -11,7 +11,7 @@ satisfy Px + q + Aᵀz = 0 at optimality. The 3-D power cone of exponent α is
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -65,7 +65,9 @@ class ConicProgram:
     """Data of a convex conic program in Clarabel's standard form.
 
     ``P`` is stored as the full symmetric matrix (CSC); adapters take the upper
-    triangle where the solver wants it.
+    triangle where the solver wants it. ``gradient``, where the formulation has one, is its own formula of
+    x ↦ Px + q for this q, exact where Px and q cancel (the contact dual's, formulations/dual.py); solvers that
+    read it take it from :meth:`updated`, which drops it with a new q.
     """
 
     P: sp.csc_matrix
@@ -73,6 +75,7 @@ class ConicProgram:
     A: sp.csc_matrix
     b: np.ndarray
     cones: tuple[Cone, ...]
+    gradient: Callable[[np.ndarray], np.ndarray] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         for name in ("q", "b"):
@@ -114,6 +117,13 @@ class ConicProgram:
     def is_linear(self) -> bool:
         """True when every cone is polyhedral (zero or nonnegative)."""
         return all(c.kind in ("zero", "nonnegative") for c in self.cones)
+
+    def updated(self, q: np.ndarray | None = None, b: np.ndarray | None = None) -> ConicProgram:
+        """The program with new data q and/or b (None: kept); the formulation's ``gradient`` holds for its own q
+        only, so a new q drops it."""
+        same_q = q is None or q is self.q or np.array_equal(q, self.q)
+        return replace(self, q=self.q if q is None else q, b=self.b if b is None else b,
+                       gradient=self.gradient if same_q else None)
 
     def blocks(self):
         """Yield (cone, row slice) for every cone block."""

@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 
 from ..fem.estimate import dorfler
 from ..results.result import ContactResult
-from ..scene.bodies import Bodies
+from ..scene.bodies import Bodies, bodies_scene
 from ..scene.description import Body, Material, Scene, SceneError, of_type
 from ..scene.meshing import build_mesh
 from .solve import solve
@@ -103,34 +103,61 @@ def inherit_boundaries(new: fe.Mesh, old: fe.Mesh) -> fe.Mesh:
         member = np.zeros(old.nfacets, dtype=bool)
         member[old_facets] = True
         names[name] = facets[member[parent]]
-    # scikit-fem's refinement leaves transposed (Fortran-ordered) arrays, which every later mesh copies with a warning
-    return dataclasses.replace(new, doflocs=np.ascontiguousarray(new.doflocs), t=np.ascontiguousarray(new.t),
-                               _boundaries=names)
+    return contiguous(dataclasses.replace(new, _boundaries=names))
 
 
-def refine(mesh: fe.Mesh, indicators: np.ndarray, fraction: float, growth: float = 1.0,
-           element: str = "P1") -> fe.Mesh:
-    """The next mesh: on triangles and tetrahedra the Dörfler cells refined locally, and more of the next largest
+def contiguous(mesh: fe.Mesh) -> fe.Mesh:
+    """``mesh`` with C-ordered arrays: scikit-fem's refinement leaves transposed (Fortran-ordered) ones, which every
+    later mesh copies with a warning."""
+    return dataclasses.replace(mesh, doflocs=np.ascontiguousarray(mesh.doflocs), t=np.ascontiguousarray(mesh.t))
+
+
+def refine(meshes: Sequence[fe.Mesh], indicators: np.ndarray, fraction: float, growth: float = 1.0,
+           element: str = "P1") -> list[fe.Mesh]:
+    """The next meshes of the bodies (``indicators``: their cells in order, as one scene concatenates them): on
+    triangles and tetrahedra the Dörfler cells of all bodies together refined locally, and more of the next largest
     indicators' cells while the ``element``'s DOFs would grow by less than ``growth`` (every cell at most); every
     cell otherwise. The marked set always holds Dörfler's, so each level keeps its error reduction."""
-    if not isinstance(mesh, LOCAL):
-        return mesh.refined()
+    if not isinstance(meshes[0], LOCAL):
+        return [mesh.refined() for mesh in meshes]
     order = np.argsort(indicators)[::-1]  # dorfler's order: its cells are the first ``count``
-    count, before = dorfler(indicators, fraction).size, dofs_of(mesh, element)
+    first = np.cumsum([0] + [mesh.nelements for mesh in meshes])
+    cells, before = first[-1], sum(dofs_of(mesh, element) for mesh in meshes)
+    count = dorfler(indicators, fraction).size
     # scikit-fem logs that local refinement drops the named boundaries: they are carried over here
     logger = logging.getLogger("skfem.mesh.mesh")
     disabled, logger.disabled = logger.disabled, True
     try:
         while True:
-            refined = mesh.refined(np.sort(order[:count]))
-            added = dofs_of(refined, element) - before
-            if added >= (growth - 1) * before or count == mesh.nelements:
+            marked = np.sort(order[:count])
+            per_body = np.split(marked, np.searchsorted(marked, first[1:-1]))
+            refined = [mesh.refined(local - start) if local.size else mesh
+                       for mesh, local, start in zip(meshes, per_body, first)]
+            added = sum(dofs_of(mesh, element) for mesh in refined) - before
+            if added >= (growth - 1) * before or count == cells:
                 break
             # new DOFs grow about in proportion to the marked cells (plus the closure's): aim 10 % beyond the goal
-            count = min(mesh.nelements, max(count + 1, math.ceil(1.1 * count * (growth - 1) * before / max(added, 1))))
+            count = min(cells, max(count + 1, math.ceil(1.1 * count * (growth - 1) * before / max(added, 1))))
     finally:
         logger.disabled = disabled
-    return inherit_boundaries(refined, mesh)
+    return [new if new is old else inherit_boundaries(new, old) for new, old in zip(refined, meshes)]
+
+
+def body_meshes(scene: Scene) -> list[fe.Mesh]:
+    """The mesh of the scene's body, or of each of its bodies (in the order of its parts, placed)."""
+    if isinstance(scene.body, Bodies):
+        return [part.mesh() for part in scene.body.parts]
+    return [build_mesh(scene.body)]
+
+
+def scene_on(scene: Scene, meshes: Sequence[fe.Mesh]) -> Scene:
+    """``scene`` on new meshes of its body (one) or of its bodies (in the order of its parts, placed)."""
+    if isinstance(scene.body, Bodies):
+        parts = tuple(dataclasses.replace(part, geometry=contiguous(mesh), offset=None)
+                      for part, mesh in zip(scene.body.parts, meshes))
+        return bodies_scene(parts, scene.contact, scene.dirichlet, scene.tractions, scene.name, scene.body_force,
+                            scene.history)
+    return dataclasses.replace(scene, body=Body(contiguous(meshes[0]), scene.body.element, scene.body.plane))
 
 
 def adapt(scene: Scene, target: float = 1e-2, max_dofs: int = 200_000, fraction: float = 0.5,
@@ -139,24 +166,26 @@ def adapt(scene: Scene, target: float = 1e-2, max_dofs: int = 200_000, fraction:
     """Solve ``scene`` on meshes refined where the error indicators are largest, until the estimated relative
     discretization error (``result.error_budget["discretization"]``) is at most ``target`` or the next mesh would
     exceed ``max_dofs``. Each level marks Dörfler's cells (``fraction`` of η²) and more, by indicator, until its
-    DOFs grow by ``growth`` at least (None: Dörfler's alone). Returns every level's certified result;
+    DOFs grow by ``growth`` at least (None: Dörfler's alone). Several bodies (2-D P1 triangles: their bound) are
+    marked together and each refined where its cells are. Returns every level's certified result;
     ``progress(level, result)`` after each."""
     of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
     target, max_dofs, fraction, growth = check_adapt_options(target, max_dofs, fraction, growth)
+    meshes = body_meshes(scene)
     if isinstance(scene.body, Bodies):
-        raise SceneError("body", "adaptive refinement is for one body (the estimator does not cover pairs)",
-                         "solve the bodies on a finer mesh with cc.solve")
-    if not isinstance(scene.materials, Material):
+        if scene.body.element != "P1" or not isinstance(meshes[0], fe.MeshTri1):
+            raise SceneError("body", f"adaptive refinement of several bodies is driven by their error bound, which "
+                             f"covers 2-D P1 triangles only (got {scene.body.element} on {type(meshes[0]).__name__})",
+                             "give the parts P1 triangles, or solve the bodies on a finer mesh with cc.solve")
+    elif not isinstance(scene.materials, Material):
         raise SceneError("materials", "materials per subdomain are not carried through local refinement",
                          "give one material, or refine the mesh file yourself")
-    mesh = build_mesh(scene.body)
-    how = ("local (Dörfler)" if isinstance(mesh, LOCAL) else
+    how = ("local (Dörfler)" if isinstance(meshes[0], LOCAL) else
            "uniform: quadrilaterals and hexahedra are not refined locally")
     levels: list[ContactResult] = []
     start = time.perf_counter()
     while True:
-        body = Body(mesh, scene.body.element, scene.body.plane)
-        result = solve(dataclasses.replace(scene, body=body), solver, **options)
+        result = solve(scene_on(scene, meshes), solver, **options)
         result.extra["refinement"] = how
         levels.append(result)
         budget = result.error_budget
@@ -166,12 +195,12 @@ def adapt(scene: Scene, target: float = 1e-2, max_dofs: int = 200_000, fraction:
         estimated = None if budget is None else budget["discretization"]
         if estimated is None or not math.isfinite(estimated) or estimated <= target:
             return levels
-        refined = refine(mesh, result.error_estimate.indicators, fraction, growth or 1.0, scene.body.element)
-        if dofs_of(refined, scene.body.element) > max_dofs:
+        refined = refine(meshes, result.error_estimate.indicators, fraction, growth or 1.0, scene.body.element)
+        if sum(dofs_of(mesh, scene.body.element) for mesh in refined) > max_dofs:
             result.message = (f"adaptive refinement stopped before the target: the next mesh would exceed max_dofs "
                               f"{max_dofs} (estimated error {estimated:.2e} > target {target:.2e})")
             return levels
-        mesh = refined
+        meshes = refined
 
 
 def plot_levels(levels: Sequence[ContactResult], path, errors: Sequence[float] | None = None, panels: int = 4) -> Path:

@@ -38,6 +38,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..scene.meshing import check_boundary
+from . import flux_correction
 from .assembly import FEModel
 from .estimate import ContactState, applied_traction, components, held_components
 
@@ -166,12 +167,12 @@ class Chains:
         return self.starts + self.lengths - 1
 
 
-def patch_chains(mesh, xy: np.ndarray, det: np.ndarray) -> Chains:
+def patch_chains(mesh, xy: np.ndarray, det: np.ndarray, opposite: np.ndarray) -> Chains:
     """The chains of cells around the vertices (:class:`Chains`), sorted once by vertex and the angle of the cells'
-    centroids around it. That consecutive corners of a chain share their facet is checked: a mesh whose cells
-    overlap is refused."""
+    centroids around it (``opposite``: :func:`opposite_facets`). That consecutive corners of a chain share their
+    facet is checked: a mesh whose cells overlap is refused."""
     ahead, behind = [1, 2, 0], [2, 0, 1]
-    opposite = opposite_facets(mesh).T
+    opposite = opposite.T
     # counterclockwise around its vertex k a cell enters through its facet (k, k+1), opposite k+2, and leaves through
     # (k, k+2), opposite k+1; the other way round on a cell numbered clockwise
     positive = det > 0
@@ -321,7 +322,8 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     area, grads = 0.5 * np.abs(det), gradients.transpose(2, 1, 0)
     sigma_h = elastic_stress(fem, u_components, grads)
     body_force = np.asarray(fem.scene.body_force, dtype=float) * fem.scaling.length / fem.scaling.pressure
-    chains = patch_chains(mesh, xy, det)
+    opposite = opposite_facets(mesh)
+    chains = patch_chains(mesh, xy, det, opposite)
     weights = circulation_weights(chains, xy, det)
     # w_a's outward flux through the facet opposite k is −|T| σ_h,i · ∇λ_k at both vertices a of the facet
     target = -area * (sigma_h.transpose(1, 2, 0)[:, :, None] * gradients[None]).sum(axis=1)  # (i, k, cells)
@@ -337,6 +339,7 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     scale = np.abs(area[None] * body_force[:, None]).max() + np.abs(flux).max()
     defect = float(np.abs(residual).max() / scale) if scale > 0 else 0.0
     vertex_stress = vertex_values(x, xy, area)
+    vertex_stress = flux_correction.corrected(vertex_stress, sigma_h, grads, area, fem.lame, mesh, opposite, held, KORN)
     symmetric, skew = cell_norms(vertex_stress, sigma_h, lam, mu, area)
     return Equilibrated(vertex_stress, symmetric, skew, defect)
 

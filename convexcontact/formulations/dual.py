@@ -15,8 +15,6 @@ multipliers are minus the obstacle's advance and shift.
 
 from __future__ import annotations
 
-import copy
-import functools
 from collections.abc import Callable
 from dataclasses import replace
 
@@ -89,10 +87,16 @@ def dual(
         rows.append(sp.vstack(pick).tocsr()[order])
         b.append(np.concatenate([slip_bound, np.zeros((dim - 1) * count)])[order])
         cones += [soc(dim)] * count
-    P = copy.copy(P)  # its own copy: a kept operator serves programs of other loads
-    P.gradient_at = functools.partial(_gradient_at, q, lambda x: np.concatenate(
-        [-(B @ factorization.solve(f - B.T @ x[:m + tangential]) + c), q[m + tangential:]]))  # W's μ block is 0
-    program = ConicProgram(P, q, sp.vstack(rows).tocsc(), np.concatenate(b), tuple(cones))
+    def gradient(x: np.ndarray) -> np.ndarray:
+        """W x + q as −(B u + c), u = K⁻¹(f − Bᵀx) the displacement the answer's fields recover. W x and q cancel
+        where the loads bend a body its contact holds up: on a strip 400 : 1 clamped at its ends (2·10³ DOFs) the
+        load alone would move it ‖K⁻¹f‖ = 9·10⁵ where it moves 2·10⁻³, and the sum's rounding (~1e-11) stood for
+        the gradient where the certificate's gaps need 1e-13; f − Bᵀx (loads and contact forces on nodes of their
+        own) loses nothing (docs/performance.md, "The clamped strip's certificates")."""
+        r = x[:m + tangential]
+        return np.concatenate([-(B @ factorization.solve(f - B.T @ r) + c), q[m + tangential:]])  # W's μ block is 0
+
+    program = ConicProgram(P, q, sp.vstack(rows).tocsc(), np.concatenate(b), tuple(cones), gradient=gradient)
     bound_rows = equalities + m + np.arange(count) * dim
     carries = carrying(B)
 
@@ -113,16 +117,6 @@ def dual(
         return {"b": updated}
 
     return program, recover, bound_update
-
-
-def _gradient_at(q: np.ndarray, minus_gap: Callable, q_now: np.ndarray) -> Callable | None:
-    """x ↦ W x + q as −(B u + c), u = K⁻¹(f − Bᵀx) the displacement the answer's fields recover (``minus_gap``), for
-    the program's own q (None for another: a solver then forms W x + q). W x and q cancel where the loads bend a
-    body its contact holds up: on a strip 400 : 1 clamped at its ends (2·10³ DOFs) the load alone would move it
-    ‖K⁻¹f‖ = 9·10⁵ where it moves 2·10⁻³, and the sum's rounding (~1e-11) stood for the gradient where the
-    certificate's gaps need 1e-13; f − Bᵀx (loads and contact forces on nodes of their own) loses nothing
-    (docs/performance.md, "The clamped strip's certificates")."""
-    return minus_gap if q_now is q or np.array_equal(q_now, q) else None
 
 
 def normal_multipliers(program: ConicProgram, C: sp.spmatrix, contact: ContactTrace) -> sp.csr_matrix:

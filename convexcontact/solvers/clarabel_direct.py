@@ -118,7 +118,7 @@ class Session:
         return sp.triu(program.P, format="csc"), program.q, sp.csc_matrix(program.A), program.b, cones
 
     def update(self, q: np.ndarray | None = None, b: np.ndarray | None = None):
-        self.program = replace(self.program, q=self.program.q if q is None else q, b=self.program.b if b is None else b)
+        self.program = self.program.updated(q, b)
         if self._solver.is_data_update_allowed():
             self._solver.update(**{k: v for k, v in (("q", q), ("b", b)) if v is not None})
         else:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import cvxpy as cp
 import numpy as np
@@ -174,7 +174,7 @@ class Session:
         self.program, self._options = program, options
 
     def update(self, q: np.ndarray | None = None, b: np.ndarray | None = None):
-        self.program = replace(self.program, q=self.program.q if q is None else q, b=self.program.b if b is None else b)
+        self.program = self.program.updated(q, b)
 
     def solve(self) -> ConicSolution:
         return solve(self.program, **self._options)

@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
@@ -189,7 +189,7 @@ class Session:
         self._cache: dict = {}  # the preconditioner, built at the first solve
 
     def update(self, q: np.ndarray | None = None, b: np.ndarray | None = None):
-        self.program = replace(self.program, q=self.program.q if q is None else q, b=self.program.b if b is None else b)
+        self.program = self.program.updated(q, b)
         if (self.program.b[self._form.ball_radius_rows] < 0).any():
             raise ValueError("newton-cg: a second-order cone of negative radius (the program is infeasible)")
 
@@ -412,7 +412,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     if sets.coupling is not None:  # the program of the radii reached: x is its answer
         b = program.b.copy()
         b[form.ball_radius_rows] = info["radii"] = sets.radii(v)
-        program = replace(program, b=b)
+        program = program.updated(b=b)
     z = np.zeros(program.n_constraints)
     z[form.bound_rows] = np.maximum(g[form.bound_vars], 0.0)  # P x + q + Aᵀz = 0 with a = −1 / scale, z ≥ 0
     z[form.ball_rows] = g[form.ball_vars]
@@ -529,13 +529,12 @@ def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds) -> np.ndarray | Non
 
 
 def _affine(program: ConicProgram):
-    """x ↦ P x + q as a sum, and P's own formula of it or None: P's ``gradient_at(q)`` where it offers one for this
-    q (the contact dual's computes it from the displacement its multipliers leave, K⁻¹(f − Bᵀx), as the answer's
-    fields are recovered: P x and q cancel where the loads bend a body its contact holds up, and the sum's rounding
-    ε‖q‖ passed the gaps the certificate checks; formulations/dual.py, ``_gradient_at``)."""
-    own = getattr(program.P, "gradient_at", None)
+    """x ↦ P x + q as a sum, and the program's own formula of it (``program.gradient``) or None (the contact dual's
+    computes it from the displacement its multipliers leave, K⁻¹(f − Bᵀx), as the answer's fields are recovered:
+    P x and q cancel where the loads bend a body its contact holds up, and the sum's rounding ε‖q‖ passed the gaps
+    the certificate checks; formulations/dual.py)."""
     P = spla.aslinearoperator(program.P)
-    return (lambda x: P.matvec(x) + program.q), own and own(program.q)
+    return (lambda x: P.matvec(x) + program.q), program.gradient
 
 
 def _natural(v, g, c, sets: _Bounds, q):

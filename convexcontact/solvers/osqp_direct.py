@@ -9,7 +9,6 @@ from __future__ import annotations
 import os
 import sys
 from contextlib import contextmanager
-from dataclasses import replace
 
 import numpy as np
 import osqp
@@ -124,7 +123,7 @@ class Session:
             changes["q"] = q
         if b is not None:
             changes["l"], changes["u"] = _bounds(b, self._plan)
-        self.program = replace(self.program, q=self.program.q if q is None else q, b=self.program.b if b is None else b)
+        self.program = self.program.updated(q, b)
         if self._setup_error is None:  # a solver that failed its setup has nothing to update: it says so again
             try:
                 self._solver.update(**changes)

@@ -15,7 +15,6 @@ nested in it, so u_h is prolonged exactly); the estimate is the result's ``error
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -26,21 +25,16 @@ import skfem as fe
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ...drivers.adapt import GROWTH, adapt, check_adapt_options
+from ...drivers.adapt import GROWTH, adapt, body_meshes, check_adapt_options, scene_on
 from ...drivers.solve import solve
 from ...results.result import ContactResult
-from ...scene.description import Body, Scene
-from ...scene.meshing import build_mesh
+from ...scene.description import Scene
 
 REFERENCE_LEVELS = 2
 """Uniform refinements between a family's finest mesh and its reference (the true error then reads ≈ 3 % small for
 the rate h¹, ≈ 13 % for the rate h^½ of a singular scene)."""
 
 FIELDS = ("scene", "method", "level", "ndof", "time", "error", "estimate", "effectivity", "reference")
-
-
-def on_mesh(scene: Scene, mesh: fe.Mesh) -> Scene:
-    return dataclasses.replace(scene, body=Body(mesh, scene.body.element, scene.body.plane))
 
 
 def timed_solve(scene: Scene) -> tuple[ContactResult, float]:
@@ -151,7 +145,7 @@ def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Call
     solve."""
     if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or levels < 2:
         raise ValueError(f"levels: the number of uniform levels, an integer ≥ 2, got {levels!r}; e.g. 4")
-    if scene.body.element not in ("P1", "P2") or build_mesh(scene.body).t.shape[0] != 3:
+    if scene.body.element not in ("P1", "P2") or body_meshes(scene)[0].t.shape[0] != 3:
         raise ValueError(f"scene: the comparison measures P1 or P2 triangles (their true error is interpolated "
                          f"exactly), got {scene.body.element}; give a 2-D P1 or P2 scene")
     if adaptive_dofs is not None and (isinstance(adaptive_dofs, bool) or not isinstance(adaptive_dofs, (int, np.integer))
@@ -160,21 +154,21 @@ def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Call
                          "finest uniform level's)")
     check_adapt_options(0.5, 1, fraction, growth)  # fraction and growth, before any solve
     say = progress or (lambda text: None)
-    coarse = build_mesh(scene.body)
+    coarse = body_meshes(scene)
     solve(scene).error_budget  # noqa: B018 -- warm-up: the first solve of a process pays its imports, not timed
     uniform, seconds = [], []
     for k in range(levels):
-        result, spent = timed_solve(on_mesh(scene, coarse.refined(k) if k else coarse))
+        result, spent = timed_solve(scene_on(scene, [mesh.refined(k) if k else mesh for mesh in coarse]))
         uniform.append(result)
         seconds.append(spent)
         say(f"uniform level {k}: {result.ndof} DOFs, {spent:.2f} s")
-    reference, _ = timed_solve(on_mesh(scene, coarse.refined(levels - 1 + REFERENCE_LEVELS)))
+    reference, _ = timed_solve(scene_on(scene, [mesh.refined(levels - 1 + REFERENCE_LEVELS) for mesh in coarse]))
     say(f"uniform reference: {reference.ndof} DOFs")
     adaptive = adapt(scene, target=1e-9, max_dofs=adaptive_dofs or uniform[-1].fem.basis.N, fraction=fraction,
                      growth=growth, progress=lambda k, r: say(f"adaptive level {k}: {r.ndof} DOFs, "
                                                               f"{r.extra['adaptive_seconds']:.2f} s so far"))
-    finest = build_mesh(adaptive[-1].scene.body)
-    adaptive_reference, _ = timed_solve(on_mesh(scene, finest.refined(REFERENCE_LEVELS)))
+    finest = body_meshes(adaptive[-1].scene)
+    adaptive_reference, _ = timed_solve(scene_on(scene, [mesh.refined(REFERENCE_LEVELS) for mesh in finest]))
     say(f"adaptive reference: {adaptive_reference.ndof} DOFs")
     label = f"{REFERENCE_LEVELS} uniform refinements finer ({{}} DOFs)"
     return (rows_of("uniform", uniform, seconds, true_errors(uniform, reference), label.format(reference.ndof))

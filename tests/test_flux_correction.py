@@ -1,0 +1,122 @@
+"""The divergence-free correction of the equilibrated stress (convexcontact.fem.flux_correction): it keeps every
+constraint of σ̂ (that is the guarantee), lowers J, and sharpens the bound (docs/estimate.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_estimate import flat_punch, hertz_levels, under_gravity
+
+import convexcontact as cc
+from convexcontact.fem import flux, flux_correction
+from convexcontact.results.result import contact_state
+
+DEFAULT = flux_correction.ITERATIONS
+
+
+def equilibrated(result: cc.Result, iterations: int, monkeypatch) -> tuple[flux.Equilibrated, np.ndarray]:
+    """σ̂ of ``result`` after ``iterations`` CG steps of the correction, and the held mask it was built with."""
+    fem = result.fem
+    mesh = fem.mesh
+    on = flux.contact_facets(fem)
+    lumped = flux.lumped_traction(fem, contact_state(result), on)
+    held = np.zeros((2, mesh.nfacets), dtype=bool)
+    held[:, mesh.boundary_facets()] = flux.held_components(fem, mesh.boundary_facets())
+    monkeypatch.setattr(flux_correction, "ITERATIONS", iterations)
+    u = flux.components(fem, result.displacement / fem.scaling.displacement)
+    return flux.equilibrate(fem, u, flux.facet_moments(fem, lumped, on), held), held
+
+
+def normal_components(mesh, vertex_stress: np.ndarray) -> np.ndarray:
+    """σ̂_i · n_E at the two ends of each cell's facets (rows, cells, facet opposite k, end), n_E the facet's normal
+    oriented along ``mesh.facets``' direction rotated (the same for both cells of an interior facet)."""
+    opposite = flux.opposite_facets(mesh)
+    ends = mesh.facets[:, opposite]  # (2, cells, k)
+    edge = mesh.p[:, ends[1]] - mesh.p[:, ends[0]]
+    normal = np.stack([edge[1], -edge[0]])  # (x, cells, k)
+    local = (mesh.t.T[:, None, :, None] == ends.transpose(1, 2, 0)[:, :, None, :]).argmax(axis=2)  # (cells, k, end)
+    cells = np.arange(mesh.nelements)[:, None, None]
+    at_ends = vertex_stress[:, :, cells, local]  # (rows, x, cells, k, end)
+    return (at_ends * normal[None, :, :, :, None]).sum(axis=1)
+
+
+@pytest.fixture(scope="module")
+def punch():
+    return cc.solve(flat_punch())
+
+
+def test_the_correction_keeps_divergence_and_prescribed_fluxes(punch, monkeypatch):
+    """τ = σ̂ (corrected) − σ̂ (RT0) on the punch (contact, free sides, a held base) and under gravity (traction
+    and body force): div τ = 0 in every cell, its normal component continuous across every interior facet and zero at
+    both ends of every boundary facet whose row is prescribed, all to round-off; and τ is not zero (it moves the
+    fluxes through the held facets too)."""
+    for result in (punch, cc.solve(under_gravity(cc.library.pressure_patch(4, "P1")))):
+        mesh = result.fem.mesh
+        before, held = equilibrated(result, 0, monkeypatch)
+        after, _ = equilibrated(result, DEFAULT, monkeypatch)
+        tau = after.vertex_stress - before.vertex_stress
+        scale = np.abs(before.vertex_stress).max()
+        assert np.abs(tau).max() > 1e-3 * scale
+        grads = flux.cell_geometry(mesh)[2]
+        divergence = (tau * grads.transpose(2, 0, 1)[None]).sum(axis=(1, 3))  # Σ_m τ_i(p_m) · ∇λ_m
+        assert np.abs(divergence).max() < 1e-12 * scale / mesh.param()
+        normal = normal_components(mesh, tau)
+        opposite = flux.opposite_facets(mesh)
+        # the cells of an interior facet see n_E from either side: the signed sum is the jump of τ · n_E
+        sign = np.where(mesh.f2t[0, opposite] == np.arange(mesh.nelements)[:, None], 1.0, -1.0)
+        jump = np.zeros((2, mesh.nfacets, 2))
+        np.add.at(jump, (slice(None), opposite), normal * sign[None, ..., None])
+        size = scale * flux.facet_lengths(mesh, np.arange(mesh.nfacets)).max()
+        boundary = mesh.f2t[1] == -1
+        assert np.abs(jump[:, ~boundary]).max() < 1e-12 * size
+        assert np.abs(jump[boundary[None] & ~held]).max() < 1e-12 * size
+        assert np.abs(jump[boundary[None] & held]).max() > 1e-6 * size
+
+
+def bound_square(stress: flux.Equilibrated) -> float:
+    """J = η_sym² + (C_K² − 1) η_skew²."""
+    return float(stress.symmetric.sum() + (flux.KORN**2 - 1) * stress.skew.sum())
+
+
+def test_each_conjugate_gradient_step_lowers_j(punch, monkeypatch):
+    """J(k) does not increase with the steps k (every iterate a valid σ̂), and the default steps remove over 40 % of
+    it on the coarse punch (measured 0.34 of η² left as asymmetry before, 0.18 after)."""
+    values = [bound_square(equilibrated(punch, k, monkeypatch)[0]) for k in range(11)]
+    assert np.all(np.diff(values) <= 1e-12 * values[0]), values
+    assert values[DEFAULT] < 0.6 * values[0]
+
+
+def test_the_corrected_bound_on_the_punch_is_within_1_to_2_of_the_true_error(monkeypatch):
+    """The uniform punch's first two levels (reference two levels finer): η ≥ the true error, and η / error ≤ 2
+    (measured 1.55, 1.33; before the correction 2.87, 2.49: above 2.2)."""
+    levels = hertz_levels("P1", 2, 2, base=flat_punch())
+    for result, error in levels:
+        assert error <= result.error_estimate.eta <= 2.0 * error
+    monkeypatch.setattr(flux_correction, "ITERATIONS", 0)
+    for result, error in levels:
+        fem = result.fem
+        rt0 = flux.flux_estimate(fem, result.displacement / fem.scaling.displacement, contact_state(result))
+        assert rt0.eta > 2.2 * error
+
+
+@pytest.mark.parametrize("dirichlet", [False, True])
+def test_a_constant_stress_stays_exact(dirichlet):
+    """A linear displacement with its traction σ n on the whole boundary: σ̂ is σ, J = 0, and the correction leaves
+    it (CG from τ = 0 with a zero load), with or without the held base's free fluxes."""
+    fem = cc.solve(flat_punch()).fem
+    mesh = fem.mesh
+    u = np.array([[0.3, -0.7], [0.2, 0.5]]) @ mesh.p
+    _, area, grads = flux.cell_geometry(mesh)
+    sigma = flux.elastic_stress(fem, u, grads)[0]
+    facets = mesh.boundary_facets()
+    edge = np.diff(mesh.p[:, mesh.facets[:, facets]], axis=1)[:, 0]
+    normal = np.stack([edge[1], -edge[0]])  # |E| n, oriented outward below
+    inward = mesh.p[:, mesh.t[:, mesh.f2t[0, facets]]].mean(axis=1) - mesh.p[:, mesh.facets[0, facets]]
+    normal *= np.where((normal * inward).sum(axis=0) > 0, -1.0, 1.0)
+    moments = np.zeros((2, 2, mesh.nfacets))
+    moments[:, :, facets] = 0.5 * (sigma @ normal)[None]
+    held = np.zeros((2, mesh.nfacets), dtype=bool)
+    held[:, facets] = flux.held_components(fem, facets) if dirichlet else False
+    stress = flux.equilibrate(fem, u, moments, held)
+    np.testing.assert_allclose(stress.vertex_stress, np.broadcast_to(sigma[:, :, None, None], (2, 2, *area.shape, 3)),
+                               atol=1e-12 * np.abs(sigma).max())
