@@ -89,9 +89,25 @@ def components(fem: FEModel, u: np.ndarray) -> np.ndarray:
     return u.reshape(-1, fem.dim).T
 
 
+def interpolate(basis: fe.AbstractBasis, nodal: np.ndarray, field: str = "value") -> np.ndarray:
+    """Σ_j nodal[..., dof_j] φ_j at the basis' quadrature points, (..., elements, points); ``field`` "grad": ∇φ_j,
+    (..., d, elements, points). scikit-fem's ``interpolate`` sums the same terms in the same order, but computes the
+    values with the gradients and first an np.unique of all the basis' element DOFs, on every call: a quarter of the
+    estimate's time at 10⁵ P2 DOFs."""
+    out = 0.0
+    for j in range(basis.Nbfun):
+        shape = basis.basis[j][0]  # a DiscreteField: the values, with .grad
+        coefficients = np.take(nodal, basis.element_dofs[j], axis=-1)[..., None]
+        if field == "grad":
+            out = out + coefficients[..., None, :, :] * shape.grad
+        else:
+            out = out + coefficients * np.asarray(shape)
+    return out
+
+
 def gradient(basis: fe.AbstractBasis, u_components: np.ndarray) -> np.ndarray:
     """∇u at the basis' quadrature points, (d, d, elements, points): [a, k] = ∂_k u_a."""
-    return np.stack([basis.interpolate(u_a).grad for u_a in u_components])
+    return interpolate(basis, u_components, "grad")
 
 
 def stress(grad_u: np.ndarray, lam: np.ndarray, mu: np.ndarray) -> np.ndarray:
@@ -214,7 +230,7 @@ def boundary_terms(fem: FEModel, space: dict, u_components: np.ndarray, state: C
     # t_h = Σ τ_i ψ_i with M τ = F: its moments against the trace space are the discrete nodal forces
     tau = splu(sp.csc_matrix(contact.mass)).solve(np.ascontiguousarray(state.forces))
     target = np.where(on_contact[None, :, None],
-                      np.stack([np.asarray(boundary.interpolate(t)) for t in trace_field(fem, tau)]),
+                      interpolate(boundary, trace_field(fem, tau)),
                       applied_traction(fem, boundary))
     n = np.asarray(boundary.normals)
     residual = np.einsum("abep,bep->aep", stress(gradient(boundary, u_components), lam[cell], mu[cell]), n) - target
@@ -227,16 +243,16 @@ def boundary_terms(fem: FEModel, space: dict, u_components: np.ndarray, state: C
 
     facets = fe.FacetBasis(fem.mesh, facets=contact.facets, **space)
     cell, n, dx, h = facets.tind, np.asarray(facets.normals), facets.dx, np.asarray(facets.mesh_parameters())
-    traction = np.stack([np.asarray(facets.interpolate(t)) for t in trace_field(fem, tau)])
+    traction = interpolate(facets, trace_field(fem, tau))
     pressure = -(traction * n).sum(axis=0)
     if state.constrained:
-        opening = np.asarray(facets.interpolate(trace_field(fem, state.gap - state.normal_displacement)))
+        opening = interpolate(facets, trace_field(fem, state.gap - state.normal_displacement))
         np.add.at(out["complementarity"], cell,
                   (np.maximum(pressure, 0.0) * np.maximum(opening, 0.0) * dx).sum(axis=1))
         np.add.at(out["penetration"], cell, 2.0 * mu[cell] * (np.maximum(-opening, 0.0) ** 2 / h * dx).sum(axis=1))
     if state.slip is not None:
         tangential = traction + pressure * n
-        slip = np.stack([np.asarray(facets.interpolate(v)) for v in trace_field(fem, state.slip)])
+        slip = interpolate(facets, trace_field(fem, state.slip))
         slip = slip - (slip * n).sum(axis=0) * n
         misdirected = np.linalg.norm(tangential, axis=0) * np.linalg.norm(slip, axis=0) + (tangential * slip).sum(axis=0)
         np.add.at(out["friction"], cell, (misdirected * dx).sum(axis=1))
