@@ -21,7 +21,9 @@ e = u − u_h (Prager–Synge, σ̂ not symmetric)::
     ‖e‖_E ≤ ‖C^{-½}(sym σ̂ − σ_h)‖ + (C_K² − 1)^{½} ‖(2μ)^{-½} skew σ̂‖,
 
 C_K Korn's constant of the body and its Dirichlet boundary (‖∇v‖ ≤ C_K ‖ε(v)‖; √2 for v = 0 on the whole
-boundary). :func:`flux_estimate` adds the complementarity and friction terms of the contact (Weiss–Wohlmuth).
+boundary). The RT0 sum's skew part is then driven down by a divergence-free correction that keeps every constraint
+(:mod:`.flux_correction`). :func:`flux_estimate` adds the complementarity and friction terms of the contact
+(Weiss–Wohlmuth).
 
 Written by hand (not with scikit-fem's RT elements): a patch problem in RT0 is the chain of cells around a, one
 divergence constraint per cell on the two fluxes through its facets at a, solved by a cumulative sum from one known

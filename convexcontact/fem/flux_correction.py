@@ -7,7 +7,7 @@ constraint σ̂ satisfies (cell divergences, Neumann and contact data), so σ̂ 
 2-D, row i: τ_i = curl φ_i = (∂_y φ_i, −∂_x φ_i), and curl φ · n = ∂_t φ on a facet, so φ_i continuous and zero along
 the boundary facets where row i's flux is prescribed, free on the facets where component i is held (Dirichlet) and
 inside. With φ_i piecewise P2 (hierarchical: hats ψ_a, edge bubbles b_E = 4 λ_p λ_q), σ̂ + τ stays linear per cell and
-the facet-midpoint rule of ``cell_norms`` stays exact. The skew part of τ is −div φ / 2 (φ = (φ_1, φ_2)): linear per
+the quadrature of ``cell_norms`` stays exact. The skew part of τ is −div φ / 2 (φ = (φ_1, φ_2)): linear per
 cell, so the asymmetry can be driven near zero (the weak symmetry of Arnold–Falk–Winther, Bertrand–Moldenhauer–Starke,
 here a post-processing). The coefficients minimize the convex quadratic
 
