@@ -159,11 +159,12 @@ def corrected(vertex_stress, sigma_h, grads, area, lame, mesh, opposite, held, k
     iterations = ITERATIONS if iterations is None else iterations
     curls = np.stack([grads[..., 1].T, -grads[..., 0].T])  # curl λ_k = (∂_y λ_k, −∂_x λ_k): (x, 3, cells)
     operator = StreamOperator(mesh, opposite, curls, area / 3.0, lame, korn)
-    # σ̂ − σ_h at the midpoint opposite vertex k: (rows, x, k, cells)
-    opposite_mid = 0.5 * (vertex_stress[..., [1, 2, 0]] + vertex_stress[..., [2, 0, 1]]).transpose(0, 1, 3, 2)
-    misfit = opposite_mid - sigma_h.transpose(1, 2, 0)[:, :, None, :]
+    # σ̂ − σ_h at the midpoint opposite vertex k, (V_{k+1} + V_{k+2}) / 2 = (Σ V − V_k) / 2: (rows, x, k, cells)
+    misfit = 0.5 * (vertex_stress.sum(axis=3)[..., None] - vertex_stress).transpose(0, 1, 3, 2) \
+        - sigma_h.transpose(1, 2, 0)[:, :, None, :]
     load = operator.adjoint(operator.weighted_form(misfit))
     x = conjugate_gradients(operator, load, operator.diagonal(), admissible_stream_functions(mesh, held), iterations)
-    tau = operator.midpoints(x)  # a linear field's vertex values from its midpoints: V_k = M_{k+1} + M_{k+2} − M_k
-    at_vertices = tau[:, :, [1, 2, 0]] + tau[:, :, [2, 0, 1]] - tau
-    return vertex_stress + at_vertices.transpose(0, 1, 3, 2)
+    tau = operator.midpoints(x)  # a linear field's vertex values from its midpoints: V_k = Σ M − 2 M_k
+    tau *= -2.0
+    tau -= 0.5 * tau.sum(axis=2, keepdims=True)
+    return vertex_stress + tau.transpose(0, 1, 3, 2)
