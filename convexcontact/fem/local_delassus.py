@@ -38,25 +38,22 @@ def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.n
 
 
 def colouring(conflict: sp.csr_matrix) -> np.ndarray:
-    """Colours of the rows of a symmetric ``conflict`` pattern such that no two conflicting rows share one: each
-    colour a maximal independent set of the rows left, grown by rounds in which the rows whose random priority is the
-    largest among their free neighbours join (Luby's rule; scipy has no graph colouring)."""
-    m = conflict.shape[0]
-    conflict = sp.csr_matrix(_pattern(conflict), dtype=float)  # its entries, whatever their values, as ones
-    conflict.setdiag(0.0)
-    conflict.eliminate_zeros()
-    priority = np.random.default_rng(0).permutation(m) + 1.0
+    """Colours of the rows of a symmetric ``conflict`` pattern such that no two conflicting rows share one: greedy
+    first fit, each row the least colour none of its coloured neighbours has (at most its degree + 1 colours).
+
+    A loop over the rows (scipy has no graph colouring), O(nnz) in all: the rounds of Luby's rule it replaces each
+    scanned the whole pattern, one round per colour and more, and on 3-D faces (~250 neighbours a row) took 31 of
+    the 38 s of a Tresca solve on a 1.3·10³-DOF plate and 80 of 117 s at 10⁴ DOFs."""
+    conflict = sp.csr_matrix(_pattern(conflict))
+    m, indptr, indices = conflict.shape[0], conflict.indptr, conflict.indices
     colours = np.full(m, -1)
-    colour = 0
-    while (colours < 0).any():
-        free = colours < 0
-        while free.any():
-            neighbours = conflict.multiply(np.where(free, priority, 0.0)[None, :]).max(axis=1).toarray().ravel()
-            joined = free & (priority > neighbours)
-            colours[joined] = colour
-            free &= ~joined
-            free[conflict[joined].indices] = False  # the neighbours of the colour's rows wait for the next one
-        colour += 1
+    taken = np.zeros(int(np.diff(indptr).max(initial=0)) + 2, dtype=bool)  # the colours of one row's neighbours
+    for row in range(m):
+        around = colours[indices[indptr[row]:indptr[row + 1]]]
+        around = around[around >= 0]
+        taken[around] = True
+        colours[row] = np.argmin(taken)
+        taken[around] = False
     return colours
 
 
