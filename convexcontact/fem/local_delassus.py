@@ -19,22 +19,42 @@ LAYERS = 2
 
 
 def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.ndarray:
-    """d_j = b_jᵀ K_Ω⁻¹ b_j for each row b_j of B, Ω_j its support grown ``layers`` times through K's graph."""
+    """d_j = b_jᵀ K_Ω⁻¹ b_j for each row b_j of B, Ω_j its support grown ``layers`` times through K's graph. Rows of
+    one support (a node's normal and tangential rows) share their patch: the supports are coloured, and each colour
+    is one factorization with a right-hand side per row of a support (3-D Tresca: a third of the factorizations)."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
+    support, slot = supports(B)
+    first = np.flatnonzero(slot == 0)  # a row of each support, in the order of the supports
     graph = sp.csr_matrix((np.ones(K.nnz, dtype=np.int32), K.indices, K.indptr), shape=K.shape)
-    patch = sp.csc_matrix((np.ones(B.nnz, dtype=np.int32), B.indices, B.indptr), shape=B.shape[::-1])  # n × m
+    patch = _pattern(B[first].T)  # n × supports
     for _ in range(layers):
         patch = _pattern(graph @ patch)
     conflict = _pattern(patch.T @ _pattern(graph @ patch))  # patches that overlap or touch
     diagonal = np.zeros(B.shape[0])
     colours = colouring(conflict)
     for colour in range(colours.max(initial=-1) + 1):
-        rows = np.flatnonzero(colours == colour)
-        region = np.flatnonzero(np.asarray(patch[:, rows].sum(axis=1)).ravel())
+        members = np.flatnonzero(colours == colour)
+        region = np.flatnonzero(np.asarray(patch[:, members].sum(axis=1)).ravel())
+        rows = np.flatnonzero(np.isin(support, members))
         load = B[rows][:, region]
-        response = spla.splu(sp.csc_matrix(K[region][:, region])).solve(np.asarray(load.sum(axis=0)).ravel())
-        diagonal[rows] = load @ response  # the other rows' loads act on other blocks of K_region
+        by_slot = sp.csr_matrix((np.ones(rows.size), (slot[rows], np.arange(rows.size))))
+        response = spla.splu(sp.csc_matrix(K[region][:, region])).solve((by_slot @ load).T.toarray())
+        diagonal[rows] = np.asarray(load.multiply(response.T[slot[rows]]).sum(axis=1)).ravel()  # other rows of
+        # a slot act on other blocks of K_region
     return diagonal
+
+
+def supports(B: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
+    """For each row of ``B``: the index of its support (the set of its stored columns, numbered in order of first
+    appearance) and its rank among the rows of that support."""
+    numbers: dict = {}
+    support = np.array([numbers.setdefault(B.indices[B.indptr[j]:B.indptr[j + 1]].tobytes(), len(numbers))
+                        for j in range(B.shape[0])], dtype=int)
+    order = np.argsort(support, kind="stable")
+    starts = np.searchsorted(support[order], support[order])  # each row's support's first place in the order
+    slot = np.empty_like(support)
+    slot[order] = np.arange(support.size) - starts
+    return support, slot
 
 
 def colouring(conflict: sp.csr_matrix) -> np.ndarray:
