@@ -19,44 +19,61 @@ LAYERS = 2
 
 
 def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.ndarray:
-    """d_j = b_jᵀ K_Ω⁻¹ b_j for each row b_j of B, Ω_j its support grown ``layers`` times through K's graph."""
+    """d_j = b_jᵀ K_Ω⁻¹ b_j for each row b_j of B, Ω_j its support grown ``layers`` times through K's graph. Rows of
+    one support (a node's normal and tangential rows) share their patch: the supports are coloured, and each colour
+    is one factorization with a right-hand side per row of a support (3-D Tresca: a third of the factorizations)."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
+    support, slot = supports(B)
+    first = np.flatnonzero(slot == 0)  # a row of each support, in the order of the supports
     graph = sp.csr_matrix((np.ones(K.nnz, dtype=np.int32), K.indices, K.indptr), shape=K.shape)
-    patch = sp.csc_matrix((np.ones(B.nnz, dtype=np.int32), B.indices, B.indptr), shape=B.shape[::-1])  # n × m
+    patch = _pattern(B[first].T)  # n × supports
     for _ in range(layers):
         patch = _pattern(graph @ patch)
     conflict = _pattern(patch.T @ _pattern(graph @ patch))  # patches that overlap or touch
     diagonal = np.zeros(B.shape[0])
     colours = colouring(conflict)
     for colour in range(colours.max(initial=-1) + 1):
-        rows = np.flatnonzero(colours == colour)
-        region = np.flatnonzero(np.asarray(patch[:, rows].sum(axis=1)).ravel())
+        members = np.flatnonzero(colours == colour)
+        region = np.flatnonzero(np.asarray(patch[:, members].sum(axis=1)).ravel())
+        rows = np.flatnonzero(np.isin(support, members))
         load = B[rows][:, region]
-        response = spla.splu(sp.csc_matrix(K[region][:, region])).solve(np.asarray(load.sum(axis=0)).ravel())
-        diagonal[rows] = load @ response  # the other rows' loads act on other blocks of K_region
+        by_slot = sp.csr_matrix((np.ones(rows.size), (slot[rows], np.arange(rows.size))))
+        response = spla.splu(sp.csc_matrix(K[region][:, region])).solve((by_slot @ load).T.toarray())
+        diagonal[rows] = np.asarray(load.multiply(response.T[slot[rows]]).sum(axis=1)).ravel()  # other rows of
+        # a slot act on other blocks of K_region
     return diagonal
 
 
+def supports(B: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
+    """For each row of ``B``: the index of its support (the set of its stored columns, numbered in order of first
+    appearance) and its rank among the rows of that support."""
+    numbers: dict = {}
+    support = np.array([numbers.setdefault(B.indices[B.indptr[j]:B.indptr[j + 1]].tobytes(), len(numbers))
+                        for j in range(B.shape[0])], dtype=int)
+    order = np.argsort(support, kind="stable")
+    starts = np.searchsorted(support[order], support[order])  # each row's support's first place in the order
+    slot = np.empty_like(support)
+    slot[order] = np.arange(support.size) - starts
+    return support, slot
+
+
 def colouring(conflict: sp.csr_matrix) -> np.ndarray:
-    """Colours of the rows of a symmetric ``conflict`` pattern such that no two conflicting rows share one: each
-    colour a maximal independent set of the rows left, grown by rounds in which the rows whose random priority is the
-    largest among their free neighbours join (Luby's rule; scipy has no graph colouring)."""
-    m = conflict.shape[0]
-    conflict = sp.csr_matrix(_pattern(conflict), dtype=float)  # its entries, whatever their values, as ones
-    conflict.setdiag(0.0)
-    conflict.eliminate_zeros()
-    priority = np.random.default_rng(0).permutation(m) + 1.0
+    """Colours of the rows of a symmetric ``conflict`` pattern such that no two conflicting rows share one: greedy
+    first fit, each row the least colour none of its coloured neighbours has (at most its degree + 1 colours).
+
+    A loop over the rows (scipy has no graph colouring), O(nnz) in all: the rounds of Luby's rule it replaces each
+    scanned the whole pattern, one round per colour and more, and on 3-D faces (~250 neighbours a row) took 31 of
+    the 38 s of a Tresca solve on a 1.3·10³-DOF plate and 80 of 117 s at 10⁴ DOFs."""
+    conflict = sp.csr_matrix(_pattern(conflict))
+    m, indptr, indices = conflict.shape[0], conflict.indptr, conflict.indices
     colours = np.full(m, -1)
-    colour = 0
-    while (colours < 0).any():
-        free = colours < 0
-        while free.any():
-            neighbours = conflict.multiply(np.where(free, priority, 0.0)[None, :]).max(axis=1).toarray().ravel()
-            joined = free & (priority > neighbours)
-            colours[joined] = colour
-            free &= ~joined
-            free[conflict[joined].indices] = False  # the neighbours of the colour's rows wait for the next one
-        colour += 1
+    taken = np.zeros(int(np.diff(indptr).max(initial=0)) + 2, dtype=bool)  # the colours of one row's neighbours
+    for row in range(m):
+        around = colours[indices[indptr[row]:indptr[row + 1]]]
+        around = around[around >= 0]
+        taken[around] = True
+        colours[row] = np.argmin(taken)
+        taken[around] = False
     return colours
 
 

@@ -2,7 +2,7 @@
 
 For each size and law (Signorini, Tresca, Coulomb) on the punch scene (or, with
 ``--scenario whole-face``, a block whose whole bottom face is in contact; ``two-body``, a punch on
-a foundation; ``shapes``, each scene of the family of :mod:`.shapes`; ``plastic``, a plastic step:
+a foundation (3-D: two spheres' caps); ``shapes``, each scene of the family of :mod:`.shapes`; ``plastic``, a plastic step:
 :mod:`.plastic_bench`), one fresh
 process assembles the scene, then times (a) one linear elastic solve, K's sparse
 factorization plus u = K⁻¹f, and (b) the contact solve on the same assembly: the
@@ -76,26 +76,30 @@ def punch_scene(dim: int, law: str, dofs: float):
     return dataclasses.replace(scene, name="punch", contact=contact)
 
 
-def two_body_scene(law: str, dofs: float):
-    """A stiffer cylindrical punch with its own mesh pressed into an elastic foundation (2-D, mortar:
-    :func:`~convexcontact.scene.bodies_library.punch_on_foundation`). Its meshes are graded towards the
-    contact, so ``dofs`` sets the cell size h there by the measured fit dofs ≈ 5·10⁴ (0.001/h)^0.86."""
-    from ...scene.bodies_library import punch_on_foundation
+def two_body_scene(law: str, dofs: float, dim: int = 2):
+    """Two bodies, mortar. 2-D: a stiffer cylindrical punch with its own mesh pressed into an elastic foundation
+    (:func:`~convexcontact.scene.bodies_library.punch_on_foundation`); its meshes are graded towards the
+    contact, so ``dofs`` sets the cell size h there by the measured fit dofs ≈ 5·10⁴ (0.001/h)^0.86. 3-D: a quarter
+    of two spheres' caps of P1 tetrahedra (:func:`~convexcontact.scene.bodies_library.two_spheres`), the upper one 10
+    times stiffer (as the 2-D punch: the normal load shears the interface), n³ cells each, 2·3(n + 1)³ ≈ ``dofs``."""
+    from ...scene.bodies_library import punch_on_foundation, two_spheres
 
+    if dim == 3:
+        return two_spheres(max(2, round((dofs / 6) ** (1 / 3)) - 1), moduli=(10.0, 1.0), law=law_of(law))
     return punch_on_foundation(0.001 * (5e4 / dofs) ** (1 / 0.86), law=law_of(law))
 
 
 def scene_of(scenario: str, dim: int, law: str, dofs: float, nodes: float | None = None):
     """The bench's scene: the punch, the whole face of :func:`~convexcontact.scene.library.whole_face`, two
-    bodies (:func:`two_body_scene`, 2-D), or a shape of :mod:`.shapes` (2-D) named as the scenario."""
+    bodies (:func:`two_body_scene`), or a shape of :mod:`.shapes` named as the scenario."""
     from .shapes import SHAPES, shape_scene
 
     if scenario == "punch":
         return punch_scene(dim, law, dofs)
     if scenario == "two-body":
-        return two_body_scene(law, dofs)
-    if scenario in SHAPES:
-        return shape_scene(scenario, law_of(law), dofs)
+        return two_body_scene(law, dofs, dim)
+    if scenario in SHAPES[dim]:
+        return shape_scene(scenario, law_of(law), dofs, dim)
     if scenario == "plastic":
         return plastic_bench.punch_scene(dofs, law)
     from ...scene.library import whole_face
@@ -179,7 +183,7 @@ def run(dim: int, sizes, laws=LAWS, formulation: str = "auto", solver: str = "au
     from .shapes import SHAPES
 
     rows = []
-    family = SHAPES if scenario == "shapes" else (scenario,)
+    family = SHAPES[dim] if scenario == "shapes" else (scenario,)
     for dofs, count, scene in ((dofs, count, scene) for dofs in sizes for count in nodes for scene in family):
         for law in laws:
             case = json.dumps([dim, law, dofs, formulation, solver, scene, count])
@@ -220,7 +224,7 @@ def friction_sweep(dim: int, dofs: float, coefficients, solver: str = "auto", pr
 def format_row(row: dict) -> str:
     from .shapes import SHAPES
 
-    return ((f"{row['scenario']:>17} " if row["scenario"] in SHAPES else "") + f"{row['dim']}-D {row['law']:>9} {row['dofs']:>8d} DOFs {row['unknowns']:>5d} unknowns "
+    return ((f"{row['scenario']:>17} " if row["scenario"] in SHAPES[row["dim"]] else "") + f"{row['dim']}-D {row['law']:>9} {row['dofs']:>8d} DOFs {row['unknowns']:>5d} unknowns "
             f"{row['formulation']:>6}/{row['solver']:<9} {row['status']:>10} it {row['iterations']:>3}  "
             f"assembly {row['assembly']:6.2f} s  linear {row['linear']:6.2f} s  contact {row['contact_total']:6.2f} s "
             f"(condensation {row['condensation']:.2f}, solve {row['contact_solve']:.2f})  ratio {row['ratio']:5.2f}  "
@@ -279,8 +283,6 @@ def check_arguments(args) -> None:
                          "e.g. --sizes 1e4 1e5")
     if args.nodes is not None and (args.scenario != "whole-face" or min(args.nodes) < 2):
         raise ValueError("--nodes: give at least 2 contact nodes, with --scenario whole-face")
-    if args.scenario in ("two-body", "shapes") and args.dim != 2:
-        raise ValueError(f"--scenario {args.scenario}: the bench's {args.scenario} scenes are 2-D; drop --dim 3")
     if args.sweep:
         check_folder_target(args.out, "--out")
     else:
@@ -289,7 +291,7 @@ def check_arguments(args) -> None:
     for dofs in sizes:
         if args.scenario in ("two-body", "shapes"):  # meshes built with the scene: estimated from the target DOFs
             with named("--sizes"):
-                check_memory(dofs, 2, "--sizes", f"--sizes {dofs:g}", "give fewer DOFs")
+                check_memory(dofs, args.dim, "--sizes", f"--sizes {dofs:g}", "give fewer DOFs")
             continue
         for nodes in nodes_of(args):
             with named("--sizes" if nodes is None else "--sizes/--nodes"):
@@ -309,7 +311,7 @@ def family_of(args) -> tuple:
     """The scenes of the scenario: each shape of :mod:`.shapes`, or the scenario's one scene."""
     from .shapes import SHAPES
 
-    return SHAPES if args.scenario == "shapes" else (args.scenario,)
+    return SHAPES[args.dim] if args.scenario == "shapes" else (args.scenario,)
 
 
 def nodes_of(args) -> tuple:
@@ -329,8 +331,9 @@ def main(argv=None) -> list:
                         help="default: all three; signorini with --scenario plastic")
     parser.add_argument("--scenario", choices=SCENARIOS, default="punch",
                         help="punch (a small contact zone), whole-face (a block's whole bottom face in contact) "
-                        "or two-body (a punch with its own mesh on an elastic foundation, mortar; 2-D) or shapes (a "
-                        "family: block, tall block, strips 20:1 to 400:1 with free or clamped ends, two bodies; 2-D), "
+                        "or two-body (a punch with its own mesh on an elastic foundation, mortar; 3-D: two spheres) or "
+                        "shapes (a family: 2-D block, tall block, strips 20:1 to 400:1 with free or clamped ends; 3-D "
+                        "flat and tall blocks, plates 20:20:1 with free or clamped edges; two bodies), "
                         "or plastic (a plastic step of Prandtl's punch: conic, Newton's fast path and return "
                         "mapping; 2-D)")
     parser.add_argument("--nodes", type=number("1e3"), nargs="+", default=None,
