@@ -291,9 +291,10 @@ def test_cli_adapt_reports_every_level_and_why_it_stopped(tmp_path, capsys):
     summary = tmp_path / "summary.json"
     code = cli.main(["run", str(scene), "--adapt", "--target", "0.01", "--max-dofs", "7500", "--json", str(summary)])
     printed = capsys.readouterr().out
-    assert code == 0 and "level 0: 6480 DOFs" in printed and "level 1: 6990 DOFs" in printed
     written = json.loads(summary.read_text())
     levels = written["adaptive_levels"]
-    assert [level["ndof"] for level in levels] == [6480, 6990]
+    dofs = [level["ndof"] for level in levels]  # the second level's depends on the marking, the third passes 7500
+    assert code == 0 and len(dofs) == 2 and dofs[0] == 6480 and 6480 < dofs[1] <= 7500
+    assert all(f"level {k}: {n} DOFs" in printed for k, n in enumerate(dofs))
     assert levels[1]["discretization"] < levels[0]["discretization"]
     assert "stopped before the target" in written["message"] and written["refinement"].startswith("local")

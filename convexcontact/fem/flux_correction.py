@@ -138,16 +138,18 @@ class StreamOperator:
 def conjugate_gradients(operator, load, diagonal, admissible, iterations: int) -> np.ndarray:
     """``iterations`` Jacobi-preconditioned CG steps (scipy's) on operator x = −load over the admissible coefficients
     (rows, facets + vertices), from x = 0; no tolerance: a fixed number of steps, each lowering J."""
-    shape, mask = load.shape, admissible.ravel()
+    shape, keep = load.shape, admissible.ravel().astype(float)
+    inverse = keep / np.where(keep > 0, diagonal.ravel(), 1.0)  # 0 off the admissible coefficients
 
     def masked(x):
-        return np.where(mask, operator(np.where(mask, x, 0.0).reshape(shape)).ravel(), 0.0)
+        out = operator((x * keep).reshape(shape)).ravel()
+        out *= keep
+        return out
 
     size = load.size
     A = spla.LinearOperator((size, size), matvec=masked, dtype=float)
-    M = spla.LinearOperator((size, size), matvec=lambda r: np.where(mask, r / np.where(mask, diagonal.ravel(), 1.0),
-                                                                    0.0), dtype=float)
-    x, _ = spla.cg(A, np.where(mask, -load.ravel(), 0.0), rtol=0.0, atol=0.0, maxiter=iterations, M=M)
+    M = spla.LinearOperator((size, size), matvec=lambda r: inverse * r, dtype=float)
+    x, _ = spla.cg(A, -keep * load.ravel(), rtol=0.0, atol=0.0, maxiter=iterations, M=M)
     return x.reshape(shape)
 
 
