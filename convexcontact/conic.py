@@ -92,6 +92,9 @@ class ConicProgram:
         n, m = self.q.size, self.b.size
         if self.P.shape != (n, n) or self.A.shape != (m, n):
             raise ValueError(f"ConicProgram: shapes P {self.P.shape}, A {self.A.shape} do not fit q ({n}) and b ({m})")
+        if self.gradient is not None and not callable(self.gradient):
+            raise ValueError(f"ConicProgram.gradient: expected a function x ↦ Px + q or None, got "
+                             f"{type(self.gradient).__name__}; leave it None to let solvers form Px + q")
         if not isinstance(self.cones, tuple) or not all(isinstance(c, Cone) for c in self.cones):
             raise ValueError("ConicProgram.cones: expected a tuple of Cone (zero(m), nonnegative(m), soc(d), power(α))")
         if sum(c.dim for c in self.cones) != m:

@@ -43,6 +43,7 @@ def test_the_sound_program_is_solved_to_its_closed_form():
     ({"P": sp.csc_matrix(np.array([[1.0, np.nan], [np.nan, 1.0]]))}, "ConicProgram.P: holds NaN or inf"),
     ({"A": sp.csc_matrix(np.array([[-np.inf, 0.0], [0.0, -1.0]]))}, "ConicProgram.A: holds NaN or inf"),
     ({"P": sp.csc_matrix(np.array([[1.0, 0.5], [0.0, 1.0]]))}, "ConicProgram.P: not symmetric"),
+    ({"gradient": np.zeros(2)}, "ConicProgram.gradient: expected a function"),
 ])
 def test_a_program_that_is_not_one_is_refused_by_name(fields, message):
     with pytest.raises(ValueError) as error:
@@ -88,3 +89,24 @@ def test_a_second_order_cone_program_with_sound_data_is_solved():
     solution = cc.solvers.solve(ConicProgram(sp.csc_matrix((1, 1)), np.array([1.0]), A, np.array([0.0, 3.0, 4.0]),
                                              (soc(3),)), "clarabel")
     assert solution.status == "solved" and solution.x[0] == pytest.approx(5.0, rel=1e-8)
+
+
+@pytest.mark.parametrize("data, message", [
+    ({"q": np.array([np.nan, 0.0])}, "ConicProgram.q: holds NaN or inf"),
+    ({"q": np.zeros(3)}, "ConicProgram: shapes"),
+    ({"b": [0.0, 0.0]}, "ConicProgram.b: expected a 1-D numpy array"),
+])
+def test_updated_data_is_checked_as_new_data(data, message):
+    """``ConicProgram.updated`` (a session's new load) refuses what the constructor refuses."""
+    with pytest.raises(ValueError) as error:
+        program().updated(**data)
+    assert str(error.value).startswith(message), error.value
+
+
+def test_updated_keeps_the_own_gradient_for_its_q_only():
+    """The formulation's gradient holds for the program's own q: kept with the same q or a new b, dropped with a new
+    q (else a solver would read the gradient of another load)."""
+    sound = program(gradient=lambda x: x + np.array([-1.0, 0.0]))
+    assert sound.updated(b=np.ones(2)).gradient is sound.gradient
+    assert sound.updated(q=sound.q.copy()).gradient is sound.gradient
+    assert sound.updated(q=np.array([0.0, -1.0])).gradient is None
