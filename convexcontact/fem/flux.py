@@ -95,13 +95,6 @@ def triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return xy, det, grads
 
 
-def cell_geometry(mesh):
-    """Vertex coordinates (cells, 3, 2), areas (cells,) and the barycentric gradients (cells, 3, 2) (views of
-    :func:`triangles`' arrays)."""
-    xy, det, grads = triangles(mesh)
-    return xy.transpose(2, 1, 0), 0.5 * np.abs(det), grads.transpose(2, 1, 0)
-
-
 def opposite_facets(mesh) -> np.ndarray:
     """(cells, 3): the facet of each cell opposite its local vertex k (scikit-fem numbers a triangle's facets
     (v0 v1), (v1 v2), (v0 v2): opposite v2, v0, v1; checked, and found by search where a mesh numbers otherwise)."""
@@ -116,12 +109,12 @@ def opposite_facets(mesh) -> np.ndarray:
     return out.T
 
 
-def elastic_stress(fem: FEModel, u_components: np.ndarray, grads: np.ndarray) -> np.ndarray:
+def elastic_stress(fem: FEModel, u_components: np.ndarray, gradients: np.ndarray) -> np.ndarray:
     """σ(u_h) per cell (cells, 2, 2; a view of a (2, 2, cells) array) of the P1 displacement ``u_components``
-    (d, vertices)."""
+    (d, vertices); ``gradients`` ∇λ_k (x, k, cells) of :func:`triangles`."""
     lam, mu = fem.lame
     nodal = np.take(u_components, fem.mesh.t, axis=1)  # (a, k, cells)
-    grad_u = (nodal[:, None] * grads.transpose(2, 1, 0)[None]).sum(axis=2)  # (a, x, cells): Σ_k u_a(p_k) ∂_x λ_k
+    grad_u = (nodal[:, None] * gradients[None]).sum(axis=2)  # (a, x, cells): Σ_k u_a(p_k) ∂_x λ_k
     stress = mu * (grad_u + grad_u.transpose(1, 0, 2))
     trace = lam * (grad_u[0, 0] + grad_u[1, 1])
     stress[0, 0] += trace
@@ -321,8 +314,8 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     mesh = fem.mesh
     lam, mu = fem.lame
     xy, det, gradients = triangles(mesh)
-    area, grads = 0.5 * np.abs(det), gradients.transpose(2, 1, 0)
-    sigma_h = elastic_stress(fem, u_components, grads)
+    area = 0.5 * np.abs(det)
+    sigma_h = elastic_stress(fem, u_components, gradients)
     body_force = np.asarray(fem.scene.body_force, dtype=float) * fem.scaling.length / fem.scaling.pressure
     opposite = opposite_facets(mesh)
     chains = patch_chains(mesh, xy, det, opposite)
@@ -341,7 +334,7 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     scale = np.abs(area[None] * body_force[:, None]).max() + np.abs(flux).max()
     defect = float(np.abs(residual).max() / scale) if scale > 0 else 0.0
     vertex_stress = vertex_values(x, xy, area)
-    vertex_stress = flux_correction.corrected(vertex_stress, sigma_h, grads, area, fem.lame, mesh, opposite, held, KORN)
+    vertex_stress = flux_correction.corrected(vertex_stress, sigma_h, gradients, area, fem.lame, mesh, opposite, held, KORN)
     symmetric, skew = cell_norms(vertex_stress, sigma_h, lam, mu, area)
     return Equilibrated(vertex_stress, symmetric, skew, defect)
 

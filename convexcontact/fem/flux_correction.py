@@ -153,13 +153,14 @@ def conjugate_gradients(operator, load, diagonal, admissible, iterations: int) -
     return x.reshape(shape)
 
 
-def corrected(vertex_stress, sigma_h, grads, area, lame, mesh, opposite, held, korn,
+def corrected(vertex_stress, sigma_h, gradients, area, lame, mesh, opposite, held, korn,
               iterations: int | None = None) -> np.ndarray:
     """σ̂ + curl φ at the vertices of each cell (rows, x, cells, 3), φ from ``iterations`` CG steps on J
     (None: :data:`ITERATIONS`). ``vertex_stress`` as in :class:`convexcontact.fem.flux.Equilibrated`, ``held`` its
-    (rows, facets) mask of held components, ``korn`` C_K; the other arguments are ``equilibrate``'s per-cell data."""
+    (rows, facets) mask of held components, ``korn`` C_K, ``gradients`` ∇λ_k (x, k, cells); the other arguments are
+    ``equilibrate``'s per-cell data."""
     iterations = ITERATIONS if iterations is None else iterations
-    curls = np.stack([grads[..., 1].T, -grads[..., 0].T])  # curl λ_k = (∂_y λ_k, −∂_x λ_k): (x, 3, cells)
+    curls = np.stack([gradients[1], -gradients[0]])  # curl λ_k = (∂_y λ_k, −∂_x λ_k): (x, 3, cells)
     operator = StreamOperator(mesh, opposite, curls, area / 3.0, lame, korn)
     # σ̂ − σ_h at the midpoint opposite vertex k, (V_{k+1} + V_{k+2}) / 2 = (Σ V − V_k) / 2: (rows, x, k, cells)
     misfit = 0.5 * (vertex_stress.sum(axis=3)[..., None] - vertex_stress).transpose(0, 1, 3, 2) \
