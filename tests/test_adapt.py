@@ -11,9 +11,9 @@ import skfem as fe
 from test_estimate import flat_punch
 
 import convexcontact as cc
-from convexcontact.drivers.adapt import adapt, dofs_of, refine
+from convexcontact.drivers.adapt import adapt, dofs_of, refine, refined_uniformly
 from convexcontact.fem.estimate import dorfler
-from convexcontact.scene.library import hertz_punch
+from convexcontact.scene.library import hertz_punch, hertz_sphere
 from convexcontact.scene.meshing import build_mesh
 from convexcontact.studies.precision import refinement, work_precision
 
@@ -85,15 +85,33 @@ def test_the_growth_floor_refines_dorflers_cells_and_more():
     assert refine([mesh], indicators, 0.5, 10.0)[0].nelements == 4 * mesh.nelements
 
 
-def test_p2_displacements_are_prolonged_as_scikit_fem_evaluates_them():
+@pytest.mark.parametrize("scene, element", [
+    (hertz_punch(nx=2, element="P2"), fe.ElementTriP2()),
+    (hertz_sphere(2, "P2", law=cc.Signorini(non_penetration="weak")), fe.ElementTetP2())], ids=["triangles", "tetrahedra"])
+def test_p2_displacements_are_prolonged_as_scikit_fem_evaluates_them(scene, element):
     """The true error of a P2 level interpolates it at a finer nested mesh's P2 nodes (vertices and edge midpoints):
-    the same values as scikit-fem's own probes, and zero error against the same answer on the finer mesh's nodes."""
-    scene = hertz_punch(nx=2, element="P2")
+    the same values as scikit-fem's own probes, and zero error against the same answer on the finer mesh's nodes; on
+    tetrahedra too, whose uniform refinement gets its named boundaries back."""
     coarse = cc.solve(scene)
-    fine = cc.solve(refinement.scene_on(scene, [build_mesh(scene.body).refined()]))
+    fine = cc.solve(refinement.scene_on(scene, [refined_uniformly(build_mesh(scene.body), 1)]))
     points, _ = refinement.scalar_dofs(fine.fem)
-    u = (coarse.displacement / coarse.fem.scaling.displacement).reshape(-1, 2)
-    probes = fe.CellBasis(coarse.fem.mesh, fe.ElementTriP2()).probes(points)
-    expected = np.column_stack([probes @ u[:, 0], probes @ u[:, 1]]).ravel()
-    assert np.allclose(refinement.prolong(coarse, points, np.zeros(points.shape[1], int)), expected, atol=1e-12)
-    assert refinement.true_errors([fine], fine) == [0.0] and 0 < refinement.true_errors([coarse], fine)[0] < 1
+    d = fine.fem.dim
+    u = (coarse.displacement / coarse.fem.scaling.displacement).reshape(-1, d)
+    probes = fe.CellBasis(coarse.fem.mesh, element).probes(points)
+    expected = np.column_stack([probes @ u[:, k] for k in range(d)]).ravel()
+    prolonged = refinement.prolong(coarse, points, np.zeros(points.shape[1], int))
+    assert np.abs(prolonged - expected).max() <= 1e-12 * np.abs(expected).max()
+    assert refinement.true_errors([fine], fine)[0] <= 1e-12 and refinement.true_errors([coarse], fine)[0] > 0.01
+
+
+def test_points_are_located_in_tetrahedra_by_their_barycentric_coordinates():
+    """Random points of a graded box: the tetrahedron found holds the point (its corners weighted by the coordinates
+    give it back, the coordinates ≥ 0), and the points outside every cell are refused."""
+    mesh = build_mesh(hertz_sphere(3).body)
+    points = np.random.default_rng(0).uniform(mesh.p.min(axis=1), mesh.p.max(axis=1), (500, 3)).T
+    cell, weights = refinement.locate(mesh, points)
+    corners = mesh.p[:, mesh.t[:, cell]]  # (3, 4, points)
+    assert np.allclose(np.einsum("dkp,pk->dp", corners, weights), points, atol=1e-12)
+    assert weights.min() >= -1e-10 and np.allclose(weights.sum(axis=1), 1)
+    with pytest.raises(ValueError, match="not nested"):
+        refinement.locate(mesh, mesh.p.max(axis=1)[:, None] + 1.0)

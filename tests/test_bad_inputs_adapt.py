@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from convexcontact import cli
-from convexcontact.scene.library import hertz_punch
+from convexcontact.scene.library import hertz_punch, hertz_sphere
 from convexcontact.studies.precision import refinement
 
 SURFACES = ("convexcontact study work-precision",)
@@ -99,6 +99,15 @@ def test_an_output_folder_that_is_a_file_is_refused(capsys, folder):
 def test_compare_refuses_levels_that_are_not_an_integer_of_at_least_two(levels):
     with pytest.raises(ValueError, match="^levels: "):
         refinement.compare(hertz_punch(nx=4), levels)
+
+
+@pytest.mark.parametrize("scene", [hertz_punch(nx=4, element="Q1"), hertz_sphere(2, "Q2")], ids=["Q1", "Q2-3D"])
+def test_compare_refuses_cells_that_are_no_simplices_before_any_solve(monkeypatch, scene):
+    """Quadrilaterals and hexahedra (uniform refinement only, their P1/P2 prolongation not written) are refused by the
+    scene's field, with the elements that work."""
+    monkeypatch.setattr("convexcontact.studies.precision.refinement.solve", lambda *a, **k: pytest.fail("solved"))
+    with pytest.raises(ValueError, match="^scene: .*give a P1 or P2 scene on triangles or tetrahedra"):
+        refinement.compare(scene, 2)
 
 
 @pytest.mark.parametrize("value", ["P3", "Q1", "p2", "2", ""])

@@ -7,6 +7,7 @@ scenes refine uniformly, and say so. Each level is an ordinary certified solve o
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import math
@@ -124,10 +125,7 @@ def refine(meshes: Sequence[fe.Mesh], indicators: np.ndarray, fraction: float, g
     first = np.cumsum([0] + [mesh.nelements for mesh in meshes])
     cells, before = first[-1], sum(dofs_of(mesh, element) for mesh in meshes)
     count = dorfler(indicators, fraction).size
-    # scikit-fem logs that local refinement drops the named boundaries: they are carried over here
-    logger = logging.getLogger("skfem.mesh.mesh")
-    disabled, logger.disabled = logger.disabled, True
-    try:
+    with names_dropped_quietly():
         while True:
             marked = np.sort(order[:count])
             per_body = np.split(marked, np.searchsorted(marked, first[1:-1]))
@@ -138,9 +136,26 @@ def refine(meshes: Sequence[fe.Mesh], indicators: np.ndarray, fraction: float, g
                 break
             # new DOFs grow about in proportion to the marked cells (plus the closure's): aim 10 % beyond the goal
             count = min(cells, max(count + 1, math.ceil(1.1 * count * (growth - 1) * before / max(added, 1))))
+    return [new if new is old else inherit_boundaries(new, old) for new, old in zip(refined, meshes)]
+
+
+def refined_uniformly(mesh: fe.Mesh, times: int) -> fe.Mesh:
+    """``mesh`` refined uniformly ``times`` times with its named boundaries (scikit-fem drops them on tetrahedra)."""
+    if times == 0:
+        return mesh
+    with names_dropped_quietly():
+        return inherit_boundaries(mesh.refined(times), mesh)
+
+
+@contextlib.contextmanager
+def names_dropped_quietly():
+    """Silences scikit-fem's log that a refinement drops the named boundaries: the callers carry them over."""
+    logger = logging.getLogger("skfem.mesh.mesh")
+    disabled, logger.disabled = logger.disabled, True
+    try:
+        yield
     finally:
         logger.disabled = disabled
-    return [new if new is old else inherit_boundaries(new, old) for new, old in zip(refined, meshes)]
 
 
 def body_meshes(scene: Scene) -> list[fe.Mesh]:

@@ -25,7 +25,7 @@ import skfem as fe
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ...drivers.adapt import GROWTH, adapt, body_meshes, check_adapt_options, scene_on
+from ...drivers.adapt import GROWTH, adapt, body_meshes, check_adapt_options, refined_uniformly, scene_on
 from ...drivers.solve import solve
 from ...results.result import ContactResult
 from ...scene.description import Scene
@@ -45,31 +45,30 @@ def timed_solve(scene: Scene) -> tuple[ContactResult, float]:
     return result, time.perf_counter() - start
 
 
-def locate(mesh: fe.MeshTri1, points: np.ndarray, candidates: int = 16) -> tuple[np.ndarray, np.ndarray]:
-    """The triangle of ``mesh`` holding each point (2, n) and the point's barycentric coordinates (n, 3), among its
-    nearest cells by centroid, more of them where a thin cell hides (scikit-fem's finder tests every point against
-    the union of all candidates: (points × cells) memory on a fine reference)."""
+def locate(mesh: fe.Mesh, points: np.ndarray, candidates: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """The simplex (triangle, tetrahedron) of ``mesh`` holding each point (d, n) and the point's barycentric
+    coordinates (n, d + 1), among its nearest cells by centroid, more of them where a thin cell hides (scikit-fem's
+    finder tests every point against the union of all candidates: (points × cells) memory on a fine reference)."""
     tree = cKDTree(mesh.p[:, mesh.t].mean(axis=1).T)
     cell = np.full(points.shape[1], -1)
-    weights = np.zeros((points.shape[1], 3))
+    weights = np.zeros((points.shape[1], mesh.t.shape[0]))
     todo = np.arange(points.shape[1])
     while todo.size:
         k = min(candidates, mesh.nelements)
         _, near = tree.query(points[:, todo].T, k=k)
         near = near.reshape(todo.size, k)
-        corners = mesh.p[:, mesh.t[:, near]]  # (2, 3, points, k)
-        e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-        r = points[:, todo, None] - corners[:, 0]
-        det = e1[0] * e2[1] - e1[1] * e2[0]
-        b1, b2 = (r[0] * e2[1] - r[1] * e2[0]) / det, (e1[0] * r[1] - e1[1] * r[0]) / det
+        corners = mesh.p[:, mesh.t[:, near]]  # (d, d + 1, points, k)
+        edges = np.moveaxis(corners[:, 1:] - corners[:, :1], (0, 1), (-2, -1))  # (points, k, d, d): edges as columns
+        offset = np.moveaxis(points[:, todo, None] - corners[:, 0], 0, -1)[..., None]  # (points, k, d, 1)
+        b = np.linalg.solve(edges, offset)[..., 0]  # the coordinates λ₁ … λ_d of each candidate
         tol = 1e-10
-        inside = (b1 >= -tol) & (b2 >= -tol) & (b1 + b2 <= 1 + tol)
+        inside = (b >= -tol).all(axis=-1) & (b.sum(axis=-1) <= 1 + tol)
         found = inside.any(axis=1)
         column = inside.argmax(axis=1)[found]
         rows = np.flatnonzero(found)
         cell[todo[found]] = near[rows, column]
-        weights[todo[found]] = np.column_stack([1 - b1[rows, column] - b2[rows, column], b1[rows, column],
-                                                b2[rows, column]])
+        local = b[rows, column]
+        weights[todo[found]] = np.column_stack([1 - local.sum(axis=1), local])
         if k == mesh.nelements and not found.all():
             raise ValueError("a reference node lies in no cell of the coarse mesh: the meshes are not nested")
         todo, candidates = todo[~found], 4 * candidates
@@ -78,20 +77,20 @@ def locate(mesh: fe.MeshTri1, points: np.ndarray, candidates: int = 16) -> tuple
 
 def bodies_of(mesh: fe.Mesh) -> np.ndarray:
     """The body (connected component, numbered from the lowest vertex) of each vertex."""
-    n = mesh.nvertices
-    edges = sp.coo_matrix((np.ones(mesh.facets.shape[1]), (mesh.facets[0], mesh.facets[1])), (n, n))
+    n, t = mesh.nvertices, mesh.t
+    edges = sp.coo_matrix((np.ones(t[1:].size), (np.broadcast_to(t[0], t[1:].shape).ravel(), t[1:].ravel())), (n, n))
     return connected_components(edges, directed=False)[1]
 
 
 def scalar_dofs(fem) -> tuple[np.ndarray, np.ndarray]:
-    """The locations (2, n) of the scalar element's DOFs (u_h's nodes, in the order of ``u.reshape(-1, d)``) and
+    """The locations (d, n) of the scalar element's DOFs (u_h's nodes, in the order of ``u.reshape(-1, d)``) and
     each cell's DOFs (shape functions × cells)."""
     dofs = fe.assembly.Dofs(fem.mesh, fem.basis.elem.elem)
     return fe.CellBasis(fem.mesh, fem.basis.elem.elem, intorder=1).doflocs, dofs.element_dofs
 
 
 def prolong(result: ContactResult, points: np.ndarray, body: np.ndarray) -> np.ndarray:
-    """The P1 or P2 displacement of ``result`` (scaled) at ``points`` (2, n), each point looked for in the cells of
+    """The P1 or P2 displacement of ``result`` (scaled) at ``points`` (d, n), each point looked for in the cells of
     its own ``body`` (two bodies touch at their contact: a point there lies in both); the element's own shape
     functions at the point's barycentric coordinates (exact for a finer nested mesh's nodes)."""
     fem = result.fem
@@ -103,8 +102,8 @@ def prolong(result: ContactResult, points: np.ndarray, body: np.ndarray) -> np.n
     for b in np.unique(label):
         at = np.flatnonzero(body == b)
         cells = np.flatnonzero(label[mesh.t[0]] == b)
-        cell, weights = locate(fe.MeshTri(mesh.p, mesh.t[:, cells]), points[:, at])
-        local = weights[:, 1:].T  # the reference triangle's coordinates (ξ, η) = (λ₁, λ₂)
+        cell, weights = locate(type(mesh)(mesh.p, mesh.t[:, cells]), points[:, at])
+        local = weights[:, 1:].T  # the reference simplex's coordinates (ξ, η[, ζ]) = (λ₁, λ₂[, λ₃])
         dofs = cell_dofs[:, cells[cell]]  # (shape functions, points)
         out[at] = sum(element.lbasis(local, k)[0][:, None] * u[dofs[k]] for k in range(dofs.shape[0]))
     return out.ravel()
@@ -139,15 +138,17 @@ def rows_of(method: str, results, seconds, errors, reference: str) -> list[dict]
 
 def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Callable | None = None,
             growth: float | None = GROWTH, adaptive_dofs: int | None = None) -> list[dict]:
-    """Rows (:data:`FIELDS`) of uniform and adaptive refinement of ``scene`` (one body, P1 or P2 triangles: the true
-    error interpolates them); the adaptive loop (Dörfler ``fraction``, DOFs growing by ``growth`` per level) until the
+    """Rows (:data:`FIELDS`) of uniform and adaptive refinement of ``scene`` (P1 or P2 triangles or tetrahedra: the
+    true error interpolates them); the adaptive loop (Dörfler ``fraction``, DOFs growing by ``growth`` per level) until the
     next mesh would exceed ``adaptive_dofs`` (default: the finest uniform level's); ``progress(text)`` after each
     solve."""
     if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or levels < 2:
         raise ValueError(f"levels: the number of uniform levels, an integer ≥ 2, got {levels!r}; e.g. 4")
-    if scene.body.element not in ("P1", "P2") or body_meshes(scene)[0].t.shape[0] != 3:
-        raise ValueError(f"scene: the comparison measures P1 or P2 triangles (their true error is interpolated "
-                         f"exactly), got {scene.body.element}; give a 2-D P1 or P2 scene")
+    mesh = body_meshes(scene)[0]
+    if scene.body.element not in ("P1", "P2") or mesh.t.shape[0] != mesh.dim() + 1:
+        raise ValueError(f"scene: the comparison measures P1 or P2 simplices (their true error is interpolated "
+                         f"exactly), got {scene.body.element} on {type(mesh).__name__}; give a P1 or P2 scene on "
+                         "triangles or tetrahedra")
     if adaptive_dofs is not None and (isinstance(adaptive_dofs, bool) or not isinstance(adaptive_dofs, (int, np.integer))
                                       or adaptive_dofs <= 0):
         raise ValueError(f"adaptive_dofs: a positive number of DOFs, got {adaptive_dofs!r}; e.g. 100000 (None: the "
@@ -158,17 +159,18 @@ def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Call
     solve(scene).error_budget  # noqa: B018 -- warm-up: the first solve of a process pays its imports, not timed
     uniform, seconds = [], []
     for k in range(levels):
-        result, spent = timed_solve(scene_on(scene, [mesh.refined(k) if k else mesh for mesh in coarse]))
+        result, spent = timed_solve(scene_on(scene, [refined_uniformly(mesh, k) for mesh in coarse]))
         uniform.append(result)
         seconds.append(spent)
         say(f"uniform level {k}: {result.ndof} DOFs, {spent:.2f} s")
-    reference, _ = timed_solve(scene_on(scene, [mesh.refined(levels - 1 + REFERENCE_LEVELS) for mesh in coarse]))
+    reference, _ = timed_solve(scene_on(scene, [refined_uniformly(mesh, levels - 1 + REFERENCE_LEVELS)
+                                                   for mesh in coarse]))
     say(f"uniform reference: {reference.ndof} DOFs")
     adaptive = adapt(scene, target=1e-9, max_dofs=adaptive_dofs or uniform[-1].fem.basis.N, fraction=fraction,
                      growth=growth, progress=lambda k, r: say(f"adaptive level {k}: {r.ndof} DOFs, "
                                                               f"{r.extra['adaptive_seconds']:.2f} s so far"))
     finest = body_meshes(adaptive[-1].scene)
-    adaptive_reference, _ = timed_solve(scene_on(scene, [mesh.refined(REFERENCE_LEVELS) for mesh in finest]))
+    adaptive_reference, _ = timed_solve(scene_on(scene, [refined_uniformly(mesh, REFERENCE_LEVELS) for mesh in finest]))
     say(f"adaptive reference: {adaptive_reference.ndof} DOFs")
     label = f"{REFERENCE_LEVELS} uniform refinements finer ({{}} DOFs)"
     return (rows_of("uniform", uniform, seconds, true_errors(uniform, reference), label.format(reference.ndof))
