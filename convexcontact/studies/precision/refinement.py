@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -102,7 +103,7 @@ def prolong(result: ContactResult, points: np.ndarray, body: np.ndarray) -> np.n
     for b in np.unique(label):
         at = np.flatnonzero(body == b)
         cells = np.flatnonzero(label[mesh.t[0]] == b)
-        cell, weights = locate(type(mesh)(mesh.p, mesh.t[:, cells]), points[:, at])
+        cell, weights = locate(type(mesh)(np.ascontiguousarray(mesh.p), mesh.t[:, cells]), points[:, at])
         local = weights[:, 1:].T  # the reference simplex's coordinates (ξ, η[, ζ]) = (λ₁, λ₂[, λ₃])
         dofs = cell_dofs[:, cells[cell]]  # (shape functions, points)
         out[at] = sum(element.lbasis(local, k)[0][:, None] * u[dofs[k]] for k in range(dofs.shape[0]))
@@ -195,7 +196,8 @@ def table(rows: Sequence[dict], front: Sequence[dict] = ()) -> str:
 
 
 def plot(rows: Sequence[dict], path, front: Sequence[dict] = (), title: str | None = None, optimal: float = 0.5) -> Path:
-    """True error and estimate against DOFs (left, with the ``optimal`` rate N^−optimal: 1/2 for P1 in 2-D, 1 for P2)
+    """True error and estimate against DOFs (left, with the ``optimal`` rate N^−optimal: for P1 1/2 in 2-D, 1/3 in 3-D;
+    P2 twice that)
     and against run time (right, with the Pareto ``front``)."""
     from ...results.plots import plt, save_figure
 
@@ -214,7 +216,7 @@ def plot(rows: Sequence[dict], path, front: Sequence[dict] = (), title: str | No
                      label="Pareto front (true error)")
     ndof = np.array([r["ndof"] for r in rows], dtype=float)
     axes[0].loglog(np.sort(ndof), rows[0]["error"] * (ndof.min() / np.sort(ndof)) ** optimal, "k:", lw=0.8,
-                   label=f"N^(−{optimal:g}) (optimal)")
+                   label=f"N^(−{Fraction(optimal).limit_denominator(6)}) (optimal)")
     for ax, label in zip(axes, ("DOFs", "wall time, end to end [s]")):
         ax.set_xlabel(label)
         ax.set_ylabel("relative energy error")
