@@ -60,8 +60,8 @@ def midpoint_values(bubbles: np.ndarray, hats: np.ndarray, curls: np.ndarray) ->
     cells) and hats (rows, vertex k, cells): at the midpoint opposite vertex k the bubbles give
     2 (Σ_e c_e − 2 c_k) curl λ_k, the hats Σ_a c_a curl λ_a (constant). ``curls`` curl λ_k (x, k, cells)."""
     scale = 2.0 * bubbles.sum(axis=1, keepdims=True) - 4.0 * bubbles  # (rows, k, cells)
-    out = scale[:, None] * curls[None]
-    out += (hats[:, None] * curls[None]).sum(axis=2, keepdims=True)
+    out = scale[:, None] * curls
+    out += (hats[:, None] * curls).sum(axis=2, keepdims=True)
     return out
 
 
@@ -82,29 +82,30 @@ class StreamOperator:
         lam, mu = lame
         kappa, w, gamma = lam / (2 * mu + 2 * lam), weight / (2 * mu), korn**2 - 1  # w = |T|/3 · 1/2μ
         # |T|/3 · Q per cell: diagonal (1 − κ), trace coupling −κ, shear (1 + γ)/2, skew coupling (1 − γ)/2
-        self.form = np.stack([w * (1 - kappa), -w * kappa, 0.5 * w * (1 + gamma), 0.5 * w * (1 - gamma)]).astype(dtype)
+        normal, trace, shear, skew = w * (1 - kappa), -w * kappa, 0.5 * w * (1 + gamma), 0.5 * w * (1 - gamma)
+        # (rows, x, 1, cells): the weight of X_ij itself and of X_ji' in (Q X)_ij
+        self.own = np.stack([[normal, shear], [shear, normal]])[:, :, None].astype(dtype)
+        self.cross = np.stack([[trace, skew], [skew, trace]])[:, :, None].astype(dtype)
+        # work arrays allocated once (fresh arrays of this size cost their page faults again on every product):
+        # the cells' coefficients, and their loads in float64, which bincount sums without a converted copy
         self.bubbles, self.hats = np.empty((2, *curls.shape[1:]), dtype), np.empty((2, *curls.shape[1:]), dtype)
+        self.loads = np.empty((2, 2, *curls.shape[1:]))  # (bubbles or hats, rows, k, cells)
 
     def weighted_form(self, X: np.ndarray, cells) -> np.ndarray:
         """|T|/3 · Q X for the ``cells`` of a block X (rows, x, 3, block), X : Q X = C⁻¹ sym X : sym X + (C_K² − 1)/2μ
-        |skew X|² pointwise (2-D: C⁻¹ τ : τ = (|τ|² − λ/(2μ + 2λ) (tr τ)²) / 2μ)."""
-        normal, trace, shear, skew = self.form[:, None, cells]
-        out = np.empty_like(X)
-        for i, j in ((0, 1), (1, 0)):
-            np.multiply(X[i, i], normal, out=out[i, i])
-            out[i, i] += X[j, j] * trace
-            np.multiply(X[i, j], shear, out=out[i, j])
-            out[i, j] += X[j, i] * skew
+        |skew X|² pointwise (2-D: C⁻¹ τ : τ = (|τ|² − λ/(2μ + 2λ) (tr τ)²) / 2μ): Q X_ij = own_ij X_ij + cross_ij
+        X_ji' with X_ji' the entry of the other row and column (X_00 with X_11, X_01 with X_10)."""
+        out = X * self.own[..., cells]
+        out += X[::-1, ::-1] * self.cross[..., cells]
         return out
 
     def adjoint(self, W: np.ndarray, cells) -> tuple[np.ndarray, np.ndarray]:
         """The transpose of :func:`midpoint_values` on a block: W (rows, x, 3, block) → the loads of each cell's
         bubbles and hats (rows, k, block)."""
         curls = self.curls[..., cells]
-        along = W[:, 0] * curls[0] + W[:, 1] * curls[1]  # curl λ_k · W_k (rows, k, block)
+        along = (W * curls).sum(axis=1)  # curl λ_k · W_k (rows, k, block)
         bubbles = 2.0 * along.sum(axis=1, keepdims=True) - 4.0 * along
-        total = W.sum(axis=2)  # (rows, x, block)
-        hats = total[:, :1] * curls[0] + total[:, 1:] * curls[1]
+        hats = (W.sum(axis=2, keepdims=True) * curls).sum(axis=1)
         return bubbles, hats
 
     def gather(self, x: np.ndarray) -> None:
@@ -113,37 +114,35 @@ class StreamOperator:
             np.take(x[i, :self.nfacets], self.facets, out=self.bubbles[i], mode="clip")
             np.take(x[i, self.nfacets:], self.vertices, out=self.hats[i], mode="clip")
 
-    def scatter(self, bubbles: np.ndarray, hats: np.ndarray, dtype) -> np.ndarray:
-        """The cells' loads (rows, k, cells) summed onto the facets and vertices (rows, facets + vertices)."""
+    def scatter(self, dtype) -> np.ndarray:
+        """The cells' ``loads`` summed onto the facets and vertices (rows, facets + vertices)."""
         out = np.empty((2, self.nfacets + self.nvertices), dtype)
         for i in range(2):
-            out[i, :self.nfacets] = np.bincount(self.facets.ravel(), bubbles[i].ravel(), self.nfacets)
-            out[i, self.nfacets:] = np.bincount(self.vertices.ravel(), hats[i].ravel(), self.nvertices)
+            out[i, :self.nfacets] = np.bincount(self.facets.ravel(), self.loads[0, i].ravel(), self.nfacets)
+            out[i, self.nfacets:] = np.bincount(self.vertices.ravel(), self.loads[1, i].ravel(), self.nvertices)
         return out
 
     def gradient(self, misfit) -> np.ndarray:
         """J's gradient at τ = 0 (half of it), ``misfit(cells)`` σ̂ − σ_h at the midpoints of a block of cells."""
-        bubbles, hats = np.empty_like(self.bubbles), np.empty_like(self.hats)
-        for cells in blocks(bubbles.shape[2]):
-            bubbles[..., cells], hats[..., cells] = self.adjoint(self.weighted_form(misfit(cells), cells), cells)
-        return self.scatter(bubbles, hats, self.curls.dtype)
+        for cells in blocks(self.loads.shape[-1]):
+            self.loads[0][..., cells], self.loads[1][..., cells] = self.adjoint(self.weighted_form(misfit(cells), cells),
+                                                                                cells)
+        return self.scatter(self.curls.dtype)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         self.gather(x)
-        bubbles, hats = self.bubbles, self.hats  # overwritten in place: each block reads only its own cells
-        for cells in blocks(bubbles.shape[2]):
-            tau = midpoint_values(bubbles[..., cells], hats[..., cells], self.curls[..., cells])
-            bubbles[..., cells], hats[..., cells] = self.adjoint(self.weighted_form(tau, cells), cells)
-        return self.scatter(bubbles, hats, x.dtype)
+        for cells in blocks(self.loads.shape[-1]):
+            tau = midpoint_values(self.bubbles[..., cells], self.hats[..., cells], self.curls[..., cells])
+            self.loads[0][..., cells], self.loads[1][..., cells] = self.adjoint(self.weighted_form(tau, cells), cells)
+        return self.scatter(x.dtype)
 
     def diagonal(self) -> np.ndarray:
         """The operator's diagonal (float64): a bubble's τ is ±2 curl λ_k at the three midpoints of each of its
         cells, a hat's curl λ_a."""
-        cx, cy = self.curls.astype(float)
-        normal, _, shear, _ = self.form.astype(float)
-        hats = np.stack([3.0 * (normal * cx**2 + shear * cy**2), 3.0 * (shear * cx**2 + normal * cy**2)])
-        bubbles = np.broadcast_to((4.0 / 3.0) * hats.sum(axis=1, keepdims=True), hats.shape)  # Q_ii (curl λ_k)
-        return self.scatter(bubbles, hats, float)
+        hats = self.loads[1]
+        np.multiply(3.0, (self.own * self.curls**2).sum(axis=1), out=hats)  # Q_ii (curl λ_a), thrice
+        self.loads[0] = (4.0 / 3.0) * hats.sum(axis=1, keepdims=True)  # Q_ii (curl λ_k) over the three k
+        return self.scatter(float)
 
 
 def conjugate_gradients(operator, load, diagonal, admissible, iterations: int) -> np.ndarray:
