@@ -193,13 +193,20 @@ def corrected(vertex_stress, sigma_h, gradients, area, lame, mesh, opposite, hel
         return (0.5 * (corners.sum(axis=2, keepdims=True) - corners) - stress[..., cells]).astype(WORKING)
 
     x = conjugate_gradients(operator, operator.gradient(misfit), operator.diagonal(),
-                            admissible_stream_functions(mesh, held), iterations).astype(float)
-    out = at.copy()
-    bubbles, hats = np.empty((2, *curls.shape[1:])), np.empty((2, *curls.shape[1:]))
+                            admissible_stream_functions(mesh, held), iterations)
+    return with_curl(vertex_stress, x.astype(float), curls, operator)
+
+
+def with_curl(vertex_stress, x, curls, operator: StreamOperator) -> np.ndarray:
+    """σ̂ + curl φ at the vertices of each cell (rows, x, cells, 3; a view of a (rows, x, 3, cells) array) for the
+    coefficients x (rows, facets + vertices) of φ, in the floating type of x and ``curls`` (curl λ_k, (x, 3, cells));
+    ``operator`` gives the cells' facets and vertices."""
+    out = vertex_stress.transpose(0, 1, 3, 2).copy()  # (rows, x, m, cells)
+    bubbles, hats = np.empty((2, *curls.shape[1:]), x.dtype), np.empty((2, *curls.shape[1:]), x.dtype)
     for i in range(2):
-        np.take(x[i, :mesh.nfacets], operator.facets, out=bubbles[i], mode="clip")
-        np.take(x[i, mesh.nfacets:], operator.vertices, out=hats[i], mode="clip")
-    for cells in blocks(area.size):
+        np.take(x[i, :operator.nfacets], operator.facets, out=bubbles[i], mode="clip")
+        np.take(x[i, operator.nfacets:], operator.vertices, out=hats[i], mode="clip")
+    for cells in blocks(out.shape[-1]):
         tau = midpoint_values(bubbles[..., cells], hats[..., cells], curls[..., cells])
         out[..., cells] += tau.sum(axis=2, keepdims=True) - 2.0 * tau  # a linear field's V_k = Σ M − 2 M_k
     return out.transpose(0, 1, 3, 2)
