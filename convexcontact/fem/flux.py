@@ -114,11 +114,19 @@ def elastic_stress(fem: FEModel, u_components: np.ndarray, gradients: np.ndarray
     (d, vertices); ``gradients`` ∇λ_k (x, k, cells) of :func:`triangles`."""
     lam, mu = fem.lame
     nodal = np.take(u_components, fem.mesh.t, axis=1)  # (a, k, cells)
-    grad_u = (nodal[:, None] * gradients[None]).sum(axis=2)  # (a, x, cells): Σ_k u_a(p_k) ∂_x λ_k
-    stress = mu * (grad_u + grad_u.transpose(1, 0, 2))
+    grad_u = np.empty((2, 2, nodal.shape[2]))  # (a, x, cells): Σ_k u_a(p_k) ∂_x λ_k, no (a, x, k, cells) temporary
+    for a in range(2):
+        for x in range(2):
+            np.multiply(nodal[a, 0], gradients[x, 0], out=grad_u[a, x])
+            grad_u[a, x] += nodal[a, 1] * gradients[x, 1]
+            grad_u[a, x] += nodal[a, 2] * gradients[x, 2]
     trace = lam * (grad_u[0, 0] + grad_u[1, 1])
-    stress[0, 0] += trace
-    stress[1, 1] += trace
+    stress = np.empty_like(grad_u)
+    for a in range(2):
+        np.multiply(2 * mu, grad_u[a, a], out=stress[a, a])
+        stress[a, a] += trace
+    np.multiply(mu, grad_u[0, 1] + grad_u[1, 0], out=stress[0, 1])
+    stress[1, 0] = stress[0, 1]
     return stress.transpose(2, 0, 1)
 
 
@@ -321,7 +329,11 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     chains = patch_chains(mesh, xy, det, opposite)
     weights = circulation_weights(chains, xy, det)
     # w_a's outward flux through the facet opposite k is −|T| σ_h,i · ∇λ_k at both vertices a of the facet
-    target = -area * (sigma_h.transpose(1, 2, 0)[:, :, None] * gradients[None]).sum(axis=1)  # (i, k, cells)
+    target = np.empty((2, *gradients.shape[1:]))  # (i, k, cells)
+    for i, row in enumerate(sigma_h.transpose(1, 2, 0)):
+        np.multiply(row[0], gradients[0], out=target[i])
+        target[i] += row[1] * gradients[1]
+    target *= -area
     # the divergence constraint at corner k: the outward fluxes through its facets opposite k+1 and k+2 sum to
     # ∫_T Π_0(ψ_a f − ∇ψ_a · σ_h) = w's (−target_k) less |T| f / 3
     rhs = -target - (area / 3.0) * body_force[:, None, None]
