@@ -137,11 +137,19 @@ def sort_by_vertex_and_angle(vertex: np.ndarray, angle: np.ndarray, nvertices: i
     index_bits, vertex_bits = int(vertex.size - 1).bit_length(), int(nvertices - 1).bit_length()
     angle_bits = 62 - index_bits - vertex_bits
     if angle_bits >= 8:
-        quantized = np.minimum((angle * 2.0 ** (angle_bits - 2)).astype(np.int64), 2**angle_bits - 1)
-        key = ((vertex.astype(np.int64) << angle_bits | quantized) << index_bits) | np.arange(vertex.size)
+        # in place: every fresh array of this size costs its page faults (as much as the sort itself)
+        key = (angle * 2.0 ** (angle_bits - 2)).astype(np.int64)
+        np.minimum(key, 2**angle_bits - 1, out=key)
+        high = vertex.astype(np.int64)
+        high <<= angle_bits
+        key |= high
+        key <<= index_bits
+        key |= np.arange(vertex.size)
         key.sort(kind="stable")  # timsort: the keys come in runs (a mesh's cells number nearby vertices together)
-        if (np.diff(key >> index_bits) > 0).all():
-            return key & ((1 << index_bits) - 1)
+        np.right_shift(key, index_bits, out=high)
+        if (high[1:] > high[:-1]).all():
+            key &= (1 << index_bits) - 1
+            return key
     return np.lexsort((angle, vertex))
 
 
