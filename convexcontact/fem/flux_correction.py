@@ -15,6 +15,8 @@ here a post-processing). The coefficients minimize the convex quadratic
 
 by a few conjugate-gradient steps from τ = 0, matrix-free with a diagonal preconditioner: each step lowers J, and
 every iterate keeps the bound valid (any coefficients do), so an inexact minimizer costs sharpness, never the guarantee.
+For the same reason the steps run in single precision (:data:`WORKING`): τ and η are evaluated in float64 from the
+coefficients they produce.
 
 At the midpoint of the facet opposite vertex k of a cell, the bubbles of its three facets with coefficients c_e give
 2 (Σ_e c_e − 2 c_k) curl λ_k, the hats Σ_a c_a curl λ_a (constant): the operator is a few products per cell, written
@@ -201,12 +203,15 @@ def with_curl(vertex_stress, x, curls, operator: StreamOperator) -> np.ndarray:
     """σ̂ + curl φ at the vertices of each cell (rows, x, cells, 3; a view of a (rows, x, 3, cells) array) for the
     coefficients x (rows, facets + vertices) of φ, in the floating type of x and ``curls`` (curl λ_k, (x, 3, cells));
     ``operator`` gives the cells' facets and vertices."""
-    out = vertex_stress.transpose(0, 1, 3, 2).copy()  # (rows, x, m, cells)
+    at = vertex_stress.transpose(0, 1, 3, 2)  # (rows, x, m, cells)
+    out = np.empty(at.shape, np.result_type(at, x))
     bubbles, hats = np.empty((2, *curls.shape[1:]), x.dtype), np.empty((2, *curls.shape[1:]), x.dtype)
     for i in range(2):
         np.take(x[i, :operator.nfacets], operator.facets, out=bubbles[i], mode="clip")
         np.take(x[i, operator.nfacets:], operator.vertices, out=hats[i], mode="clip")
     for cells in blocks(out.shape[-1]):
         tau = midpoint_values(bubbles[..., cells], hats[..., cells], curls[..., cells])
-        out[..., cells] += tau.sum(axis=2, keepdims=True) - 2.0 * tau  # a linear field's V_k = Σ M − 2 M_k
+        tau *= -2.0  # a linear field's vertex values from its midpoints: V_k = Σ M − 2 M_k
+        tau -= 0.5 * tau.sum(axis=2, keepdims=True)
+        np.add(at[..., cells], tau, out=out[..., cells])
     return out.transpose(0, 1, 3, 2)
