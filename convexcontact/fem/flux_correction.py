@@ -73,14 +73,14 @@ class StreamOperator:
 
     The cell-wise arithmetic runs in blocks of :data:`BLOCK` cells, the gathers of the cells' coefficients and the
     sums back onto the facets and vertices over whole arrays. Arrays are laid out (…, 3, cells): the small axes
-    first, every operation over long contiguous rows. ``curls`` curl λ_k (x, 3, cells); ``weight`` |T| / 3 (the
+    first, every operation over long contiguous rows. ``gradients`` ∇λ_k (x, 3, cells); ``weight`` |T| / 3 (the
     midpoint rule); ``lame`` (λ, μ) per cell."""
 
-    def __init__(self, mesh, opposite, curls, weight, lame, korn, dtype):
+    def __init__(self, mesh, opposite, gradients, weight, lame, korn, dtype):
         self.nfacets, self.nvertices = mesh.nfacets, mesh.nvertices
         # (3, cells) in the platform's index type: bincount and take would convert int32 on every call
         self.facets, self.vertices = opposite.T.astype(np.intp), mesh.t.astype(np.intp)
-        self.curls = curls.astype(dtype)
+        self.curls = curls(gradients, slice(None), dtype)
         lam, mu = lame
         kappa, w, gamma = lam / (2 * mu + 2 * lam), weight / (2 * mu), korn**2 - 1  # w = |T|/3 · 1/2μ
         # |T|/3 · Q per cell: diagonal (1 − κ), trace coupling −κ, shear (1 + γ)/2, skew coupling (1 − γ)/2
@@ -90,8 +90,8 @@ class StreamOperator:
         self.cross = np.stack([[trace, skew], [skew, trace]])[:, :, None].astype(dtype)
         # work arrays allocated once (fresh arrays of this size cost their page faults again on every product):
         # the cells' coefficients, and their loads in float64, which bincount sums without a converted copy
-        self.bubbles, self.hats = np.empty((2, *curls.shape[1:]), dtype), np.empty((2, *curls.shape[1:]), dtype)
-        self.loads = np.empty((2, 2, *curls.shape[1:]))  # (bubbles or hats, rows, k, cells)
+        self.bubbles, self.hats = np.empty((2, *gradients.shape[1:]), dtype), np.empty((2, *gradients.shape[1:]), dtype)
+        self.loads = np.empty((2, 2, *gradients.shape[1:]))  # (bubbles or hats, rows, k, cells)
 
     def weighted_form(self, X: np.ndarray, cells) -> np.ndarray:
         """|T|/3 · Q X for the ``cells`` of a block X (rows, x, 3, block), X : Q X = C⁻¹ sym X : sym X + (C_K² − 1)/2μ
@@ -177,17 +177,16 @@ def conjugate_gradients(operator, load, diagonal, admissible, iterations: int) -
 
 def corrected(vertex_stress, sigma_h, gradients, area, lame, mesh, opposite, held, korn,
               iterations: int | None = None) -> np.ndarray:
-    """σ̂ + curl φ at the vertices of each cell (rows, x, cells, 3; a view of a (rows, x, 3, cells) array), φ from
+    """σ̂ + curl φ at the vertices of each cell, written over ``vertex_stress`` (as in
+    :class:`convexcontact.fem.flux.Equilibrated`: (rows, x, cells, 3), a view of a (rows, x, 3, cells) array), φ from
     ``iterations`` CG steps on J (None: :data:`ITERATIONS`) in :data:`WORKING` precision, τ = curl φ then evaluated
-    in float64. ``vertex_stress`` as in :class:`convexcontact.fem.flux.Equilibrated`, ``held`` its (rows, facets)
-    mask of held components, ``korn`` C_K, ``gradients`` ∇λ_k (x, k, cells); the other arguments are
-    ``equilibrate``'s per-cell data."""
+    in float64. ``held`` the (rows, facets) mask of held components, ``korn`` C_K, ``gradients`` ∇λ_k (x, k, cells);
+    the other arguments are ``equilibrate``'s per-cell data."""
     iterations = ITERATIONS if iterations is None else iterations
-    curls = np.stack([gradients[1], -gradients[0]])  # curl λ_k = (∂_y λ_k, −∂_x λ_k): (x, 3, cells)
-    at = vertex_stress.transpose(0, 1, 3, 2)  # (rows, x, m, cells)
     if iterations == 0:
-        return at.copy().transpose(0, 1, 3, 2)
-    operator = StreamOperator(mesh, opposite, curls, area / 3.0, lame, korn, WORKING)
+        return vertex_stress
+    at = vertex_stress.transpose(0, 1, 3, 2)  # (rows, x, m, cells)
+    operator = StreamOperator(mesh, opposite, gradients, area / 3.0, lame, korn, WORKING)
     stress = sigma_h.transpose(1, 2, 0)[:, :, None]  # (rows, x, 1, cells)
 
     def misfit(cells):  # σ̂ − σ_h at the midpoint opposite vertex k: (V_{k+1} + V_{k+2}) / 2 = (Σ V − V_k) / 2
@@ -196,21 +195,30 @@ def corrected(vertex_stress, sigma_h, gradients, area, lame, mesh, opposite, hel
 
     x = conjugate_gradients(operator, operator.gradient(misfit), operator.diagonal(),
                             admissible_stream_functions(mesh, held), iterations)
-    return with_curl(vertex_stress, x.astype(float), curls, operator)
+    return with_curl(vertex_stress, x.astype(float), gradients, operator, out=at)
 
 
-def with_curl(vertex_stress, x, curls, operator: StreamOperator) -> np.ndarray:
-    """σ̂ + curl φ at the vertices of each cell (rows, x, cells, 3; a view of a (rows, x, 3, cells) array) for the
-    coefficients x (rows, facets + vertices) of φ, in the floating type of x and ``curls`` (curl λ_k, (x, 3, cells));
-    ``operator`` gives the cells' facets and vertices."""
+def curls(gradients: np.ndarray, cells, dtype=float) -> np.ndarray:
+    """curl λ_k = (∂_y λ_k, −∂_x λ_k) (x, k, cells) of the ``cells`` of ``gradients`` ∇λ_k (x, k, cells)."""
+    out = np.empty((2, 3, *gradients[0, 0, cells].shape), dtype)
+    out[0] = gradients[1][..., cells]
+    np.negative(gradients[0][..., cells], out=out[1])
+    return out
+
+
+def with_curl(vertex_stress, x, gradients, operator: StreamOperator, out=None) -> np.ndarray:
+    """σ̂ + curl φ at the vertices of each cell (rows, x, cells, 3; a view of ``out`` (rows, x, 3, cells), None: a new
+    array, or ``vertex_stress``'s own to overwrite it) for the float64 coefficients x (rows, facets + vertices) of φ;
+    ``gradients`` ∇λ_k (x, k, cells), ``operator`` gives the cells' facets and vertices and its float64 work arrays
+    (overwritten)."""
     at = vertex_stress.transpose(0, 1, 3, 2)  # (rows, x, m, cells)
-    out = np.empty(at.shape, np.result_type(at, x))
-    bubbles, hats = np.empty((2, *curls.shape[1:]), x.dtype), np.empty((2, *curls.shape[1:]), x.dtype)
+    out = np.empty_like(at) if out is None else out
+    bubbles, hats = operator.loads
     for i in range(2):
         np.take(x[i, :operator.nfacets], operator.facets, out=bubbles[i], mode="clip")
         np.take(x[i, operator.nfacets:], operator.vertices, out=hats[i], mode="clip")
     for cells in blocks(out.shape[-1]):
-        tau = midpoint_values(bubbles[..., cells], hats[..., cells], curls[..., cells])
+        tau = midpoint_values(bubbles[..., cells], hats[..., cells], curls(gradients, cells))
         tau *= -2.0  # a linear field's vertex values from its midpoints: V_k = Σ M − 2 M_k
         tau -= 0.5 * tau.sum(axis=2, keepdims=True)
         np.add(at[..., cells], tau, out=out[..., cells])
