@@ -3,6 +3,8 @@ constraint of σ̂ (that is the guarantee), lowers J, and sharpens the bound (do
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from test_estimate import flat_punch, hertz_levels, under_gravity
@@ -149,3 +151,11 @@ def test_float32_steps_move_eta_by_under_1e_6_and_keep_j_between_the_minimum_and
         assert estimates[single] == pytest.approx(estimates[double], rel=1e-6)
         assert estimates[single] != estimates[double]  # the steps did run in single precision
         assert squares[exact] <= squares[single] <= squares[double] * (1 + 1e-6)
+
+
+def test_zero_data_give_a_zero_bound(punch):
+    """u_h = 0 with zero contact forces: σ̂ = σ_h = 0 up to round-off, the steps stop where J's gradient vanishes, and
+    η is at round-off (measured 10⁻¹⁴), not NaN (a 0/0 step size, warned about as an error)."""
+    state = contact_state(punch)
+    state = dataclasses.replace(state, forces=np.zeros_like(state.forces))
+    assert 0.0 <= flux.flux_estimate(punch.fem, np.zeros_like(punch.displacement), state).eta < 1e-12

@@ -155,7 +155,8 @@ def conjugate_gradients(operator, load, diagonal, admissible, iterations: int) -
     Written out rather than scipy's ``cg``: its vectors are float64 and its dot products BLAS calls, which OpenBLAS
     spreads over threads that contend with a busy machine (a 4 ms dot product of 4·10⁵ entries, against 0.1 ms).
     The preconditioner is 0 off the admissible coefficients, so every search direction, and x, stays admissible
-    without masking the products."""
+    without masking the products. Stops early where the preconditioned residual or the curvature along the direction
+    is zero (J already minimal there: zero data, or no admissible coefficient)."""
     inverse = np.where(admissible, 1.0 / np.where(admissible, diagonal, 1.0), 0.0).astype(load.dtype)
     residual = -load
     z = inverse * residual
@@ -163,7 +164,10 @@ def conjugate_gradients(operator, load, diagonal, admissible, iterations: int) -
     rz = np.einsum("ij,ij", residual, z)
     for step in range(iterations):
         product = operator(direction)
-        alpha = rz / np.einsum("ij,ij", direction, product)
+        curvature = np.einsum("ij,ij", direction, product)
+        if not (rz > 0 and curvature > 0):
+            break
+        alpha = rz / curvature
         x += alpha * direction
         if step + 1 == iterations:
             break
