@@ -40,9 +40,11 @@ BLOCK = 8192
 """Cells per block of the products' cell-wise arithmetic: its temporaries then stay in the processor's caches."""
 
 
-def blocks(count: int):
-    for start in range(0, count, BLOCK):
-        yield slice(start, start + BLOCK)
+def blocks(count: int, size: int | None = None):
+    """Slices of ``size`` cells (None: :data:`BLOCK`) covering ``count`` cells."""
+    size = BLOCK if size is None else size
+    for start in range(0, count, size):
+        yield slice(start, start + size)
 
 
 def admissible_stream_functions(mesh, held: np.ndarray) -> np.ndarray:
