@@ -38,7 +38,8 @@ the bound (τ and η are evaluated in float64 from them); single precision halve
 measured; tests/test_flux_correction.py)."""
 
 BLOCK = 8192
-"""Cells per block of the products' cell-wise arithmetic: its temporaries then stay in the processor's caches."""
+"""Cells per block of the products' cell-wise arithmetic: its temporaries then stay in the processor's caches (a
+product at 10⁵ cells: 10.8 ms of CPU, against 11.6 with 4,096, 12.6 with 16,384 and 17.1 with 2,048)."""
 
 
 def blocks(count: int, size: int | None = None):
