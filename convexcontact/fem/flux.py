@@ -198,7 +198,9 @@ def patch_chains(mesh, xy: np.ndarray, det: np.ndarray, opposite: np.ndarray) ->
     angle = np.where(dx < 0, 2.0 - ratio, ratio)
     reference = np.zeros(mesh.nvertices)
     reference[vertex[begins]] = angle[begins]
-    order = sort_by_vertex_and_angle(vertex, (angle - reference[vertex]) % 4.0, mesh.nvertices)
+    angle -= reference[vertex]  # in (−4, 4): mod 4 by adding 4 where negative (np.remainder costs 3× more)
+    np.add(angle, 4.0, out=angle, where=angle < 0)
+    order = sort_by_vertex_and_angle(vertex, angle, mesh.nvertices)
     around = vertex[order]
     new = begins[order]
     new[0] = True
