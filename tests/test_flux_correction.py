@@ -3,6 +3,8 @@ constraint of σ̂ (that is the guarantee), lowers J, and sharpens the bound (do
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from test_estimate import flat_punch, hertz_levels, under_gravity
@@ -97,3 +99,63 @@ def test_the_corrected_bound_on_the_punch_is_within_1_to_2_of_the_true_error(mon
         fem = result.fem
         rt0 = flux.flux_estimate(fem, result.displacement / fem.scaling.displacement, contact_state(result))
         assert rt0.eta > 2.2 * error
+
+
+def correction_data(result: cc.Result, monkeypatch) -> tuple:
+    """The arguments ``equilibrate`` gives :func:`flux_correction.corrected` for ``result`` (σ̂ of RT0 first)."""
+    captured = []
+    monkeypatch.setattr(flux_correction, "corrected", lambda *args: captured.append(args) or args[0])
+    equilibrated(result, DEFAULT, monkeypatch)
+    monkeypatch.undo()
+    return captured[0]
+
+
+def test_the_blocked_products_are_the_hessian_and_the_gradient_of_j(punch, monkeypatch):
+    """For random coefficients x, J(x) evaluated as η is (σ̂ + curl φ at the vertices, ``cell_norms``) equals
+    J(0) + 2 g · x + x · A x with the operator's gradient g (of σ̂ − σ_h at the midpoints, written here from the
+    definition) and product A x, in float64 to round-off; with blocks of 7 cells (cut through the cells of a facet
+    and of a vertex) the same."""
+    stress, sigma_h, gradients, area, lame, mesh, opposite, _, korn = correction_data(punch, monkeypatch)
+    corners = stress.transpose(0, 1, 3, 2)  # (rows, x, m, cells)
+    midpoints = 0.5 * (corners[:, :, [1, 2, 0]] + corners[:, :, [2, 0, 1]]) - sigma_h.transpose(1, 2, 0)[:, :, None]
+
+    def j(vertex_stress):
+        symmetric, skew = flux.cell_norms(vertex_stress, sigma_h, *lame, area)
+        return symmetric.sum() + (korn**2 - 1) * skew.sum()
+
+    x = np.random.default_rng(0).standard_normal((2, mesh.nfacets + mesh.nvertices)) * np.abs(stress).max()
+    values = []
+    for block in (flux_correction.BLOCK, 7):
+        monkeypatch.setattr(flux_correction, "BLOCK", block)
+        operator = flux_correction.StreamOperator(mesh, opposite, gradients, area / 3.0, lame, korn, np.float64)
+        gradient = operator.gradient(lambda cells: midpoints[..., cells])
+        quadratic = j(stress) + 2 * (gradient * x).sum() + (x * operator(x)).sum()
+        values.append(quadratic)
+        assert quadratic == pytest.approx(j(flux_correction.with_curl(stress, x, gradients, operator)), rel=1e-11)
+    assert values[1] == pytest.approx(values[0], rel=1e-12)
+
+
+def test_float32_steps_move_eta_by_under_1e_6_and_keep_j_between_the_minimum_and_float64(punch, monkeypatch):
+    """The CG steps in float32 (:data:`flux_correction.WORKING`) only choose the coefficients: η is evaluated in
+    float64 from them, within 10⁻⁶ of the float64 steps' η (measured 2·10⁻⁸ at 10⁵ DOFs), and J is no lower than the
+    exact minimizer's (300 float64 steps) and not above the float64 steps' by more than 10⁻⁶."""
+    for result in (punch, cc.solve(flat_punch(32))):
+        fem = result.fem
+        u, state = result.displacement / fem.scaling.displacement, contact_state(result)
+        estimates, squares = {}, {}
+        for working, steps in ((np.float32, DEFAULT), (np.float64, DEFAULT), (np.float64, 300)):
+            monkeypatch.setattr(flux_correction, "WORKING", working)
+            squares[working, steps] = bound_square(equilibrated(result, steps, monkeypatch)[0])
+            estimates[working, steps] = flux.flux_estimate(fem, u, state).eta
+        single, double, exact = (np.float32, DEFAULT), (np.float64, DEFAULT), (np.float64, 300)
+        assert estimates[single] == pytest.approx(estimates[double], rel=1e-6)
+        assert estimates[single] != estimates[double]  # the steps did run in single precision
+        assert squares[exact] <= squares[single] <= squares[double] * (1 + 1e-6)
+
+
+def test_zero_data_give_a_zero_bound(punch):
+    """u_h = 0 with zero contact forces: σ̂ = σ_h = 0 up to round-off, the steps stop where J's gradient vanishes, and
+    η is at round-off (measured 10⁻¹⁴), not NaN (a 0/0 step size, warned about as an error)."""
+    state = contact_state(punch)
+    state = dataclasses.replace(state, forces=np.zeros_like(state.forces))
+    assert 0.0 <= flux.flux_estimate(punch.fem, np.zeros_like(punch.displacement), state).eta < 1e-12

@@ -15,6 +15,8 @@ here a post-processing). The coefficients minimize the convex quadratic
 
 by a few conjugate-gradient steps from τ = 0, matrix-free with a diagonal preconditioner: each step lowers J, and
 every iterate keeps the bound valid (any coefficients do), so an inexact minimizer costs sharpness, never the guarantee.
+For the same reason the steps run in single precision (:data:`WORKING`): τ and η are evaluated in float64 from the
+coefficients they produce.
 
 At the midpoint of the facet opposite vertex k of a cell, the bubbles of its three facets with coefficients c_e give
 2 (Σ_e c_e − 2 c_k) curl λ_k, the hats Σ_a c_a curl λ_a (constant): the operator is a few products per cell, written
@@ -24,12 +26,27 @@ by hand and applied matrix-free (assembling the P2 matrix, with scikit-fem or by
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse.linalg as spla
 
 ITERATIONS = 5
 """Conjugate-gradient steps: on the uniform punch at 4,160 and 65,792 DOFs they reach η within 11–12 % of the exact
-minimizer's (10 steps: 3–4 %, 3 steps: 21–22 %; RT0 alone: 2.1×), each step costing ≈ 10 % of the rest of the
-estimator (docs/estimate.md, "Cost of the bound")."""
+minimizer's (10 steps: 3–4 %, 3 steps: 21–22 %; RT0 alone: 2.1×) (docs/estimate.md, "Cost of the bound")."""
+
+WORKING = np.float32
+"""The floating type of the conjugate-gradient steps: they only choose φ's coefficients, and any coefficients keep
+the bound (τ and η are evaluated in float64 from them); single precision halves the memory traffic of the products
+(a product at 10⁵ cells: 23 ms against 40 ms in float64, both under load) and moves η by under 10⁻⁶ relative (2·10⁻⁸
+measured; tests/test_flux_correction.py)."""
+
+BLOCK = 8192
+"""Cells per block of the products' cell-wise arithmetic: its temporaries then stay in the processor's caches (a
+product at 10⁵ cells: 10.8 ms of CPU, against 11.6 with 4,096, 12.6 with 16,384 and 17.1 with 2,048)."""
+
+
+def blocks(count: int, size: int | None = None):
+    """Slices of ``size`` cells (None: :data:`BLOCK`) covering ``count`` cells."""
+    size = BLOCK if size is None else size
+    for start in range(0, count, size):
+        yield slice(start, start + size)
 
 
 def admissible_stream_functions(mesh, held: np.ndarray) -> np.ndarray:
@@ -44,130 +61,173 @@ def admissible_stream_functions(mesh, held: np.ndarray) -> np.ndarray:
     return np.concatenate([bubbles, hats], axis=1)
 
 
+def midpoint_values(bubbles: np.ndarray, hats: np.ndarray, curls: np.ndarray) -> np.ndarray:
+    """τ = curl φ (rows, x, 3 midpoints, cells) of the coefficients of each cell's bubbles (rows, facet opposite k,
+    cells) and hats (rows, vertex k, cells): at the midpoint opposite vertex k the bubbles give
+    2 (Σ_e c_e − 2 c_k) curl λ_k, the hats Σ_a c_a curl λ_a (constant). ``curls`` curl λ_k (x, k, cells)."""
+    scale = 2.0 * bubbles.sum(axis=1, keepdims=True) - 4.0 * bubbles  # (rows, k, cells)
+    out = scale[:, None] * curls
+    out += (hats[:, None] * curls).sum(axis=2, keepdims=True)
+    return out
+
+
 class StreamOperator:
-    """J's Hessian (half of it) and τ at the facet midpoints for the coefficients x (rows, facets + vertices) of φ.
+    """J's Hessian (half of it) for the coefficients x (rows, facets + vertices) of φ, matrix-free, in the floating
+    type ``dtype``.
 
-    Arrays are laid out (…, 3, cells): the small axes first, every operation over long contiguous rows (numpy's
-    reductions over a trailing axis of length 3 cost 10× more), into work arrays allocated once (a fresh array of
-    this size costs its page faults again on every product: half the time). ``curls`` curl λ_k (x, 3, cells);
-    ``weight`` |T| / 3 (the midpoint rule); ``lame`` (λ, μ) per cell."""
+    The cell-wise arithmetic runs in blocks of :data:`BLOCK` cells, the gathers of the cells' coefficients and the
+    sums back onto the facets and vertices over whole arrays. Arrays are laid out (…, 3, cells): the small axes
+    first, every operation over long contiguous rows. ``gradients`` ∇λ_k (x, 3, cells); ``weight`` |T| / 3 (the
+    midpoint rule); ``lame`` (λ, μ) per cell."""
 
-    def __init__(self, mesh, opposite, curls, weight, lame, korn):
+    def __init__(self, mesh, opposite, gradients, weight, lame, korn, dtype):
         self.nfacets, self.nvertices = mesh.nfacets, mesh.nvertices
         # (3, cells) in the platform's index type: bincount and take would convert int32 on every call
         self.facets, self.vertices = opposite.T.astype(np.intp), mesh.t.astype(np.intp)
-        self.curls = curls
+        self.curls = curls(gradients, slice(None), dtype)
         lam, mu = lame
         kappa, w, gamma = lam / (2 * mu + 2 * lam), weight / (2 * mu), korn**2 - 1  # w = |T|/3 · 1/2μ
         # |T|/3 · Q per cell: diagonal (1 − κ), trace coupling −κ, shear (1 + γ)/2, skew coupling (1 − γ)/2
-        self.normal, self.trace, self.shear, self.skew = w * (1 - kappa), -w * kappa, 0.5 * w * (1 + gamma), \
-            0.5 * w * (1 - gamma)
-        self.field, self.weighted = np.empty((2, *curls.shape)), np.empty((2, *curls.shape))
-        self.corner = tuple(np.empty((2, *curls.shape[1:])) for _ in range(3))  # (rows, k, cells)
-        self.cell = tuple(np.empty((2, curls.shape[2])) for _ in range(2))  # (rows, cells)
+        normal, trace, shear, skew = w * (1 - kappa), -w * kappa, 0.5 * w * (1 + gamma), 0.5 * w * (1 - gamma)
+        # (rows, x, 1, cells): the weight of X_ij itself and of X_ji' in (Q X)_ij
+        self.own = np.stack([[normal, shear], [shear, normal]])[:, :, None].astype(dtype)
+        self.cross = np.stack([[trace, skew], [skew, trace]])[:, :, None].astype(dtype)
+        # work arrays allocated once (fresh arrays of this size cost their page faults again on every product):
+        # the cells' coefficients, and their loads in float64, which bincount sums without a converted copy
+        self.bubbles, self.hats = np.empty((2, *gradients.shape[1:]), dtype), np.empty((2, *gradients.shape[1:]), dtype)
+        self.loads = np.empty((2, 2, *gradients.shape[1:]))  # (bubbles or hats, rows, k, cells)
 
-    def midpoints(self, x: np.ndarray) -> np.ndarray:
-        """τ (rows, x, 3 midpoints, cells) of the coefficients x: at the midpoint opposite vertex k the bubbles give
-        2 (Σ_e c_e − 2 c_k) curl λ_k, the hats Σ_a c_a curl λ_a. Returns a work array (valid until the next call)."""
-        out, (scale, hat, _), (total, term) = self.field, self.corner, self.cell
+    def weighted_form(self, X: np.ndarray, cells) -> np.ndarray:
+        """|T|/3 · Q X for the ``cells`` of a block X (rows, x, 3, block), X : Q X = C⁻¹ sym X : sym X + (C_K² − 1)/2μ
+        |skew X|² pointwise (2-D: C⁻¹ τ : τ = (|τ|² − λ/(2μ + 2λ) (tr τ)²) / 2μ): Q X_ij = own_ij X_ij + cross_ij
+        X_ji' with X_ji' the entry of the other row and column (X_00 with X_11, X_01 with X_10)."""
+        out = X * self.own[..., cells]
+        out += X[::-1, ::-1] * self.cross[..., cells]
+        return out
+
+    def adjoint(self, W: np.ndarray, cells) -> tuple[np.ndarray, np.ndarray]:
+        """The transpose of :func:`midpoint_values` on a block: W (rows, x, 3, block) → the loads of each cell's
+        bubbles and hats (rows, k, block)."""
+        curls = self.curls[..., cells]
+        along = (W * curls).sum(axis=1)  # curl λ_k · W_k (rows, k, block)
+        bubbles = 2.0 * along.sum(axis=1, keepdims=True) - 4.0 * along
+        hats = (W.sum(axis=2, keepdims=True) * curls).sum(axis=1)
+        return bubbles, hats
+
+    def gather(self, x: np.ndarray) -> None:
+        """Each cell's coefficients of x into ``bubbles`` and ``hats`` (rows, k, cells)."""
         for i in range(2):  # mode "clip": numpy buffers a take into ``out=`` that checks its indices (6× slower)
-            np.take(x[i, :self.nfacets], self.facets, out=scale[i], mode="clip")
-            np.take(x[i, self.nfacets:], self.vertices, out=hat[i], mode="clip")
-        np.sum(scale, axis=1, out=total)
-        scale *= -4.0
-        total *= 2.0
-        scale += total[:, None]
-        for c in range(2):
-            np.multiply(scale, self.curls[c], out=out[:, c])
-            np.multiply(hat[:, 0], self.curls[c, 0], out=total)
-            for k in (1, 2):
-                np.multiply(hat[:, k], self.curls[c, k], out=term)
-                total += term
-            out[:, c] += total[:, None]
-        return out
+            np.take(x[i, :self.nfacets], self.facets, out=self.bubbles[i], mode="clip")
+            np.take(x[i, self.nfacets:], self.vertices, out=self.hats[i], mode="clip")
 
-    def weighted_form(self, X: np.ndarray) -> np.ndarray:
-        """|T|/3 · Q X, X : Q X = C⁻¹ sym X : sym X + (C_K² − 1)/2μ |skew X|² pointwise (2-D: C⁻¹ τ : τ =
-        (|τ|² − λ/(2μ + 2λ) (tr τ)²) / 2μ). Returns a work array."""
-        out, spare = self.weighted, self.corner[1]
-        for i, j in ((0, 1), (1, 0)):
-            np.multiply(X[i, i], self.normal, out=out[i, i])
-            np.multiply(X[j, j], self.trace, out=spare[i])
-            out[i, i] += spare[i]
-            np.multiply(X[i, j], self.shear, out=out[i, j])
-            np.multiply(X[j, i], self.skew, out=spare[i])
-            out[i, j] += spare[i]
-        return out
-
-    def adjoint(self, Y: np.ndarray) -> np.ndarray:
-        """The transpose of :meth:`midpoints`: Y (rows, x, 3, cells) → (rows, facets + vertices)."""
-        (along, hat, spare), (total, term) = self.corner, self.cell
-        np.multiply(Y[:, 0], self.curls[0], out=along)
-        np.multiply(Y[:, 1], self.curls[1], out=hat)
-        along += hat  # curl λ_k · Y_k (rows, k, cells)
-        np.sum(along, axis=1, out=total)
-        along *= -4.0
-        total *= 2.0
-        along += total[:, None]
-        np.sum(Y[:, 0], axis=1, out=total)
-        np.sum(Y[:, 1], axis=1, out=term)
-        np.multiply(total[:, None], self.curls[0], out=hat)
-        hat += np.multiply(term[:, None], self.curls[1], out=spare)
-        out = np.empty((2, self.nfacets + self.nvertices))
+    def scatter(self, dtype) -> np.ndarray:
+        """The cells' ``loads`` summed onto the facets and vertices (rows, facets + vertices)."""
+        out = np.empty((2, self.nfacets + self.nvertices), dtype)
         for i in range(2):
-            out[i, :self.nfacets] = np.bincount(self.facets.ravel(), along[i].ravel(), self.nfacets)
-            out[i, self.nfacets:] = np.bincount(self.vertices.ravel(), hat[i].ravel(), self.nvertices)
+            out[i, :self.nfacets] = np.bincount(self.facets.ravel(), self.loads[0, i].ravel(), self.nfacets)
+            out[i, self.nfacets:] = np.bincount(self.vertices.ravel(), self.loads[1, i].ravel(), self.nvertices)
         return out
+
+    def gradient(self, misfit) -> np.ndarray:
+        """J's gradient at τ = 0 (half of it), ``misfit(cells)`` σ̂ − σ_h at the midpoints of a block of cells."""
+        for cells in blocks(self.loads.shape[-1]):
+            self.loads[0][..., cells], self.loads[1][..., cells] = self.adjoint(self.weighted_form(misfit(cells), cells),
+                                                                                cells)
+        return self.scatter(self.curls.dtype)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        return self.adjoint(self.weighted_form(self.midpoints(x)))
+        self.gather(x)
+        for cells in blocks(self.loads.shape[-1]):
+            tau = midpoint_values(self.bubbles[..., cells], self.hats[..., cells], self.curls[..., cells])
+            self.loads[0][..., cells], self.loads[1][..., cells] = self.adjoint(self.weighted_form(tau, cells), cells)
+        return self.scatter(x.dtype)
 
     def diagonal(self) -> np.ndarray:
-        """The operator's diagonal: a bubble's τ is ±2 curl λ_k at the three midpoints of each of its cells, a hat's
-        curl λ_a."""
-        cx, cy = self.curls
-        rows = (self.normal * cx**2 + self.shear * cy**2, self.shear * cx**2 + self.normal * cy**2)
-        out = np.empty((2, self.nfacets + self.nvertices))
-        for i, row in enumerate(rows):  # (3, cells): Q_ii applied to curl λ_k
-            out[i, :self.nfacets] = np.bincount(self.facets.ravel(), np.tile(4.0 * row.sum(axis=0), 3),
-                                                self.nfacets)
-            out[i, self.nfacets:] = np.bincount(self.vertices.ravel(), 3.0 * row.ravel(), self.nvertices)
-        return out
+        """The operator's diagonal (float64): a bubble's τ is ±2 curl λ_k at the three midpoints of each of its
+        cells, a hat's curl λ_a."""
+        hats = self.loads[1]
+        np.multiply(3.0, (self.own * self.curls**2).sum(axis=1), out=hats)  # Q_ii (curl λ_a), thrice
+        self.loads[0] = (4.0 / 3.0) * hats.sum(axis=1, keepdims=True)  # Q_ii (curl λ_k) over the three k
+        return self.scatter(float)
 
 
 def conjugate_gradients(operator, load, diagonal, admissible, iterations: int) -> np.ndarray:
-    """``iterations`` Jacobi-preconditioned CG steps (scipy's) on operator x = −load over the admissible coefficients
-    (rows, facets + vertices), from x = 0; no tolerance: a fixed number of steps, each lowering J."""
-    shape, keep = load.shape, admissible.ravel().astype(float)
-    inverse = keep / np.where(keep > 0, diagonal.ravel(), 1.0)  # 0 off the admissible coefficients
+    """``iterations`` Jacobi-preconditioned CG steps on operator x = −load over the admissible coefficients (rows,
+    facets + vertices), from x = 0, in the floating type of ``load``; no tolerance: a fixed number of steps, each
+    lowering J.
 
-    def masked(x):
-        out = operator((x * keep).reshape(shape)).ravel()
-        out *= keep
-        return out
-
-    size = load.size
-    A = spla.LinearOperator((size, size), matvec=masked, dtype=float)
-    M = spla.LinearOperator((size, size), matvec=lambda r: inverse * r, dtype=float)
-    x, _ = spla.cg(A, -keep * load.ravel(), rtol=0.0, atol=0.0, maxiter=iterations, M=M)
-    return x.reshape(shape)
+    Written out rather than scipy's ``cg``: its vectors are float64 and its dot products BLAS calls, which OpenBLAS
+    spreads over threads that contend with a busy machine (a 4 ms dot product of 4·10⁵ entries, against 0.1 ms).
+    The preconditioner is 0 off the admissible coefficients, so every search direction, and x, stays admissible
+    without masking the products. Stops early where the preconditioned residual or the curvature along the direction
+    is zero (J already minimal there: zero data, or no admissible coefficient)."""
+    inverse = np.where(admissible, 1.0 / np.where(admissible, diagonal, 1.0), 0.0).astype(load.dtype)
+    residual = -load
+    z = inverse * residual
+    direction, x = z.copy(), np.zeros_like(load)
+    rz = np.einsum("ij,ij", residual, z)
+    for step in range(iterations):
+        product = operator(direction)
+        curvature = np.einsum("ij,ij", direction, product)
+        if not (rz > 0 and curvature > 0):
+            break
+        alpha = rz / curvature
+        x += alpha * direction
+        if step + 1 == iterations:
+            break
+        residual -= alpha * product
+        np.multiply(inverse, residual, out=z)
+        rz, previous = np.einsum("ij,ij", residual, z), rz
+        direction *= rz / previous
+        direction += z
+    return x
 
 
 def corrected(vertex_stress, sigma_h, gradients, area, lame, mesh, opposite, held, korn,
               iterations: int | None = None) -> np.ndarray:
-    """σ̂ + curl φ at the vertices of each cell (rows, x, cells, 3), φ from ``iterations`` CG steps on J
-    (None: :data:`ITERATIONS`). ``vertex_stress`` as in :class:`convexcontact.fem.flux.Equilibrated`, ``held`` its
-    (rows, facets) mask of held components, ``korn`` C_K, ``gradients`` ∇λ_k (x, k, cells); the other arguments are
-    ``equilibrate``'s per-cell data."""
+    """σ̂ + curl φ at the vertices of each cell, written over ``vertex_stress`` (as in
+    :class:`convexcontact.fem.flux.Equilibrated`: (rows, x, cells, 3), a view of a (rows, x, 3, cells) array), φ from
+    ``iterations`` CG steps on J (None: :data:`ITERATIONS`) in :data:`WORKING` precision, τ = curl φ then evaluated
+    in float64. ``held`` the (rows, facets) mask of held components, ``korn`` C_K, ``gradients`` ∇λ_k (x, k, cells);
+    the other arguments are ``equilibrate``'s per-cell data."""
     iterations = ITERATIONS if iterations is None else iterations
-    curls = np.stack([gradients[1], -gradients[0]])  # curl λ_k = (∂_y λ_k, −∂_x λ_k): (x, 3, cells)
-    operator = StreamOperator(mesh, opposite, curls, area / 3.0, lame, korn)
-    # σ̂ − σ_h at the midpoint opposite vertex k, (V_{k+1} + V_{k+2}) / 2 = (Σ V − V_k) / 2: (rows, x, k, cells)
-    misfit = 0.5 * (vertex_stress.sum(axis=3)[..., None] - vertex_stress).transpose(0, 1, 3, 2) \
-        - sigma_h.transpose(1, 2, 0)[:, :, None, :]
-    load = operator.adjoint(operator.weighted_form(misfit))
-    x = conjugate_gradients(operator, load, operator.diagonal(), admissible_stream_functions(mesh, held), iterations)
-    tau = operator.midpoints(x)  # a linear field's vertex values from its midpoints: V_k = Σ M − 2 M_k
-    tau *= -2.0
-    tau -= 0.5 * tau.sum(axis=2, keepdims=True)
-    return vertex_stress + tau.transpose(0, 1, 3, 2)
+    if iterations == 0:
+        return vertex_stress
+    at = vertex_stress.transpose(0, 1, 3, 2)  # (rows, x, m, cells)
+    operator = StreamOperator(mesh, opposite, gradients, area / 3.0, lame, korn, WORKING)
+    stress = sigma_h.transpose(1, 2, 0)[:, :, None]  # (rows, x, 1, cells)
+
+    def misfit(cells):  # σ̂ − σ_h at the midpoint opposite vertex k: (V_{k+1} + V_{k+2}) / 2 = (Σ V − V_k) / 2
+        corners = at[..., cells]
+        return (0.5 * (corners.sum(axis=2, keepdims=True) - corners) - stress[..., cells]).astype(WORKING)
+
+    x = conjugate_gradients(operator, operator.gradient(misfit), operator.diagonal(),
+                            admissible_stream_functions(mesh, held), iterations)
+    return with_curl(vertex_stress, x.astype(float), gradients, operator, out=at)
+
+
+def curls(gradients: np.ndarray, cells, dtype=float) -> np.ndarray:
+    """curl λ_k = (∂_y λ_k, −∂_x λ_k) (x, k, cells) of the ``cells`` of ``gradients`` ∇λ_k (x, k, cells)."""
+    out = np.empty((2, 3, *gradients[0, 0, cells].shape), dtype)
+    out[0] = gradients[1][..., cells]
+    np.negative(gradients[0][..., cells], out=out[1])
+    return out
+
+
+def with_curl(vertex_stress, x, gradients, operator: StreamOperator, out=None) -> np.ndarray:
+    """σ̂ + curl φ at the vertices of each cell (rows, x, cells, 3; a view of ``out`` (rows, x, 3, cells), None: a new
+    array, or ``vertex_stress``'s own to overwrite it) for the float64 coefficients x (rows, facets + vertices) of φ;
+    ``gradients`` ∇λ_k (x, k, cells), ``operator`` gives the cells' facets and vertices and its float64 work arrays
+    (overwritten)."""
+    at = vertex_stress.transpose(0, 1, 3, 2)  # (rows, x, m, cells)
+    out = np.empty_like(at) if out is None else out
+    bubbles, hats = operator.loads
+    for i in range(2):
+        np.take(x[i, :operator.nfacets], operator.facets, out=bubbles[i], mode="clip")
+        np.take(x[i, operator.nfacets:], operator.vertices, out=hats[i], mode="clip")
+    for cells in blocks(out.shape[-1]):
+        tau = midpoint_values(bubbles[..., cells], hats[..., cells], curls(gradients, cells))
+        tau *= -2.0  # a linear field's vertex values from its midpoints: V_k = Σ M − 2 M_k
+        tau -= 0.5 * tau.sum(axis=2, keepdims=True)
+        np.add(at[..., cells], tau, out=out[..., cells])
+    return out.transpose(0, 1, 3, 2)
