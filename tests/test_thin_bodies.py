@@ -9,6 +9,8 @@ import convexcontact as cc
 from convexcontact.fem import local_delassus
 from convexcontact.fem.local_delassus import local_diagonal
 from convexcontact.scene.library import whole_face
+from convexcontact.solvers import newton_cg
+from convexcontact.studies.benchmarks.bench import scene_of
 
 
 def contact_rows(dim: int, nodes: int, dofs: float):
@@ -48,3 +50,16 @@ def test_the_patches_stop_growing_past_their_size(dim, nodes, dofs, layers):
     K, B = contact_rows(dim, nodes, dofs)
     assert local_delassus.LAYERS == 2
     np.testing.assert_array_equal(local_diagonal(K, B), local_diagonal(K, B, layers))
+
+
+def test_grown_faces_solved_loosely_give_the_same_answer_for_fewer_products(monkeypatch):
+    """CG on a grown face stops at GROWN_FORCING × its first residual (its point is a trial that finds the face):
+    on a strip 100 : 1 clamped at its ends (Tresca, matrix-free) the same answer as with every grown face solved to
+    the step's target, and fewer products with W (60 against 73 measured)."""
+    model = cc.prepare(scene_of("strip-clamped-100", 2, "tresca", 2e3), "dual-matrix-free")
+    loose = newton_cg.solve(model.program)
+    monkeypatch.setattr(newton_cg, "GROWN_FORCING", 0.0)
+    tight = newton_cg.solve(model.program)
+    assert loose.status == tight.status == "solved" and loose.info["grown"] > 0
+    assert np.abs(loose.x - tight.x).max() <= 1e-10 * np.abs(tight.x).max()
+    assert loose.info["products"] < tight.info["products"]
