@@ -15,19 +15,31 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 LAYERS = 2
-"""Layers of cells around a row's support (patches of ~30 DOFs in 2-D, ~200 in 3-D)."""
+"""Most layers of cells around a row's support (patches of ~24 DOFs on a 2-D P1 face)."""
+PATCH = 30
+"""Mean DOFs of the patches from which they grow no further: a patch costs its size cubed. One layer leaves ~10 DOFs
+on a 2-D P1 face, ~45–54 on a 3-D Q1 face, where a second took them to ~220 and the diagonal of a plate 20 : 20 : 1
+(3.3·10⁴ DOFs) from 1.3 s to 6.5 s, ten times its linear solve, for the same Newton steps and products on the 3-D
+plates, flat, tall and two-body rows (products 43 against 40, 105 against 115, 160 and 160; docs/performance.md,
+"Thin bodies"). In 2-D the second layer stays: one cost the pair 172 products against 158."""
 
 
-def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.ndarray:
-    """d_j = b_jᵀ K_Ω⁻¹ b_j for each row b_j of B, Ω_j its support grown ``layers`` times through K's graph. Rows of
-    one support (a node's normal and tangential rows) share their patch: the supports are coloured, and each colour
-    is one factorization with a right-hand side per row of a support (3-D Tresca: a third of the factorizations)."""
+def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int | None = None) -> np.ndarray:
+    """d_j = b_jᵀ K_Ω⁻¹ b_j for each row b_j of B, Ω_j its support grown through K's graph ``layers`` times (None:
+    LAYERS times or until the patches' mean passes PATCH DOFs). Rows whose supports grown once are alike (a node's
+    normal and tangential rows, whose own supports are a component each) share their patch: the patches are coloured,
+    and each colour is one factorization with a right-hand side per row of a patch (3-D: a third of the
+    factorizations of a colouring by the rows' own supports)."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
-    support, slot = supports(B)
-    first = np.flatnonzero(slot == 0)  # a row of each support, in the order of the supports
     graph = sp.csr_matrix((np.ones(K.nnz, dtype=np.int32), K.indices, K.indptr), shape=K.shape)
-    patch = _pattern(B[first].T)  # n × supports
-    for _ in range(layers):
+    layers, largest = (LAYERS, PATCH) if layers is None else (layers, np.inf)
+    reach = _pattern(graph @ B.T).T.tocsr() if layers else B  # each row's support grown once
+    support, slot = supports(reach)
+    first = np.flatnonzero(slot == 0)  # a row of each patch, in the order of the patches
+    patch = _pattern(reach[first].T)  # n × patches
+    for _ in range(layers - 1):
+        if patch.nnz >= largest * patch.shape[1]:
+            break
         patch = _pattern(graph @ patch)
     conflict = _pattern(patch.T @ _pattern(graph @ patch))  # patches that overlap or touch
     diagonal = np.zeros(B.shape[0])
