@@ -125,6 +125,8 @@ solve with K, as a product is); where P is a matrix a product is far cheaper tha
 Tresca: 27 solves took the dense newton-cg from 0.12 to 0.94 s), so the sum serves until the natural residual is within
 SUM_FLOOR × ε ‖c q‖∞ of 0 or passes the stopping test, P's own formula after (the sum's rounding held the clamped
 strip 400 : 1 at ~5·10³ ε ‖c q‖ for 100 steps; from there P's own formula refines it as iterative refinement does)."""
+DAMPING = 10.0
+FAR = 1e3
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
@@ -328,20 +330,21 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         p = _project(v - c * g, sets)
         return least_on_segment(v, g, p, move(v, g, p)[2])
 
-    def newton_point(v, y, target):
-        """Newton's point from v on the face y holds and the CG iterations it took; with balls (friction) and fixed
-        radii the face grown by the sets that point leaves until it leaves none (at most GROW times; see GROW), each
-        solve started from the last point, projected."""
-        newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix)
+    def newton_point(v, y, target, damping):
+        """Newton's point from v on the face y holds, the CG iterations it took and how far the first solve went
+        (‖point − v‖∞, see FAR); with balls (friction) and fixed radii the face grown by the sets that point leaves
+        until it leaves none (at most GROW times; see GROW), each solve started from the last point, projected."""
+        newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix, damping)
+        reach = np.abs(newton - v).max(initial=0.0)
         for _ in range(GROW if sets.coupling is None and sets.balls.size else 0):
             y = _grown(y, newton, sets)
             if y is None:
                 break
             newton, more = _step(P, affine, sets, _project(newton, sets), y, c, target, products,
-                                 cache["precondition"], matrix)
+                                 cache["precondition"], matrix, damping)
             iterations += more
             faces[0] += 1
-        return newton, iterations
+        return newton, iterations, reach
 
     def backtrack(v, g, towards, residual):
         """Without an f (moving balls), the first of 1, ½, …, 1/16 of the way to ``towards`` (projected)
@@ -362,6 +365,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     risen, kinds, descent = 0.0, dict.fromkeys(("residual", "newton", "arc", "segment", "gradient"), 0), []
     steps = cg_total = 0
     faces = [0]  # the faces grown (see GROW)
+    damping = 0.0  # μ of the Newton systems (see DAMPING)
     status, word = "failed", "max_iter"
     floor = SUM_FLOOR * EPS * (c * np.abs(sets.scale * program.q)).max(initial=0.0)
     for steps in range(max_iter + 1):
@@ -385,9 +389,10 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if steps == max_iter:
             break
         target = FORCING * min(1.0, residual / first) * residual * size / np.max(c)
-        newton, iterations = newton_point(v, y, max(target, 0.1 * tol * answer(v, size) / np.max(c)))
+        newton, iterations, reach = newton_point(v, y, max(target, 0.1 * tol * answer(v, size) / np.max(c)), damping)
         cg_total += iterations
         best = min(best, residual)
+        damping = _damped(damping, reach > FAR * size, residual)
         if sets.coupling is not None:
             v, g, moved = backtrack(v, g, newton, residual)
             if not moved:  # a projected-gradient segment, as for a fixed f: Newton stalled on a punch with F = 2
@@ -422,6 +427,12 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         status = "inaccurate"
     return ConicSolution(x=x, z=z, s=program.b - program.A @ x, status=status, solver_status=word, iterations=steps,
                          solve_time=time.perf_counter() - began, solver="newton-cg", info=info)
+
+
+def _damped(damping: float, far: bool, residual: float) -> float:
+    """μ for the next step: where Newton's point was ``far`` (see FAR) DAMPING times more and at least the natural
+    residual (Levenberg–Marquardt's choice), else DAMPING times less."""
+    return max(DAMPING * damping, residual) if far else damping / DAMPING
 
 
 class _Preconditioner:
@@ -560,7 +571,7 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
     return v
 
 
-def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None):
+def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, damping=0.0):
     """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v and the CG
     (GMRES, where radii move) iterations it took; where P is a matrix (``matrix()`` = P̃) and the system has at most
     DIRECT_LIMIT unknowns, a dense LU instead."""
@@ -589,6 +600,8 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     k, _, t = bases.shape
     c_sphere = c[sets.balls[sphere, 0]] if np.ndim(c) and sets.balls.shape[1] else np.max(c)
     curvature = np.repeat((norm[sphere] - rho) / (c_sphere * rho), t)
+    shift = np.concatenate([damping / np.broadcast_to(c, (n,))[free],  # μ/c on every unknown: see DAMPING
+                            np.repeat(np.broadcast_to(damping / c_sphere, (sphere.size,)), t)])
     # v = new + Z ξ: ξ holds the free variables, then t tangent coordinates per sphere (see _expansion)
     sphere_vars = sets.balls[sphere]
     moving = None if sets.coupling is None else sets.coupling[sphere]
@@ -602,7 +615,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     def hessian(xi):  # Rᵀ P̃ Z ξ + curvature on the tangent coordinates
         products[0] += 1
         return R.T @ (sets.scale * P.matvec(sets.scale * (Z @ xi))) + np.concatenate(
-            [np.zeros(free.size), curvature * xi[free.size:]])
+            [np.zeros(free.size), curvature * xi[free.size:]]) + shift * xi
 
     size = free.size + k * t
     # the system for the step from ξ at v, whose right-hand side is the residual there: one product with P where
@@ -617,6 +630,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
         H = R.T @ (Z.T @ matrix()).T  # P̃ symmetric
         H = H.toarray() if sp.issparse(H) else np.asarray(H)
         H[free.size:, free.size:] += np.diag(curvature)
+        H[np.diag_indices(size)] += shift
         # a relative 1e-14 on the diagonal: W is singular where a multiplier's DOFs are all held (a 3-D
         # punch's symmetry planes); such a variable then stays where it is
         H[np.diag_indices(size)] += 1e-14 * np.abs(H).max(initial=0.0)
@@ -635,7 +649,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     if size and not direct:
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
-            (size, size), matvec=precondition.system(R, np.concatenate([np.zeros(free.size), curvature])), dtype=float)
+            (size, size), matvec=precondition.system(R, np.concatenate([np.zeros(free.size), curvature]) + shift), dtype=float)
         callback = lambda *_: count.__setitem__(0, count[0] + 1)
         if moving is None:
             xi, _ = spla.cg(H, rhs, rtol=0.0, atol=target, maxiter=CG_LIMIT, M=M, callback=callback)
