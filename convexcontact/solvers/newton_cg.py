@@ -25,7 +25,8 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
     (the exact line search of a quadratic on a feasible segment; no bound of P is needed to take it).
 
 Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
-way. With balls (friction) it is Newton's point on a face grown until the point is feasible (GROW): the face the
+way; after a point far from v its systems are damped (FAR, DAMPING: a face with a near-singular system). With balls
+(friction) it is Newton's point on a face grown until the point is feasible (GROW): the face the
 natural map holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends,
 and a step solves at most GROW + 1 Newton systems.
 
@@ -125,8 +126,20 @@ solve with K, as a product is); where P is a matrix a product is far cheaper tha
 Tresca: 27 solves took the dense newton-cg from 0.12 to 0.94 s), so the sum serves until the natural residual is within
 SUM_FLOOR × ε ‖c q‖∞ of 0 or passes the stopping test, P's own formula after (the sum's rounding held the clamped
 strip 400 : 1 at ~5·10³ ε ‖c q‖ for 100 steps; from there P's own formula refines it as iterative refinement does)."""
-DAMPING = 10.0
 FAR = 1e3
+"""A Newton point more than FAR × the answer's scale from v (‖point − v‖∞) is far: its face holds a direction along
+which f is all but linear (a near-singular Newton system), and the next systems are damped (DAMPING). The 3-D pair of
+spheres (mortar, quarter model): the tangential multipliers of nodes on the symmetry planes act on almost nothing
+(W's least eigenvalues 1e-18 and 2e-14 against 1.5e-2), and from the stick start (frictionless pressures, every point
+sticking) Newton's point went 3·10⁶ × |v| away, its projection raised f, and no Newton point was taken in 100 steps.
+Elsewhere the Newton points measured stayed within 25 × |v| (the 2-D family at 2·10⁴ DOFs, matrix-free)."""
+DAMPING = 10.0
+"""After a far Newton point the Newton systems gain μ C⁻¹ on their diagonal (Levenberg–Marquardt; μ at least the
+natural residual, then DAMPING times more after each far point, DAMPING times less after each other; C = diag(c)).
+The point is only a trial of the step rules ("Convergence"), so the argument is unchanged; μ → 0 near the answer
+keeps Newton's local rate. The pair's Tresca dual from the stick start: 100 steps without a Newton point → 6; every
+row of the 2-D family at 2·10⁴ DOFs, matrix-free, the same steps and products (none far). μ = the natural residual at
+every step instead damped the 2-D block's Tresca dual into 100 projected-gradient steps (its residual starts at ~1)."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
