@@ -20,11 +20,9 @@ SIZES = {2: 1.5e3, 3: 1e3}
 CERTIFIED = {"signorini": 1e-10, "tresca": 1e-10, "coulomb": cc.Coulomb(friction=0.3).tol}
 """The issue's certificates: 1e-10 for Signorini and Tresca, Coulomb's own tolerance (1e-8)."""
 
-PAIR_3D = ("newton-cg fails on the 3-D pair's Tresca dual from the frictionless stick guess (100 steps, no Newton "
-           "point accepted; from its own start 6 steps): Newton's Coulomb solve stalls after 2 steps, the Picard "
-           "map's first inner solve fails, and a forced matrix-free dual has no other solver")
-FAILING = {(3, "two-body", "coulomb", MATRIX_FREE): PAIR_3D}
-"""Cases that are not solved today, and why."""
+FAILING: dict = {}
+"""Cases that are not solved today, and why: none since newton-cg damps its Newton systems after a far point (the
+3-D pair's Coulomb row, matrix-free; docs/performance.md, "The 3-D pair from the stick start")."""
 PRIMAL_3D = ("auto condenses no 3-D body whose contact nodes carry over a quarter of its DOFs; the sparse primal's "
              "second-order cones are not in the polish's bound form, and Clarabel alone certifies 3-D friction to "
              "~1e-7 (at the bench's sizes, 1e4 DOFs and up, auto takes a dual on these shapes)")

@@ -25,7 +25,8 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
     (the exact line search of a quadratic on a feasible segment; no bound of P is needed to take it).
 
 Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
-way. With balls (friction) it is Newton's point on a face grown until the point is feasible (GROW): the face the
+way; after a point far from v its systems are damped (FAR, DAMPING: a face with a near-singular system). With balls
+(friction) it is Newton's point on a face grown until the point is feasible (GROW): the face the
 natural map holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends,
 and a step solves at most GROW + 1 Newton systems.
 
@@ -130,6 +131,21 @@ solve with K, as a product is); where P is a matrix a product is far cheaper tha
 Tresca: 27 solves took the dense newton-cg from 0.12 to 0.94 s), so the sum serves until the natural residual is within
 SUM_FLOOR × ε ‖c q‖∞ of 0 or passes the stopping test, P's own formula after (the sum's rounding held the clamped
 strip 400 : 1 at ~5·10³ ε ‖c q‖ for 100 steps; from there P's own formula refines it as iterative refinement does)."""
+FAR = 1e3
+"""A Newton point more than FAR × the answer's scale from v (‖point − v‖∞) is far: its face holds a direction along
+which f is all but linear (a near-singular Newton system), and the next systems are damped (DAMPING). The 3-D pair of
+spheres (mortar, quarter model): the tangential multipliers of nodes on the symmetry planes act on almost nothing
+(W's least eigenvalues 1e-18 and 2e-14 against 1.5e-2), and from the stick start (frictionless pressures, every point
+sticking) Newton's point went 3·10⁶ × |v| away, its projection raised f, and no Newton point was taken in 100 steps.
+Elsewhere the Newton points measured stayed within 25 × |v| (the 2-D family at 2·10⁴ DOFs, matrix-free)."""
+DAMPING = 10.0
+"""After a far Newton point the Newton systems gain μ C⁻¹ on their diagonal (Levenberg–Marquardt; μ at least the
+natural residual, then DAMPING times more after each far point, DAMPING times less after each other; C = diag(c)).
+The point is only a trial of the step rules ("Convergence"), so the argument is unchanged; μ → 0 near the answer
+keeps Newton's local rate. The pair's Tresca dual from the stick start: 100 steps without a Newton point → 6; at
+10⁵ DOFs, matrix-free from its own start: stuck at 4e-11 after 62 steps and 3197 products → 6 and 123; every
+row of the 2-D family at 2·10⁴ DOFs, matrix-free, the same steps and products (none far). μ = the natural residual at
+every step instead damped the 2-D block's Tresca dual into 100 projected-gradient steps (its residual starts at ~1)."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
@@ -333,20 +349,21 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         p = _project(v - c * g, sets)
         return least_on_segment(v, g, p, move(v, g, p)[2])
 
-    def newton_point(v, y, target):
-        """Newton's point from v on the face y holds and the CG iterations it took; with balls (friction) and fixed
-        radii the face grown by the sets that point leaves until it leaves none (at most GROW times; see GROW), each
-        solve started from the last point, projected."""
-        newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix)
+    def newton_point(v, y, target, damping):
+        """Newton's point from v on the face y holds, the CG iterations it took and how far the first solve went
+        (‖point − v‖∞, see FAR); with balls (friction) and fixed radii the face grown by the sets that point leaves
+        until it leaves none (at most GROW times; see GROW), each solve started from the last point, projected."""
+        newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix, damping)
+        reach = np.abs(newton - v).max(initial=0.0)
         for _ in range(GROW if sets.coupling is None and sets.balls.size else 0):
             y = _grown(y, newton, sets)
             if y is None:
                 break
             newton, more = _step(P, affine, sets, _project(newton, sets), y, c, target, products,
-                                 cache["precondition"], matrix, GROWN_FORCING)
+                                 cache["precondition"], matrix, damping, GROWN_FORCING)
             iterations += more
             faces[0] += 1
-        return newton, iterations
+        return newton, iterations, reach
 
     def backtrack(v, g, towards, residual):
         """Without an f (moving balls), the first of 1, ½, …, 1/16 of the way to ``towards`` (projected)
@@ -367,6 +384,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     risen, kinds, descent = 0.0, dict.fromkeys(("residual", "newton", "arc", "segment", "gradient"), 0), []
     steps = cg_total = 0
     faces = [0]  # the faces grown (see GROW)
+    damping = 0.0  # μ of the Newton systems (see DAMPING)
     status, word = "failed", "max_iter"
     floor = SUM_FLOOR * EPS * (c * np.abs(sets.scale * program.q)).max(initial=0.0)
     for steps in range(max_iter + 1):
@@ -390,9 +408,10 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if steps == max_iter:
             break
         target = FORCING * min(1.0, residual / first) * residual * size / np.max(c)
-        newton, iterations = newton_point(v, y, max(target, 0.1 * tol * answer(v, size) / np.max(c)))
+        newton, iterations, reach = newton_point(v, y, max(target, 0.1 * tol * answer(v, size) / np.max(c)), damping)
         cg_total += iterations
         best = min(best, residual)
+        damping = _damped(damping, reach > FAR * size, residual)
         if sets.coupling is not None:
             v, g, moved = backtrack(v, g, newton, residual)
             if not moved:  # a projected-gradient segment, as for a fixed f: Newton stalled on a punch with F = 2
@@ -427,6 +446,12 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         status = "inaccurate"
     return ConicSolution(x=x, z=z, s=program.b - program.A @ x, status=status, solver_status=word, iterations=steps,
                          solve_time=time.perf_counter() - began, solver="newton-cg", info=info)
+
+
+def _damped(damping: float, far: bool, residual: float) -> float:
+    """μ for the next step: where Newton's point was ``far`` (see FAR) DAMPING times more and at least the natural
+    residual (Levenberg–Marquardt's choice), else DAMPING times less."""
+    return max(DAMPING * damping, residual) if far else damping / DAMPING
 
 
 class _Preconditioner:
@@ -565,11 +590,12 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
     return v
 
 
-def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, relative=0.0):
+def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, damping=0.0,
+          relative=0.0):
     """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v and the CG
     (GMRES, where radii move) iterations it took, CG stopping at ``target`` or ``relative`` × its first residual
     (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃) and the system has at most DIRECT_LIMIT unknowns, a dense
-    LU instead."""
+    LU instead. ``damping`` μ adds μ/c to the system's diagonal (:func:`_damped`, DAMPING)."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
@@ -595,6 +621,8 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     k, _, t = bases.shape
     c_sphere = c[sets.balls[sphere, 0]] if np.ndim(c) and sets.balls.shape[1] else np.max(c)
     curvature = np.repeat((norm[sphere] - rho) / (c_sphere * rho), t)
+    shift = np.concatenate([damping / np.broadcast_to(c, (n,))[free],  # μ/c on every unknown: see DAMPING
+                            np.repeat(np.broadcast_to(damping / c_sphere, (sphere.size,)), t)])
     # v = new + Z ξ: ξ holds the free variables, then t tangent coordinates per sphere (see _expansion)
     sphere_vars = sets.balls[sphere]
     moving = None if sets.coupling is None else sets.coupling[sphere]
@@ -608,7 +636,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     def hessian(xi):  # Rᵀ P̃ Z ξ + curvature on the tangent coordinates
         products[0] += 1
         return R.T @ (sets.scale * P.matvec(sets.scale * (Z @ xi))) + np.concatenate(
-            [np.zeros(free.size), curvature * xi[free.size:]])
+            [np.zeros(free.size), curvature * xi[free.size:]]) + shift * xi
 
     size = free.size + k * t
     # the system for the step from ξ at v, whose right-hand side is the residual there: one product with P where
@@ -623,6 +651,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
         H = R.T @ (Z.T @ matrix()).T  # P̃ symmetric
         H = H.toarray() if sp.issparse(H) else np.asarray(H)
         H[free.size:, free.size:] += np.diag(curvature)
+        H[np.diag_indices(size)] += shift
         # a relative 1e-14 on the diagonal: W is singular where a multiplier's DOFs are all held (a 3-D
         # punch's symmetry planes); such a variable then stays where it is
         H[np.diag_indices(size)] += 1e-14 * np.abs(H).max(initial=0.0)
@@ -641,7 +670,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     if size and not direct:
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
-            (size, size), matvec=precondition.system(R, np.concatenate([np.zeros(free.size), curvature])), dtype=float)
+            (size, size), matvec=precondition.system(R, np.concatenate([np.zeros(free.size), curvature]) + shift), dtype=float)
         callback = lambda *_: count.__setitem__(0, count[0] + 1)
         if moving is None:
             xi, _ = spla.cg(H, rhs, rtol=relative, atol=target, maxiter=CG_LIMIT, M=M, callback=callback)

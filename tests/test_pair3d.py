@@ -1,0 +1,51 @@
+"""The 3-D pair of spheres (mortar, quarter model; issue 25): its Tresca dual from the stick start the Coulomb solve
+seeds it with. W is singular there (the tangential multipliers of nodes on the symmetry planes act on almost
+nothing), and without the damping of far Newton points (newton_cg.FAR, DAMPING) not one Newton point was taken in
+100 steps."""
+
+import functools
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import convexcontact as cc
+from convexcontact.drivers import picard
+from convexcontact.solvers import newton_cg
+from convexcontact.studies.benchmarks.bench import scene_of
+
+
+@functools.cache
+def stick_start_program():
+    """The pair's model at 2·10³ DOFs (dense W) and its Tresca program under the frictionless pressures' slip bounds."""
+    model = cc.prepare(scene_of("two-body", 3, "coulomb", 2e3), "dual")
+    bound = picard.pressure_map(model)[0](picard.initial_pressure(model, "newton-cg", {}))
+    return model, replace(model.program, **model.bound_update(bound))
+
+
+def solve_from_the_stick_start():
+    model, program = stick_start_program()
+    session = newton_cg.Session(program)
+    model.seed(session, "newton-cg", {}, start={"tol": picard.START_TOL})
+    return program, session.solve()
+
+
+def objective(program, x: np.ndarray) -> float:
+    return 0.5 * x @ (program.P @ x) + program.q @ x
+
+
+def test_the_pairs_tresca_dual_is_solved_from_the_stick_start_as_clarabel_solves_it():
+    """A few Newton steps, and the least value of the dual that Clarabel finds (the multipliers are not unique: W is
+    singular, so the values are compared, not the points)."""
+    program, solution = solve_from_the_stick_start()
+    reference = cc.solvers.solve(program, "clarabel")
+    assert solution.status == "solved" and solution.iterations <= 10
+    assert np.linalg.eigvalsh(program.P.toarray())[0] < 1e-15 * abs(program.P).max()  # the case this is about
+    assert objective(program, solution.x) == pytest.approx(objective(program, reference.x), rel=1e-8)
+
+
+def test_the_check_catches_newton_cg_without_the_damping(monkeypatch):
+    """Without the damping (no Newton point is ever far) the same solve takes no Newton point and fails."""
+    monkeypatch.setattr(newton_cg, "FAR", np.inf)
+    _, solution = solve_from_the_stick_start()
+    assert solution.status != "solved" and solution.info["steps"]["residual"] + solution.info["steps"]["newton"] == 0
