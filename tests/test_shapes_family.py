@@ -20,12 +20,10 @@ SIZES = {2: 1.5e3, 3: 1e3}
 CERTIFIED = {"signorini": 1e-10, "tresca": 1e-10, "coulomb": cc.Coulomb(friction=0.3).tol}
 """The issue's certificates: 1e-10 for Signorini and Tresca, Coulomb's own tolerance (1e-8)."""
 
-PAIR_3D = ("Newton's Coulomb solve on the 3-D pair stalls (13 steps) and the Picard map's inner Tresca solves run out "
-           "their steps: the tangential multipliers of the nodes on the symmetry planes are near-null (W_jj ~ 4e-8 of "
-           "the largest). It passed with two-layer patches of the local diagonal (its step lengths), fails with the "
-           "one layer 3-D faces now take, and fails at 1e4 DOFs with either; auto's dense W solves it")
-FAILING = {(3, "two-body", "coulomb", MATRIX_FREE): PAIR_3D}
-"""Cases that are not solved today, and why."""
+FAILING: dict = {}
+"""Cases that are not solved today, and why: none since newton-cg damps its Newton systems after a far point (the
+3-D pair's Coulomb row, matrix-free; docs/performance.md, "The 3-D pair from the stick start"). That row hangs on the
+local diagonal's estimates of near-null rows: with one layer of patches on 3-D faces it stalled again."""
 PRIMAL_3D = ("auto condenses no 3-D body whose contact nodes carry over a quarter of its DOFs; the sparse primal's "
              "second-order cones are not in the polish's bound form, and Clarabel alone certifies 3-D friction to "
              "~1e-7 (at the bench's sizes, 1e4 DOFs and up, auto takes a dual on these shapes)")

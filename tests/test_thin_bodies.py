@@ -6,7 +6,6 @@ import pytest
 import scipy.sparse as sp
 
 import convexcontact as cc
-from convexcontact.fem import local_delassus
 from convexcontact.fem.local_delassus import local_diagonal
 from convexcontact.scene.library import whole_face
 from convexcontact.solvers import newton_cg
@@ -41,15 +40,6 @@ def test_a_node_s_rows_share_a_patch_and_keep_their_own_diagonal(dim, nodes, dof
     factorizations in 3-D; each row's d_j is still b_jᵀ K_Ω⁻¹ b_j on its own support's patch."""
     K, B = contact_rows(dim, nodes, dofs)
     np.testing.assert_allclose(local_diagonal(K, B, layers), row_by_row(K, B, layers), rtol=1e-10)
-
-
-@pytest.mark.parametrize("dim, nodes, dofs, layers", [(2, 9, 200, 2), (3, 81, 2500, 1)])
-def test_the_patches_stop_growing_past_their_size(dim, nodes, dofs, layers):
-    """By default the patches grow LAYERS times in 2-D (P1: ~10 DOFs after one layer) and once in 3-D (Q1: ~46 after
-    one, ~220 after two: five times the work for the same Newton steps)."""
-    K, B = contact_rows(dim, nodes, dofs)
-    assert local_delassus.LAYERS == 2
-    np.testing.assert_array_equal(local_diagonal(K, B), local_diagonal(K, B, layers))
 
 
 def test_grown_faces_solved_loosely_give_the_same_answer_for_fewer_products(monkeypatch):

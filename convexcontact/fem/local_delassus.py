@@ -15,31 +15,25 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 LAYERS = 2
-"""Most layers of cells around a row's support (patches of ~24 DOFs on a 2-D P1 face)."""
-PATCH = 30
-"""Mean DOFs of the patches from which they grow no further: a patch costs its size cubed. One layer leaves ~10 DOFs
-on a 2-D P1 face, ~45–54 on a 3-D Q1 face, where a second took them to ~220 and the diagonal of a plate 20 : 20 : 1
-(3.3·10⁴ DOFs) from 1.3 s to 6.5 s, ten times its linear solve, for the same Newton steps and products on the 3-D
-plates, flat, tall and two-body rows (products 43 against 40, 105 against 115, 160 and 160; docs/performance.md,
-"Thin bodies"). In 2-D the second layer stays: one cost the pair 172 products against 158."""
+"""Layers of cells around a row's support (patches of ~24 DOFs on a 2-D P1 face, ~220 on a 3-D Q1 face). One layer
+on 3-D faces made the diagonal of a plate 20 : 20 : 1 five times cheaper (3.3·10⁴ DOFs: 6.5 → 1.3 s) for the same
+Newton steps there, but its cruder step lengths c_j = 0.1 / d_j on the near-null rows of the 3-D pair of spheres
+(tangential multipliers of the nodes on its symmetry planes) left its Tresca row at 10⁵ DOFs `inaccurate` after 100
+Newton steps (6 steps with two layers) and its Coulomb row matrix-free stalled (docs/performance.md, "Thin bodies")."""
 
 
-def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int | None = None) -> np.ndarray:
-    """d_j = b_jᵀ K_Ω⁻¹ b_j for each row b_j of B, Ω_j its support grown through K's graph ``layers`` times (None:
-    LAYERS times or until the patches' mean passes PATCH DOFs). Rows whose supports grown once are alike (a node's
-    normal and tangential rows, whose own supports are a component each) share their patch: the patches are coloured,
-    and each colour is one factorization with a right-hand side per row of a patch (3-D: a third of the
-    factorizations of a colouring by the rows' own supports)."""
+def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.ndarray:
+    """d_j = b_jᵀ K_Ω⁻¹ b_j for each row b_j of B, Ω_j its support grown through K's graph ``layers`` times. Rows
+    whose supports grown once are alike (a node's normal and tangential rows, whose own supports are a component
+    each) share their patch: the patches are coloured, and each colour is one factorization with a right-hand side
+    per row of a patch (3-D: a third of the factorizations of a colouring by the rows' own supports)."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
     graph = sp.csr_matrix((np.ones(K.nnz, dtype=np.int32), K.indices, K.indptr), shape=K.shape)
-    layers, largest = (LAYERS, PATCH) if layers is None else (layers, np.inf)
     reach = _pattern(graph @ B.T).T.tocsr() if layers else B  # each row's support grown once
     support, slot = supports(reach)
     first = np.flatnonzero(slot == 0)  # a row of each patch, in the order of the patches
     patch = _pattern(reach[first].T)  # n × patches
     for _ in range(layers - 1):
-        if patch.nnz >= largest * patch.shape[1]:
-            break
         patch = _pattern(graph @ patch)
     conflict = _pattern(patch.T @ _pattern(graph @ patch))  # patches that overlap or touch
     diagonal = np.zeros(B.shape[0])
