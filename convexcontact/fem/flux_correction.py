@@ -114,11 +114,11 @@ class StreamOperator:
         hats = (W.sum(axis=2, keepdims=True) * curls).sum(axis=1)
         return bubbles, hats
 
-    def gather(self, x: np.ndarray) -> None:
+    def gather(self, x: np.ndarray, bubbles: np.ndarray, hats: np.ndarray) -> None:
         """Each cell's coefficients of x into ``bubbles`` and ``hats`` (rows, k, cells)."""
         for i in range(2):  # mode "clip": numpy buffers a take into ``out=`` that checks its indices (6× slower)
-            np.take(x[i, :self.nfacets], self.facets, out=self.bubbles[i], mode="clip")
-            np.take(x[i, self.nfacets:], self.vertices, out=self.hats[i], mode="clip")
+            np.take(x[i, :self.nfacets], self.facets, out=bubbles[i], mode="clip")
+            np.take(x[i, self.nfacets:], self.vertices, out=hats[i], mode="clip")
 
     def scatter(self, dtype) -> np.ndarray:
         """The cells' ``loads`` summed onto the facets and vertices (rows, facets + vertices)."""
@@ -136,7 +136,7 @@ class StreamOperator:
         return self.scatter(self.curls.dtype)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        self.gather(x)
+        self.gather(x, self.bubbles, self.hats)
         for cells in blocks(self.loads.shape[-1]):
             tau = midpoint_values(self.bubbles[..., cells], self.hats[..., cells], self.curls[..., cells])
             self.loads[0][..., cells], self.loads[1][..., cells] = self.adjoint(self.weighted_form(tau, cells), cells)
@@ -222,9 +222,7 @@ def with_curl(vertex_stress, x, gradients, operator: StreamOperator, out=None) -
     at = vertex_stress.transpose(0, 1, 3, 2)  # (rows, x, m, cells)
     out = np.empty_like(at) if out is None else out
     bubbles, hats = operator.loads
-    for i in range(2):
-        np.take(x[i, :operator.nfacets], operator.facets, out=bubbles[i], mode="clip")
-        np.take(x[i, operator.nfacets:], operator.vertices, out=hats[i], mode="clip")
+    operator.gather(x, bubbles, hats)
     for cells in blocks(out.shape[-1]):
         tau = midpoint_values(bubbles[..., cells], hats[..., cells], curls(gradients, cells))
         tau *= -2.0  # a linear field's vertex values from its midpoints: V_k = Σ M − 2 M_k
