@@ -54,6 +54,21 @@ def check_adapt_options(target, max_dofs, fraction, growth=GROWTH) -> tuple[floa
     return float(target), int(max_dofs), float(fraction), None if growth is None else float(growth)
 
 
+def check_adapt_scene(scene: Scene) -> list[fe.Mesh]:
+    """The meshes of a scene the adaptive loop can refine (see :func:`adapt`), else a SceneError naming the field."""
+    of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
+    meshes = body_meshes(scene)
+    if isinstance(scene.body, Bodies):
+        if scene.body.element != "P1" or not isinstance(meshes[0], fe.MeshTri1):
+            raise SceneError("body", f"adaptive refinement of several bodies is driven by their error bound, which "
+                             f"covers 2-D P1 triangles only (got {scene.body.element} on {type(meshes[0]).__name__})",
+                             "give the parts P1 triangles, or solve the bodies on a finer mesh with cc.solve")
+    elif not isinstance(scene.materials, Material):
+        raise SceneError("materials", "materials per subdomain are not carried through local refinement",
+                         "give one material, or refine the mesh file yourself")
+    return meshes
+
+
 def dofs_of(mesh: fe.Mesh, element: str) -> int:
     """The DOF count of ``element`` on ``mesh`` (before Dirichlet elimination), without building a basis."""
     nodes = mesh.nvertices
@@ -184,17 +199,8 @@ def adapt(scene: Scene, target: float = 1e-2, max_dofs: int = 200_000, fraction:
     DOFs grow by ``growth`` at least (None: Dörfler's alone). Several bodies (2-D P1 triangles: their bound) are
     marked together and each refined where its cells are. Returns every level's certified result;
     ``progress(level, result)`` after each."""
-    of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
     target, max_dofs, fraction, growth = check_adapt_options(target, max_dofs, fraction, growth)
-    meshes = body_meshes(scene)
-    if isinstance(scene.body, Bodies):
-        if scene.body.element != "P1" or not isinstance(meshes[0], fe.MeshTri1):
-            raise SceneError("body", f"adaptive refinement of several bodies is driven by their error bound, which "
-                             f"covers 2-D P1 triangles only (got {scene.body.element} on {type(meshes[0]).__name__})",
-                             "give the parts P1 triangles, or solve the bodies on a finer mesh with cc.solve")
-    elif not isinstance(scene.materials, Material):
-        raise SceneError("materials", "materials per subdomain are not carried through local refinement",
-                         "give one material, or refine the mesh file yourself")
+    meshes = check_adapt_scene(scene)
     how = ("local (Dörfler)" if isinstance(meshes[0], LOCAL) else
            "uniform: quadrilaterals and hexahedra are not refined locally")
     levels: list[ContactResult] = []

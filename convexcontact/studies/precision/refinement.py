@@ -26,7 +26,15 @@ import skfem as fe
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ...drivers.adapt import GROWTH, adapt, body_meshes, check_adapt_options, refined_uniformly, scene_on
+from ...drivers.adapt import (
+    GROWTH,
+    adapt,
+    body_meshes,
+    check_adapt_options,
+    check_adapt_scene,
+    refined_uniformly,
+    scene_on,
+)
 from ...drivers.solve import solve
 from ...results.result import ContactResult
 from ...scene.description import Scene
@@ -145,7 +153,7 @@ def compare(scene: Scene, levels: int = 4, fraction: float = 0.5, progress: Call
     solve."""
     if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or levels < 2:
         raise ValueError(f"levels: the number of uniform levels, an integer ≥ 2, got {levels!r}; e.g. 4")
-    mesh = body_meshes(scene)[0]
+    mesh = check_adapt_scene(scene)[0]  # what the adaptive family will refuse, refused before any solve
     if scene.body.element not in ("P1", "P2") or mesh.t.shape[0] != mesh.dim() + 1:
         raise ValueError(f"scene: the comparison measures P1 or P2 simplices (their true error is interpolated "
                          f"exactly), got {scene.body.element} on {type(mesh).__name__}; give a P1 or P2 scene on "
