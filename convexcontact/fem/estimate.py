@@ -17,7 +17,8 @@ traction is the field of the trace space whose moments are the discrete nodal co
 (t_h = Σ τ_i ψ_i with M τ = F, M the boundary mass of Γ_C): the same for lumped, weak (Hild's P1) and
 Gauss-point multipliers, and with it the residual vanishes on the discrete test functions. p_h = −t_h·n
 is the pressure, g and u_N,h the trace-space interpolants of the nodal gap and normal displacement,
-v_T,h the slip. The obstacle's own interpolation error (g − g_h, O(h²) for a smooth obstacle) is not
+v_T,h the slip. The complementarity term is signed on each facet: its sum over Γ_C is the discrete complementarity
+λᵀC(g − u_N), zero for the exact discrete solution. The obstacle's own interpolation error (g − g_h, O(h²) for a smooth obstacle) is not
 included. The 1/2μ weights put the residual terms in energy units (‖u − u_h‖² ≤ C/(2μ) ‖residual‖²
 by Korn's inequality).
 
