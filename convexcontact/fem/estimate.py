@@ -8,7 +8,7 @@ modulus, t_h the contact traction the discrete problem holds and g_N the applied
                       + ½ Σ_{E ⊂ ∂T interior} h_E ‖[σ n]‖²_E                 jump
                       + Σ_{E ⊂ ∂T ∩ Γ_N} h_E ‖σ n − g_N‖²_E                  neumann
                       + Σ_{E ⊂ ∂T ∩ Γ_C} h_E ‖σ n − t_h‖²_E ]                contact (normal and tangential)
-           + Σ_{E ⊂ ∂T ∩ Γ_C} ∫_E (p_h)_+ (g − u_N,h)_+                     complementarity
+           + Σ_{E ⊂ ∂T ∩ Γ_C} (∫_E p_h (g − u_N,h))_+                       complementarity
            + Σ_{E ⊂ ∂T ∩ Γ_C} 2μ_T h_E⁻¹ ‖(u_N,h − g)_+‖²_E                  penetration
            + Σ_{E ⊂ ∂T ∩ Γ_C} ∫_E (|t_T,h| |v_T,h| + t_T,h · v_T,h)           friction (slip against the traction)
 
@@ -17,7 +17,8 @@ traction is the field of the trace space whose moments are the discrete nodal co
 (t_h = Σ τ_i ψ_i with M τ = F, M the boundary mass of Γ_C): the same for lumped, weak (Hild's P1) and
 Gauss-point multipliers, and with it the residual vanishes on the discrete test functions. p_h = −t_h·n
 is the pressure, g and u_N,h the trace-space interpolants of the nodal gap and normal displacement,
-v_T,h the slip. The obstacle's own interpolation error (g − g_h, O(h²) for a smooth obstacle) is not
+v_T,h the slip. The complementarity term is signed on each facet: its sum over Γ_C is the discrete complementarity
+λᵀC(g − u_N), zero for the exact discrete solution. The obstacle's own interpolation error (g − g_h, O(h²) for a smooth obstacle) is not
 included. The 1/2μ weights put the residual terms in energy units (‖u − u_h‖² ≤ C/(2μ) ‖residual‖²
 by Korn's inequality).
 
@@ -247,8 +248,9 @@ def boundary_terms(fem: FEModel, space: dict, u_components: np.ndarray, state: C
     pressure = -(traction * n).sum(axis=0)
     if state.constrained:
         opening = interpolate(facets, trace_field(fem, state.gap - state.normal_displacement))
-        np.add.at(out["complementarity"], cell,
-                  (np.maximum(pressure, 0.0) * np.maximum(opening, 0.0) * dx).sum(axis=1))
+        # signed on each facet (its sum over Γ_C is λᵀC(g − u_N), zero at the discrete complementarity), not the
+        # pointwise (p_h)_+ (g − u_N,h)_+: P2 tetrahedra's weak multipliers oscillate (docs/estimate.md)
+        np.add.at(out["complementarity"], cell, np.maximum((pressure * opening * dx).sum(axis=1), 0.0))
         np.add.at(out["penetration"], cell, 2.0 * mu[cell] * (np.maximum(-opening, 0.0) ** 2 / h * dx).sum(axis=1))
     if state.slip is not None:
         tangential = traction + pressure * n
