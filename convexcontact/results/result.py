@@ -301,6 +301,7 @@ def effectivity(element: str, dim: int) -> float:
     """The residual estimate's calibration constant for ``element`` in ``dim`` dimensions."""
     return EFFECTIVITY_3D.get(element, EFFECTIVITY[element]) if dim == 3 else EFFECTIVITY[element]
 
+
 LARGE_ERROR = 0.5
 """Estimated relative discretization error (energy norm) above which a result warns and names the remedy: an answer
 not resolved at all. Measured (docs/estimate.md): Hertz P1 ν = 0.3 on the stability study's nx = 32 mesh 0.19, the
