@@ -49,3 +49,21 @@ def test_the_check_catches_newton_cg_without_the_damping(monkeypatch):
     monkeypatch.setattr(newton_cg, "FAR", np.inf)
     _, solution = solve_from_the_stick_start()
     assert solution.status != "solved" and solution.info["steps"]["residual"] + solution.info["steps"]["newton"] == 0
+
+
+def test_the_axis_nodes_tangential_rows_are_its_normal_row_on_the_free_dofs():
+    """The node on both symmetry planes: the planes hold its tangential motion, so on the free DOFs its two
+    tangential rows and its normal row are one direction (the mortar normal's tilt). W's two null vectors lie on
+    these three multipliers, and one of them moves the normal multiplier too: the tangential multipliers there are
+    no inert rows to hold at 0 or leave out; a change of them is a change of the node's pressure, so of its slip
+    bound (docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs")."""
+    model, program = stick_start_program()
+    W, m = program.P.toarray(), model.fem.contact.m
+    tangential = np.diag(W)[m:].reshape(-1, m).max(axis=0)
+    axis = int(np.argmin(tangential))
+    assert tangential[axis] < 1e-6 * np.diag(W).max()  # the rows this is about
+    values, vectors = np.linalg.eigh(W)
+    null = vectors[:, :2]
+    assert abs(values[:2]).max() < 1e-14 * abs(values).max() < values[2]
+    assert np.linalg.norm(null[[axis, m + axis, 2 * m + axis]], axis=0) == pytest.approx(1.0, abs=1e-6)
+    assert abs(null[axis]).max() > 1e-3
