@@ -161,7 +161,8 @@ tangential rows are its normal row (the mortar normal's tilt), W is singular on 
 3.6e-8 max P̃ and c_j 10⁹. Its Coulomb solve at 10⁴ DOFs stalled after 9 steps at 1.4e-8 on those rows (the rounding
 × 10⁹), the points beside them still at 1.2e-8: certificate 2.5e-8 > the law's 1e-8, `inaccurate`. Newton's point at
 that stall moved the node's multipliers 200 along the singular direction. Now 2 more steps: natural residual 8e-16,
-certificate 2.4e-11. Only from a stall: from the start, step lengths capped at 0.1 / (ε max P̃) stalled the same
+certificate 7e-12; at 1.9·10⁴ DOFs, where Newton stalled at once and the Picard map took 116 s, 8 steps and 0.14 s.
+Only from a stall: from the start, step lengths capped at 0.1 / (ε max P̃) stalled the same
 solve after 3 steps at 8e-5 and the proximal term after 4 at 1e-1 (the large c_j is what puts such a ball on its
 sphere in the first steps); the Tresca dual at its answer's radii, capped, failed after 100 steps where it takes 1
 (docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs")."""
@@ -320,6 +321,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         v = _project(v - c * g, sets)
         g = gradient(v)
     def natural(v, g):
+        """:func:`_natural` with the residual's step lengths (see INERT)."""
         return _natural(v, g, c, sets, program.q, metric)
 
     def move(v, g, w):
