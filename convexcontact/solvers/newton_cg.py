@@ -164,8 +164,8 @@ that stall moved the node's multipliers 200 along the singular direction. Now 2 
 certificate 7e-12; at 1.9·10⁴ DOFs, where Newton stalled at once and the Picard map took 116 s, 8 steps and 0.14 s.
 Only from a stall: from the start, step lengths capped at 0.1 / (ε max P̃) stalled the same
 solve after 3 steps at 8e-5 and the proximal term after 4 at 1e-1 (the large c_j is what puts such a ball on its
-sphere in the first steps); the Tresca dual at its answer's radii, capped, failed after 100 steps where it takes 1
-(docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs")."""
+sphere in the first steps); the Tresca dual under the answer's radii from the stick start, capped, failed after 100
+steps (3.3e-5) where it takes 8 (docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs")."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
