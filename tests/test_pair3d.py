@@ -1,7 +1,8 @@
 """The 3-D pair of spheres (mortar, quarter model; issue 25): its Tresca dual from the stick start the Coulomb solve
 seeds it with. W is singular there (the tangential multipliers of nodes on the symmetry planes act on almost
 nothing), and without the damping of far Newton points (newton_cg.FAR, DAMPING) not one Newton point was taken in
-100 steps."""
+100 steps. Its Coulomb problem at 10⁴ DOFs, by Newton's method with moving radii: without the inert sets' metric and
+proximal term from a stall on (newton_cg.INERT) it stalled on the axis node's rounding."""
 
 import functools
 from dataclasses import replace
@@ -11,6 +12,7 @@ import pytest
 
 import convexcontact as cc
 from convexcontact.drivers import picard
+from convexcontact.formulations.dual import normal_multipliers
 from convexcontact.solvers import newton_cg
 from convexcontact.studies.benchmarks.bench import scene_of
 
@@ -49,3 +51,54 @@ def test_the_check_catches_newton_cg_without_the_damping(monkeypatch):
     monkeypatch.setattr(newton_cg, "FAR", np.inf)
     _, solution = solve_from_the_stick_start()
     assert solution.status != "solved" and solution.info["steps"]["residual"] + solution.info["steps"]["newton"] == 0
+
+
+def test_the_axis_nodes_tangential_rows_are_its_normal_row_on_the_free_dofs():
+    """The node on both symmetry planes: the planes hold its tangential motion, so on the free DOFs its two
+    tangential rows and its normal row are one direction (the mortar normal's tilt). W's two null vectors lie on
+    these three multipliers, and one of them moves the normal multiplier too: the tangential multipliers there are
+    no inert rows to hold at 0 or leave out; a change of them is a change of the node's pressure, so of its slip
+    bound (docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs")."""
+    model, program = stick_start_program()
+    W, m = program.P.toarray(), model.fem.contact.m
+    tangential = np.diag(W)[m:].reshape(-1, m).max(axis=0)
+    axis = int(np.argmin(tangential))
+    assert tangential[axis] < 1e-6 * np.diag(W).max()  # the rows this is about
+    values, vectors = np.linalg.eigh(W)
+    null = vectors[:, :2]
+    assert abs(values[:2]).max() < 1e-14 * abs(values).max() < values[2]
+    assert np.linalg.norm(null[[axis, m + axis, 2 * m + axis]], axis=0) == pytest.approx(1.0, abs=1e-6)
+    assert abs(null[axis]).max() > 1e-3
+
+
+def coulomb_newton_at_ten_thousand_dofs():
+    """The pair at 10⁴ DOFs (291 unknowns, dense W) and Newton's solve of its Coulomb problem from the stick start,
+    as the Coulomb driver makes it."""
+    model = cc.prepare(scene_of("two-body", 3, "coulomb", 1e4), "dual")
+    session = newton_cg.Session(model.program)
+    model.seed(session, "newton-cg", {}, start={})
+    pressure_bound = picard.pressure_map(model)[2] @ normal_multipliers(model.program, model.C, model.fem.contact)
+    return model, session.coupled(pressure_bound)
+
+
+def coulomb_residual(model, solution) -> float:
+    return picard.residual(model, model.recover(solution), solution.info["radii"])
+
+
+def test_the_pairs_coulomb_problem_at_ten_thousand_dofs_is_solved_as_clarabel_solves_its_tresca_problem():
+    """Solved to newton-cg's tol and certified to the law's 1e-8; its displacement is Clarabel's answer of the Tresca
+    problem under the slip bounds Newton reached (unique in u: K is positive definite), to Clarabel's accuracy."""
+    model, solution = coulomb_newton_at_ten_thousand_dofs()
+    assert solution.status == "solved"
+    assert coulomb_residual(model, solution) < 1e-8
+    reference = cc.solvers.solve(replace(model.program, **model.bound_update(solution.info["radii"])), "clarabel")
+    u, expected = model.recover(solution).u, model.recover(reference).u
+    assert np.abs(u - expected).max() < 1e-6 * np.abs(expected).max()
+
+
+def test_the_check_catches_newton_cg_without_the_inert_sets(monkeypatch):
+    """Without them (no set inert) the same solve stalls at the axis node's rounding, short of the law's 1e-8."""
+    monkeypatch.setattr(newton_cg, "_inert", lambda c, tol: None)
+    model, solution = coulomb_newton_at_ten_thousand_dofs()
+    assert solution.status != "solved" and solution.solver_status == "stalled"
+    assert coulomb_residual(model, solution) > 1e-8

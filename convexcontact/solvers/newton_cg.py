@@ -146,6 +146,26 @@ keeps Newton's local rate. The pair's Tresca dual from the stick start: 100 step
 10⁵ DOFs, matrix-free from its own start: stuck at 4e-11 after 62 steps and 3197 products → 6 and 123; every
 row of the 2-D family at 2·10⁴ DOFs, matrix-free, the same steps and products (none far). μ = the natural residual at
 every step instead damped the 2-D block's Tresca dual into 100 projected-gradient steps (its residual starts at ~1)."""
+INERT = 1.0
+"""A set (a bound, or a ball: all its rows) is inert where P̃_jj < ε max P̃ on each of its rows, ε = INERT · EPS / tol:
+its step length c_j = 0.1 / P̃_jj turns ∇f's rounding (≥ EPS · max P̃ · ‖v‖, the product's) into more than a tenth of
+the stopping test's tol · ‖v‖ on its natural residual, a floor no step lowers (and c_j |q_j| inflates the answer's
+scale). Where Newton's method with moving radii (:func:`coupled`) stalls, from then on the residual measures those sets
+with the least step length of all, 0.1 / max P̃ (their rounding then weighs as little as the stiffest row's), and their
+rows of the Newton systems gain ε max P̃ (a proximal term). Both are sound: the natural map's zeros do not depend on
+the step lengths (for each set, Π(v − c g) = v says that −g is normal to it at v, whatever c > 0), Newton's point is
+only a trial of the step rules, and the certificate, computed on the whole problem, still judges the answer.
+
+The 3-D pair of spheres (mortar, quarter model), its node on both symmetry planes: on the free DOFs its two
+tangential rows are its normal row (the mortar normal's tilt), W is singular on its three multipliers, P̃_jj is
+3.6e-8 max P̃ and c_j 10⁹. Its Coulomb solve at 10⁴ DOFs stalled after 9 steps at 1.4e-8 on those rows (the rounding
+× 10⁹), the points beside them still at 1.2e-8: certificate 2.5e-8 > the law's 1e-8, `inaccurate`. Newton's point at
+that stall moved the node's multipliers 200 along the singular direction. Now 2 more steps: natural residual 8e-16,
+certificate 7e-12; at 1.9·10⁴ DOFs, where Newton stalled at once and the Picard map took 116 s, 8 steps and 0.14 s.
+Only from a stall: from the start, step lengths capped at 0.1 / (ε max P̃) stalled the same
+solve after 3 steps at 8e-5 and the proximal term after 4 at 1e-1 (the large c_j is what puts such a ball on its
+sphere in the first steps); the Tresca dual under the answer's radii from the stick start, capped, failed after 100
+steps (3.3e-5) where it takes 8 (docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs")."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
@@ -287,6 +307,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     curvature = probe @ P.matvec(probe) / (probe @ probe)
     c = 0.1 / curvature if curvature > 0 else 1.0  # 0.1: 219 products on a 2-D Tresca dual, 1: 263, 10: 2076
     c = _step_lengths(program.P, sets, c, products)
+    metric, proximal, inert = c, 0.0, _inert(c, tol)  # the residual's step lengths, see INERT
     cache = {} if cache is None else cache
     if "precondition" not in cache:
         approximation = getattr(program.P, "approximation", None)
@@ -299,6 +320,10 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     if start is None:
         v = _project(v - c * g, sets)
         g = gradient(v)
+    def natural(v, g):
+        """:func:`_natural` with the residual's step lengths (see INERT)."""
+        return _natural(v, g, c, sets, program.q, metric)
+
     def move(v, g, w):
         """∇f at w, f(w) − f(v) (exact: f is quadratic) and P̃(w − v): one product. Where P x + q has its own
         formula (:func:`_affine`) ∇f at w is that, not g + P̃(w − v): the sum's errors, ε‖P̃‖‖w − v‖ a step, added
@@ -328,7 +353,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         gradient's segment. The point, ∇f there, f's change and which point it is."""
         end = _project(towards, sets)  # the points themselves are returned: v + (w − v) would leave bounds by round-off
         g_end, change, Pd = move(v, g, end)
-        if risen + change <= 0 and _natural(end, g_end, c, sets, program.q)[0] < residual:
+        if risen + change <= 0 and natural(end, g_end)[0] < residual:
             return end, g_end, change, "residual"
         if matrix is not None and change <= ARMIJO * cauchy:
             return end, g_end, change, "newton"
@@ -353,14 +378,15 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         """Newton's point from v on the face y holds, the CG iterations it took and how far the first solve went
         (‖point − v‖∞, see FAR); with balls (friction) and fixed radii the face grown by the sets that point leaves
         until it leaves none (at most GROW times; see GROW), each solve started from the last point, projected."""
-        newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix, damping)
+        newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix, damping,
+                                   proximal=proximal)
         reach = np.abs(newton - v).max(initial=0.0)
         for _ in range(GROW if sets.coupling is None and sets.balls.size else 0):
             y = _grown(y, newton, sets)
             if y is None:
                 break
             newton, more = _step(P, affine, sets, _project(newton, sets), y, c, target, products,
-                                 cache["precondition"], matrix, damping, GROWN_FORCING)
+                                 cache["precondition"], matrix, damping, GROWN_FORCING, proximal)
             iterations += more
             faces[0] += 1
         return newton, iterations, reach
@@ -371,7 +397,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         for alpha in 0.5 ** np.arange(5):
             w = _project(v + alpha * (towards - v), sets)
             gw = gradient(w)
-            if _natural(w, gw, c, sets, program.q)[0] < residual:
+            if natural(w, gw)[0] < residual:
                 return w, gw, True
         return v, g, False
 
@@ -388,11 +414,11 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     status, word = "failed", "max_iter"
     floor = SUM_FLOOR * EPS * (c * np.abs(sets.scale * program.q)).max(initial=0.0)
     for steps in range(max_iter + 1):
-        residual, y, size = _natural(v, g, c, sets, program.q)
+        residual, y, size = natural(v, g)
         if residual * size <= max(tol * answer(v, size), 0.0 if exact or own is None else floor):
             exact = own is not None  # the sum's rounding is near: P's own formula from here on, where it has one
             g = gradient(v)  # ∇f was updated along the segments: check with a fresh one
-            residual, y, size = _natural(v, g, c, sets, program.q)
+            residual, y, size = natural(v, g)
         first = first or residual
         history.append(residual)
         if verbose:
@@ -416,6 +442,9 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             v, g, moved = backtrack(v, g, newton, residual)
             if not moved:  # a projected-gradient segment, as for a fixed f: Newton stalled on a punch with F = 2
                 v, g, moved = backtrack(v, g, _project(v - c * g, sets), residual)
+            if not moved and inert is not None:  # the inert sets' rounding may be what stalls it: see INERT
+                (metric, proximal), inert = inert, None
+                continue
             if not moved:
                 word = "stalled"
                 break
@@ -425,7 +454,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         # point that lowers f at least as a fraction of the projected gradient's step does (see "Convergence")
         cauchy = g @ (_project(y, sets) - v)
         v, g, change, kind = descend(v, g, newton, ACCEPT * best, cauchy, risen)
-        if kind in ("segment", "gradient") and _natural(v, g, c, sets, program.q)[0] > STALL * residual:
+        if kind in ("segment", "gradient") and natural(v, g)[0] > STALL * residual:
             v, g, more = gradient_step(v, g)
             change += more
         risen += change
@@ -546,6 +575,16 @@ def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
     return lengths
 
 
+def _inert(c, tol: float):
+    """The residual's step lengths, the least c on the inert sets (see INERT), and the proximal term of each variable,
+    ε max P̃ on those sets and 0 elsewhere; None where no set is inert or c is one number."""
+    if np.ndim(c) == 0:
+        return None
+    floor = INERT * EPS / tol * 0.1 / np.min(c)  # P̃_jj = 0.1 / c_j (:func:`_step_lengths`)
+    inert = c > 0.1 / floor
+    return (np.where(inert, np.min(c), c), np.where(inert, floor, 0.0)) if inert.any() else None
+
+
 def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds) -> np.ndarray | None:
     """y (v − c∇f, whose outside sets :func:`_step` holds) with the sets it leaves free and Newton's point leaves
     added, at Newton's point (so held on that side, a ball on its sphere through it); None where there are none."""
@@ -568,12 +607,13 @@ def _affine(program: ConicProgram):
     return (lambda x: P.matvec(x) + program.q), program.gradient
 
 
-def _natural(v, g, c, sets: _Bounds, q):
-    """The natural residual ‖v − Π(v − c∇f)‖∞ relative to the answer's scale, v − c∇f and that scale
-    (Π onto the sets at v, where radii move)."""
+def _natural(v, g, c, sets: _Bounds, q, metric=None):
+    """The natural residual ‖v − Π(v − c̃∇f)‖∞ relative to the answer's scale, v − c∇f and that scale
+    (Π onto the sets at v, where radii move); c̃ = ``metric`` (step lengths of the residual only, see INERT) or c."""
     y = v - c * g
-    size = max(np.abs(v).max(initial=0.0), (c * np.abs(sets.scale * q)).max(initial=0.0), 1e-300)
-    return np.abs(v - _project(y, sets, sets.radii(v))).max(initial=0.0) / size, y, size
+    metric = c if metric is None else metric
+    size = max(np.abs(v).max(initial=0.0), (metric * np.abs(sets.scale * q)).max(initial=0.0), 1e-300)
+    return np.abs(v - _project(v - metric * g, sets, sets.radii(v))).max(initial=0.0) / size, y, size
 
 
 def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> np.ndarray:
@@ -591,11 +631,12 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
 
 
 def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, damping=0.0,
-          relative=0.0):
+          relative=0.0, proximal=0.0):
     """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v and the CG
     (GMRES, where radii move) iterations it took, CG stopping at ``target`` or ``relative`` × its first residual
     (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃) and the system has at most DIRECT_LIMIT unknowns, a dense
-    LU instead. ``damping`` μ adds μ/c to the system's diagonal (:func:`_damped`, DAMPING)."""
+    LU instead. ``damping`` μ adds μ/c to the system's diagonal (:func:`_damped`, DAMPING), ``proximal`` (0 or one
+    number per variable) its own number to each variable's (:func:`_inert`)."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
@@ -621,8 +662,10 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     k, _, t = bases.shape
     c_sphere = c[sets.balls[sphere, 0]] if np.ndim(c) and sets.balls.shape[1] else np.max(c)
     curvature = np.repeat((norm[sphere] - rho) / (c_sphere * rho), t)
-    shift = np.concatenate([damping / np.broadcast_to(c, (n,))[free],  # μ/c on every unknown: see DAMPING
-                            np.repeat(np.broadcast_to(damping / c_sphere, (sphere.size,)), t)])
+    proximal = np.broadcast_to(proximal, (n,))
+    shift = np.concatenate([damping / np.broadcast_to(c, (n,))[free] + proximal[free],  # μ/c: see DAMPING
+                            np.repeat(np.broadcast_to(damping / c_sphere, (sphere.size,)), t)
+                            + (bases**2 * proximal[sets.balls[sphere]][:, :, None]).sum(axis=1).ravel()])
     # v = new + Z ξ: ξ holds the free variables, then t tangent coordinates per sphere (see _expansion)
     sphere_vars = sets.balls[sphere]
     moving = None if sets.coupling is None else sets.coupling[sphere]
