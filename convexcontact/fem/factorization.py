@@ -173,6 +173,8 @@ class Approximation:
         from .local_delassus import local_diagonal
 
         slab = self.H.shape[0] if self.slab is None else self.slab
+        if slab == self.H.shape[0]:  # the whole body: no copy of K
+            return local_diagonal(self.H, self.G)
         return local_diagonal(self.H[:slab, :slab], self.G[:, :slab])
 
 
@@ -207,7 +209,7 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Appr
     if layers < COARSE_LAYERS:  # too thin for coarse functions: the whole body
         inside[:] = True
     index = np.flatnonzero(inside)
-    G, H = B[:, index], K[index][:, index]
+    G, H = (B, K) if inside.all() else (B[:, index], K[index][:, index])  # the whole body: K itself, not a copy
     far = None if coarse is None or layers < COARSE_LAYERS or inside.all() else coarse(inside, contact)
     if far is not None and far.shape[1]:
         K_far = (K @ far).tocsr()
