@@ -339,9 +339,12 @@ class Condensation(Factorization):
         outside[self.C] = False
         if abs(B[:, outside]).sum() > 0:
             raise ValueError("B has nonzero columns outside the condensed DOFs C: condense onto every DOF B touches")
-        BC = B[:, self.C].toarray()
-        W = BC @ la.cho_solve(self._cho, BC.T)
-        return 0.5 * (W + W.T)
+        BC = sp.csr_matrix(B[:, self.C])  # sparse: a dense rows × |C| copy and a dense product cost a pair at 10⁵
+        # DOFs 64 MB beside its S (docs/performance.md, "Peak memory on thin bodies and pairs")
+        W = BC @ la.cho_solve(self._cho, BC.T.toarray(order="F"), overwrite_b=True)
+        W += W.T
+        W *= 0.5
+        return W
 
 
 class _Interior(Condensation):
