@@ -8,6 +8,7 @@ import pytest
 import scipy.sparse as sp
 
 import convexcontact as cc
+from convexcontact.fem import factorization, pardiso
 from convexcontact.fem.local_delassus import local_diagonal
 from convexcontact.solvers import newton_cg
 from convexcontact.solvers.cone_polish import bound_form
@@ -86,3 +87,32 @@ def test_the_strip_takes_the_newton_steps_it_took(law, steps, products):
     solution = newton_cg.solve(model.program)
     assert solution.status == "solved" and solution.iterations == steps
     assert abs(solution.info["products"] - products) <= 1
+
+
+def test_refactorize_by_chunks_gives_what_one_chunk_gives_and_refuses_an_entry_outside(strip, monkeypatch):
+    """PARDISO's refactorization places K's upper entries a few rows at a time: by chunks of 3 entries (every row
+    its own chunks) the very solves of one chunk; an entry outside the pattern in the last row is refused (the
+    factors still solve the last matrix); by chunks of a sixteenth of K its numpy temporaries held ≤ 8 bytes per entry
+    of K (the COO triangle and the keys of every entry it replaces: ~26 in one chunk, measured)."""
+    if factorization._pardiso() is None:
+        pytest.skip("PARDISO does not load here")
+    K = sp.csr_matrix(strip.fem.K)
+    rng = np.random.default_rng(2)
+    factors = factorization.factorize(K, "pardiso")
+    scaled = sp.diags(rng.uniform(0.5, 2.0, K.shape[0]))
+    changed = (scaled @ K @ scaled).tocsr()
+    b = rng.standard_normal(K.shape[0])
+    monkeypatch.setattr(pardiso, "REFACTOR_CHUNK", K.nnz)
+    factors.refactorize(changed)
+    whole = factors.solve(b)
+    monkeypatch.setattr(pardiso, "REFACTOR_CHUNK", K.nnz // 16)
+    assert traced_peak(lambda: factors.refactorize(changed)) <= 8 * K.nnz
+    factors.refactorize(K)
+    monkeypatch.setattr(pardiso, "REFACTOR_CHUNK", 3)
+    factors.refactorize(changed)
+    assert np.array_equal(factors.solve(b), whole)
+    n = K.shape[0]
+    outside = changed + sp.csr_matrix(([1.0, 1.0], ([0, n - 1], [n - 1, 0])), shape=K.shape)
+    with pytest.raises(ValueError, match="outside the pattern"):
+        factors.refactorize(2.0 * outside)
+    assert np.array_equal(factors.solve(b), whole)
