@@ -260,15 +260,17 @@ class _Direct(Factorization):
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self._solve(b)
 
-    def refactorize(self, K: sp.spmatrix) -> None:
-        """Factorize new values on the sparsity pattern of the first K (entries outside it: ValueError), without
-        the singularity check: PARDISO keeps its ordering and redoes only the numeric factorization."""
+    def refactorize(self, K: sp.spmatrix, *more: sp.spmatrix) -> None:
+        """Factorize new values, K (+ ``more``, summed), on the sparsity pattern of the first K (entries outside it:
+        ValueError), without the singularity check: PARDISO keeps its ordering and redoes only the numeric
+        factorization, placing each term's entries (their sum is not formed: a K-sized temporary)."""
         if self._factors is not None:
-            self._factors.refactorize(K)
-        elif (_structure(K) > self._pattern).nnz:
+            self._factors.refactorize(K, *more)
+            return
+        K = sum(more, K)
+        if (_structure(K) > self._pattern).nnz:
             raise ValueError("refactorize: the matrix has entries outside the pattern factorized")
-        else:  # SuperLU has no numeric-only factorization: a new one
-            self._solve = _superlu(K, self._dim)
+        self._solve = _superlu(K, self._dim)  # SuperLU has no numeric-only factorization: a new one
 
 
 def _structure(K: sp.spmatrix) -> sp.csr_matrix:

@@ -131,15 +131,17 @@ class Pardiso:
             x[:, start:start + BLOCK] = out
         return x
 
-    def refactorize(self, K: sp.spmatrix) -> None:
-        """New values, on the sparsity pattern of the matrix factorized (or part of it): the numeric factorization
+    def refactorize(self, *terms: sp.spmatrix) -> None:
+        """New values, the sum of ``terms`` (one matrix, or a few whose sum is not formed: a preconditioner's K and its
+        contact block), on the sparsity pattern of the matrix factorized (or part of it): the numeric factorization
         only (phase 22), keeping the ordering — 0.14 s against 0.65 s on a 2-D slab of 1.4·10⁵ DOFs."""
-        K = sp.csr_matrix(K)
-        places = [self._places(K, rows) for rows in self._chunks(K)]  # all checked before data changes
+        terms = [sp.csr_matrix(term) for term in terms]
+        places = [[self._places(term, rows) for rows in self._chunks(term)] for term in terms]  # all checked first
         data = self._handle[3]
         data[:] = 0.0  # in place: PARDISO holds a pointer to it
-        for rows, (where, upper) in zip(self._chunks(K), places):
-            np.add.at(data, where, K.data[K.indptr[rows.start]:K.indptr[rows.stop]][upper])
+        for term, where_upper in zip(terms, places):
+            for rows, (where, upper) in zip(self._chunks(term), where_upper):
+                np.add.at(data, where, term.data[term.indptr[rows.start]:term.indptr[rows.stop]][upper])
         self._run(22, np.zeros(1), np.zeros(1), 1)
 
     def _chunks(self, K: sp.csr_matrix) -> list:

@@ -483,7 +483,7 @@ class _Preconditioner:
             return lambda xi: R.T @ _woodbury(self.factors, self.G, self.shift, R @ xi)
         d = R.multiply(R).T @ self.shift + curvature  # a tangent coordinate's δ: its ball's, weighted by its basis
         G = sp.csr_matrix(R.T @ self.G)
-        self.factors.refactorize(self.H + G.T @ sp.diags(1.0 / d) @ G)
+        self.factors.refactorize(self.H, G.T @ sp.diags(1.0 / d) @ G)  # summed in place: no K-sized sum
         return lambda xi: _woodbury(self.factors, G, d, xi)
 
 
