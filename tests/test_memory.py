@@ -93,7 +93,8 @@ def test_refactorize_by_chunks_gives_what_one_chunk_gives_and_refuses_an_entry_o
     """PARDISO's refactorization places K's upper entries a few rows at a time: by chunks of 3 entries (every row
     its own chunks) the solves of one chunk (to the last bits PARDISO's threads vary); an entry outside the pattern
     in the last row is refused (the factors still solve the last matrix); by chunks of a sixteenth of K its numpy
-    temporaries held ≤ 8 bytes per entry of K (the COO triangle and the keys of every entry it replaced: ~26 in one chunk, measured)."""
+    temporaries held ≤ 8 bytes per entry of K (the COO triangle and the keys of every entry it replaced: ~26 in one
+    chunk, measured)."""
     if factorization._pardiso() is None:
         pytest.skip("PARDISO does not load here")
     K = sp.csr_matrix(strip.fem.K)
