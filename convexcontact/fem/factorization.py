@@ -195,7 +195,8 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Appr
     Signorini dual at aspect 400 (2.4·10⁴ DOFs) took 17,006 CG iterations with the 1-layer slab, 1694 with coarse
     functions beyond it, 22 with the whole strip (docs/performance.md, "Shapes")."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
-    graph = (abs(K) > 0).astype(np.int32)  # int8 sums of neighbours overflow
+    graph = sp.csr_matrix(((K.data != 0).astype(np.int32), K.indices, K.indptr), shape=K.shape)  # int8 sums of
+    # neighbours overflow; K's own indices, a stored zero a 0 (abs(K) > 0 copied K twice: a thin body's peak)
     contact = np.unique(B.indices)
     inside = np.zeros(K.shape[0], dtype=bool)
     inside[contact] = True
