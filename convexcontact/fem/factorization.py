@@ -159,7 +159,8 @@ products with W against 73), and the approximation is then the whole body (see :
 @dataclass(frozen=True)
 class Approximation:
     """W ≈ G H⁻¹ Gᵀ with H sparse SPD (K on a slab of DOFs next to the contact, its first ``slab`` rows, and on
-    coarse functions beyond it) and G = B on them; ``factorize(H)`` returns an object with ``solve``."""
+    coarse functions beyond it) and G = B on them; ``factorize(H)`` returns an object with ``solve`` (and, for
+    programs with balls, ``refactorize(H, *terms)``: new values, the sum of the terms)."""
 
     G: sp.csr_matrix
     H: sp.csr_matrix
