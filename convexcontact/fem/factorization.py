@@ -159,7 +159,8 @@ products with W against 73), and the approximation is then the whole body (see :
 @dataclass(frozen=True)
 class Approximation:
     """W ≈ G H⁻¹ Gᵀ with H sparse SPD (K on a slab of DOFs next to the contact, its first ``slab`` rows, and on
-    coarse functions beyond it) and G = B on them; ``factorize(H)`` returns an object with ``solve``."""
+    coarse functions beyond it) and G = B on them; ``factorize(H)`` returns an object with ``solve`` (and, for
+    programs with balls, ``refactorize(H, *terms)``: new values, the sum of the terms)."""
 
     G: sp.csr_matrix
     H: sp.csr_matrix
@@ -173,6 +174,8 @@ class Approximation:
         from .local_delassus import local_diagonal
 
         slab = self.H.shape[0] if self.slab is None else self.slab
+        if slab == self.H.shape[0]:  # the whole body: no copy of K
+            return local_diagonal(self.H, self.G)
         return local_diagonal(self.H[:slab, :slab], self.G[:, :slab])
 
 
@@ -193,7 +196,8 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Appr
     Signorini dual at aspect 400 (2.4·10⁴ DOFs) took 17,006 CG iterations with the 1-layer slab, 1694 with coarse
     functions beyond it, 22 with the whole strip (docs/performance.md, "Shapes")."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
-    graph = (abs(K) > 0).astype(np.int32)  # int8 sums of neighbours overflow
+    graph = sp.csr_matrix(((K.data != 0).astype(np.int32), K.indices, K.indptr), shape=K.shape)  # int8 sums of
+    # neighbours overflow; K's own indices, a stored zero a 0 (abs(K) > 0 copied K twice: a thin body's peak)
     contact = np.unique(B.indices)
     inside = np.zeros(K.shape[0], dtype=bool)
     inside[contact] = True
@@ -207,7 +211,7 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Appr
     if layers < COARSE_LAYERS:  # too thin for coarse functions: the whole body
         inside[:] = True
     index = np.flatnonzero(inside)
-    G, H = B[:, index], K[index][:, index]
+    G, H = (B, K) if inside.all() else (B[:, index], K[index][:, index])  # the whole body: K itself, not a copy
     far = None if coarse is None or layers < COARSE_LAYERS or inside.all() else coarse(inside, contact)
     if far is not None and far.shape[1]:
         K_far = (K @ far).tocsr()
@@ -258,15 +262,17 @@ class _Direct(Factorization):
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self._solve(b)
 
-    def refactorize(self, K: sp.spmatrix) -> None:
-        """Factorize new values on the sparsity pattern of the first K (entries outside it: ValueError), without
-        the singularity check: PARDISO keeps its ordering and redoes only the numeric factorization."""
+    def refactorize(self, K: sp.spmatrix, *more: sp.spmatrix) -> None:
+        """Factorize new values, K (+ ``more``, summed), on the sparsity pattern of the first K (entries outside it:
+        ValueError), without the singularity check: PARDISO keeps its ordering and redoes only the numeric
+        factorization, placing each term's entries (their sum is not formed: a K-sized temporary)."""
         if self._factors is not None:
-            self._factors.refactorize(K)
-        elif (_structure(K) > self._pattern).nnz:
+            self._factors.refactorize(K, *more)
+            return
+        K = sum(more, K)
+        if (_structure(K) > self._pattern).nnz:
             raise ValueError("refactorize: the matrix has entries outside the pattern factorized")
-        else:  # SuperLU has no numeric-only factorization: a new one
-            self._solve = _superlu(K, self._dim)
+        self._solve = _superlu(K, self._dim)  # SuperLU has no numeric-only factorization: a new one
 
 
 def _structure(K: sp.spmatrix) -> sp.csr_matrix:
@@ -337,9 +343,12 @@ class Condensation(Factorization):
         outside[self.C] = False
         if abs(B[:, outside]).sum() > 0:
             raise ValueError("B has nonzero columns outside the condensed DOFs C: condense onto every DOF B touches")
-        BC = B[:, self.C].toarray()
-        W = BC @ la.cho_solve(self._cho, BC.T)
-        return 0.5 * (W + W.T)
+        BC = sp.csr_matrix(B[:, self.C])  # sparse: a dense rows × |C| copy and a dense product cost a pair at 10⁵
+        # DOFs 64 MB beside its S (docs/performance.md, "Peak memory on thin bodies and pairs")
+        W = BC @ la.cho_solve(self._cho, BC.T.toarray(order="F"), overwrite_b=True)
+        W += W.T
+        W *= 0.5
+        return W
 
 
 class _Interior(Condensation):

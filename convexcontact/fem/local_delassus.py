@@ -45,8 +45,10 @@ def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.n
         load = B[rows][:, region]
         by_slot = sp.csr_matrix((np.ones(rows.size), (slot[rows], np.arange(rows.size))))
         response = spla.splu(sp.csc_matrix(K[region][:, region])).solve((by_slot @ load).T.toarray())
-        diagonal[rows] = np.asarray(load.multiply(response.T[slot[rows]]).sum(axis=1)).ravel()  # other rows of
-        # a slot act on other blocks of K_region
+        # b_j · (the response of row j's slot): other rows of a slot act on other blocks of K_region. Picked from
+        # the rows × slots products; the rows × region array of each row's slot's response this replaces was
+        # the contact solve's peak on thin bodies (strip 400 : 1 clamped, 3.4·10⁴ DOFs: 67 of 97 MB)
+        diagonal[rows] = (load @ response)[np.arange(rows.size), slot[rows]]
     return diagonal
 
 

@@ -62,8 +62,11 @@ def dual(
     c = np.concatenate([C @ contact.normal_offset - contact.weighted_gap(C)] + ([-friction.offset] if count else []))
     Kf = factorization.solve(f)
     size = m + tangential + extra
-    P = factorization.delassus(B, K, coarse) if matrix_free else sp.block_diag(
-        [sp.csc_matrix(factorization.schur(B)), sp.csc_matrix((extra, extra))], format="csc")
+    if matrix_free:
+        P = factorization.delassus(B, K, coarse)
+    else:  # W alone where there is no μ block: block_diag would copy it (a pair's W at 10⁵ DOFs: 25 MB)
+        P = sp.csc_matrix(factorization.schur(B))
+        P = sp.block_diag([P, sp.csc_matrix((extra, extra))], format="csc") if extra else P
     q = np.concatenate([-(B @ Kf + c), -epsilon * friction.weights if extra else np.zeros(0)])
 
     rows, b, cones = [], [], []

@@ -1,0 +1,136 @@
+"""Peak memory of the matrix-free dual on thin bodies (issue 25, docs/performance.md "Peak memory on thin bodies"):
+the pieces that were rows × DOFs arrays or copies of K hold a few times K's bytes, and give what they gave."""
+
+import tracemalloc
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import convexcontact as cc
+from convexcontact.fem import factorization, pardiso
+from convexcontact.fem.local_delassus import local_diagonal
+from convexcontact.solvers import newton_cg
+from convexcontact.solvers.cone_polish import bound_form
+from convexcontact.studies.benchmarks.bench import scene_of
+
+
+def nbytes(A: sp.csr_matrix) -> int:
+    return A.data.nbytes + A.indices.nbytes + A.indptr.nbytes
+
+
+def traced_peak(build) -> int:
+    """The most bytes numpy and Python held at once while ``build()`` ran (not SuperLU's or PARDISO's own)."""
+    tracemalloc.start()
+    try:
+        build()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+@pytest.fixture(scope="module")
+def strip():
+    """The clamped strip 400 : 1 (4.8·10³ DOFs, 801 contact nodes), its Tresca dual applied matrix-free."""
+    return cc.prepare(scene_of("strip-clamped-400", 2, "tresca", 4e3), "dual-matrix-free")
+
+
+def test_the_local_diagonal_holds_a_few_times_k(strip):
+    """Each row's d_j is picked from the rows × slots products: the rows × region array of each row's slot's response
+    it replaces took 6.2 × K's bytes here (and grows with the rows of a colour), now 2.3 ×."""
+    K, B = sp.csr_matrix(strip.fem.K), sp.csr_matrix(strip.program.P.B)
+    assert traced_peak(lambda: local_diagonal(K, B)) <= 3.5 * nbytes(K)
+
+
+def test_a_thin_body_is_its_own_approximation_without_a_copy_of_k(strip):
+    """Too thin for coarse functions, the body is its approximation: K itself (its arrays shared, not copied) and B,
+    so G H⁻¹ Gᵀ is W."""
+    approximation, K = strip.program.P.approximation, strip.fem.K
+    assert np.shares_memory(approximation.H.data, K.data) and np.shares_memory(approximation.H.indices, K.indices)
+    r = np.random.default_rng(0).standard_normal(strip.program.P.shape[0])
+    G = approximation.G
+    np.testing.assert_allclose(G @ approximation.factorize(approximation.H).solve(G.T @ r), strip.program.P @ r,
+                               rtol=1e-10, atol=1e-12 * np.abs(strip.program.P @ r).max())
+
+
+@pytest.mark.parametrize("shape, dim, dofs", [("strip-clamped-400", 2, 4e3), ("plate-free-20", 3, 3e3)])
+def test_the_preconditioner_holds_a_few_times_k_while_it_is_built(shape, dim, dofs):
+    """H + Gᵀ D⁻¹ G on the pattern of every later Newton system from one triplet list: abs(H), the sums of patterns and
+    the COO copies it replaces took 6.8 × H's bytes on the strip and 7.5 × on the 3-D plate (measured), now ~3 ×."""
+    model = cc.prepare(scene_of(shape, dim, "tresca", dofs), "dual-matrix-free")
+    approximation = model.program.P.approximation
+    sets = newton_cg._bounds(model.program, bound_form(model.program))
+    shift = newton_cg.SHIFT * newton_cg._shifts(approximation, sets, 1.0)
+    peak = traced_peak(lambda: newton_cg._Preconditioner(approximation, sets.scale, sets.balls, shift))
+    assert peak <= 4.0 * nbytes(approximation.H)
+
+
+def test_the_stored_sum_keeps_every_entry_and_adds_the_values():
+    """H + A with every entry either stores, explicit zeros and cancellations included (a later refactorization on
+    the pattern needs them); the values those of the sum."""
+    rng = np.random.default_rng(3)
+    H = sp.coo_matrix(sp.random(30, 30, density=0.2, random_state=rng))
+    i, j = H.row[0], H.col[0]  # A cancels H there
+    A = sp.coo_matrix(([0.0, -H.data[0], 2.0], ([0, i, 7], [29, j, 7])), shape=(30, 30))
+    total = sp.coo_matrix(newton_cg._stored_sum(sp.csr_matrix(H), A))
+    np.testing.assert_allclose(total.toarray(), H.toarray() + A.toarray(), rtol=0, atol=1e-15)
+    stored = set(zip(H.row, H.col)) | set(zip(A.row, A.col))
+    assert set(zip(total.row, total.col)) == stored and total.nnz == len(stored)
+
+
+@pytest.mark.parametrize("law, steps, products", [("tresca", 12, 219), ("signorini", 6, 50)])
+def test_the_strip_takes_the_newton_steps_it_took(law, steps, products):
+    """The storage changed, the method not: the clamped strip's dual takes the Newton steps it took before them
+    (Tresca 12 and 218 products with W, one more now from the rounding of the local diagonal's sums; Signorini 6
+    and 50)."""
+    model = cc.prepare(scene_of("strip-clamped-400", 2, law, 4e3), "dual-matrix-free")
+    solution = newton_cg.solve(model.program)
+    assert solution.status == "solved" and solution.iterations == steps
+    assert abs(solution.info["products"] - products) <= 1
+
+
+def test_refactorize_by_chunks_gives_what_one_chunk_gives_and_refuses_an_entry_outside(strip, monkeypatch):
+    """PARDISO's refactorization places K's upper entries a few rows at a time: by chunks of 3 entries (every row
+    its own chunks) the solves of one chunk (to the last bits PARDISO's threads vary); an entry outside the pattern
+    in the last row is refused (the factors still solve the last matrix); by chunks of a sixteenth of K its numpy
+    temporaries held ≤ 8 bytes per entry of K (the COO triangle and the keys of every entry it replaced: ~26 in one
+    chunk, measured)."""
+    if factorization._pardiso() is None:
+        pytest.skip("PARDISO does not load here")
+    K = sp.csr_matrix(strip.fem.K)
+    rng = np.random.default_rng(2)
+    factors = factorization.factorize(K, "pardiso")
+    scaled = sp.diags(rng.uniform(0.5, 2.0, K.shape[0]))
+    changed = (scaled @ K @ scaled).tocsr()
+    b = rng.standard_normal(K.shape[0])
+    monkeypatch.setattr(pardiso, "REFACTOR_CHUNK", K.nnz)
+    factors.refactorize(changed)
+    whole = factors.solve(b)
+    monkeypatch.setattr(pardiso, "REFACTOR_CHUNK", K.nnz // 16)
+    assert traced_peak(lambda: factors.refactorize(changed)) <= 8 * K.nnz
+    factors.refactorize(K)
+    monkeypatch.setattr(pardiso, "REFACTOR_CHUNK", 3)
+    factors.refactorize(changed)
+    np.testing.assert_allclose(factors.solve(b), whole, rtol=0, atol=1e-12 * np.abs(whole).max())
+    n = K.shape[0]
+    outside = changed + sp.csr_matrix(([1.0, 1.0], ([0, n - 1], [n - 1, 0])), shape=K.shape)
+    with pytest.raises(ValueError, match="outside the pattern"):
+        factors.refactorize(2.0 * outside)
+    np.testing.assert_allclose(factors.solve(b), whole, rtol=0, atol=1e-12 * np.abs(whole).max())
+
+
+@pytest.mark.parametrize("backend", ["pardiso", "superlu"])
+def test_refactorize_of_terms_solves_with_their_sum(strip, backend):
+    """The preconditioner refactorizes K and its contact block as two terms, never summed into a K-sized matrix:
+    its solves are those of the sum refactorized (the same values placed; PARDISO's threads vary the last bits,
+    4e-16 measured)."""
+    if backend == "pardiso" and factorization._pardiso() is None:
+        pytest.skip("PARDISO does not load here")
+    K, B = sp.csr_matrix(strip.fem.K), sp.csr_matrix(strip.program.P.B)
+    block = (B.T @ sp.diags(np.random.default_rng(4).uniform(1.0, 2.0, B.shape[0])) @ B).tocsr()
+    factors = factorization.factorize(newton_cg._stored_sum(K, block), backend)  # K's stored zeros too
+    b = np.random.default_rng(5).standard_normal(K.shape[0])
+    factors.refactorize(2.0 * K, block)
+    by_terms = factors.solve(b)
+    factors.refactorize((2.0 * K + block).tocsr())
+    np.testing.assert_allclose(by_terms, factors.solve(b), rtol=0, atol=1e-12 * np.abs(by_terms).max())
