@@ -222,17 +222,48 @@ def trace_field(fem: FEModel, nodal: np.ndarray) -> np.ndarray:
     return out
 
 
+def contact_facets(fem: FEModel) -> np.ndarray:
+    """The facets whose traction is the contact's: Γ_C (a pair's slave side) and the master sides of pairs."""
+    facets = [fem.contact.facets]
+    contact = fem.scene.contact
+    for pair in getattr(contact, "pairs", None) or (contact,):
+        if getattr(pair, "master", ""):
+            facets.append(check_boundary(fem.mesh, pair.master, "contact.master"))
+    return np.unique(np.concatenate(facets))
+
+
+def contact_forces(fem: FEModel, state: ContactState) -> np.ndarray:
+    """The nodal contact forces (scalar DOFs, d) on both sides of the contact: the slave's (a body's against an
+    obstacle) and, for a pair, the master's (mortar: the forces the mortar matrix transfers), zero elsewhere."""
+    forces = np.zeros((fem.basis.N // fem.dim, fem.dim))
+    np.add.at(forces, fem.contact.dofs[:, 0] // fem.dim, state.forces)
+    if state.master_forces is not None:
+        np.add.at(forces, fem.contact.master_dofs[:, 0] // fem.dim, state.master_forces)
+    return forces
+
+
+def contact_traction(fem: FEModel, space: dict, state: ContactState, facets: np.ndarray) -> np.ndarray:
+    """τ (d, scalar DOFs) of the discrete contact traction t_h = Σ τ_i ψ_i on the contact ``facets``: M τ = F, M the
+    consistent boundary mass of the facets' nodes and F the nodal contact forces on them (:func:`contact_forces`), so
+    that ∫ t_h ψ_i = F_i and the residual vanishes on the discrete test functions. For a pair each side holds its own
+    (the facets of the two bodies share no node: M is block diagonal); one body's M is its trace's ``mass``."""
+    mass = fe.asm(fe.BilinearForm(lambda u, v, w: u * v), fe.FacetBasis(fem.mesh, facets=facets, **space)).tocsr()
+    nodes = np.unique(fem.basis.get_dofs(facets).flatten() // fem.dim)  # (the others' rows hold round-off only)
+    tau = np.zeros((fem.basis.N // fem.dim, fem.dim))
+    tau[nodes] = splu(sp.csc_matrix(mass[nodes][:, nodes])).solve(np.ascontiguousarray(contact_forces(fem, state)[nodes]))
+    return tau.T
+
+
 def boundary_terms(fem: FEModel, space: dict, u_components: np.ndarray, state: ContactState) -> dict:
-    """The Neumann, contact, complementarity, penetration and friction terms per cell."""
+    """The Neumann, contact, complementarity, penetration and friction terms per cell; a pair's contact term on both
+    sides (each against its own traction), the others on the slave side (the relative gap and slip)."""
     contact, (lam, mu) = fem.contact, fem.lame
     boundary = fe.FacetBasis(fem.mesh, facets=fem.mesh.boundary_facets(), **space)
     cell = boundary.tind
-    on_contact = np.isin(boundary.find, contact.facets)
-    # t_h = Σ τ_i ψ_i with M τ = F: its moments against the trace space are the discrete nodal forces
-    tau = splu(sp.csc_matrix(contact.mass)).solve(np.ascontiguousarray(state.forces))
-    target = np.where(on_contact[None, :, None],
-                      interpolate(boundary, trace_field(fem, tau)),
-                      applied_traction(fem, boundary))
+    on = contact_facets(fem)
+    on_contact = np.isin(boundary.find, on)
+    tau = contact_traction(fem, space, state, on)
+    target = np.where(on_contact[None, :, None], interpolate(boundary, tau), applied_traction(fem, boundary))
     n = np.asarray(boundary.normals)
     residual = np.einsum("abep,bep->aep", stress(gradient(boundary, u_components), lam[cell], mu[cell]), n) - target
     residual = np.where(held_components(fem, boundary.find)[:, :, None], 0.0, residual)
@@ -244,7 +275,7 @@ def boundary_terms(fem: FEModel, space: dict, u_components: np.ndarray, state: C
 
     facets = fe.FacetBasis(fem.mesh, facets=contact.facets, **space)
     cell, n, dx, h = facets.tind, np.asarray(facets.normals), facets.dx, np.asarray(facets.mesh_parameters())
-    traction = interpolate(facets, trace_field(fem, tau))
+    traction = interpolate(facets, tau)
     pressure = -(traction * n).sum(axis=0)
     if state.constrained:
         opening = interpolate(facets, trace_field(fem, state.gap - state.normal_displacement))
