@@ -1,7 +1,7 @@
 """A residual a-posteriori estimate of the energy-norm discretization error, contact-aware (Hild–Nicaise).
 
-For the one-body scenes (a body against a rigid obstacle), any element (the residual terms are
-element-agnostic), in scaled units. Per cell T, with σ = σ(u_h), h the cell (facet) size, μ_T the shear
+For a body against a rigid obstacle or a pair of bodies, any element (the residual terms are element-agnostic), in
+scaled units. Per cell T, with σ = σ(u_h), h the cell (facet) size, μ_T the shear
 modulus, t_h the contact traction the discrete problem holds and g_N the applied traction::
 
     η_T² = (1/2μ_T) [ h_T² ‖f + div σ‖²_T                                   interior
@@ -17,7 +17,9 @@ traction is the field of the trace space whose moments are the discrete nodal co
 (t_h = Σ τ_i ψ_i with M τ = F, M the boundary mass of Γ_C): the same for lumped, weak (Hild's P1) and
 Gauss-point multipliers, and with it the residual vanishes on the discrete test functions. p_h = −t_h·n
 is the pressure, g and u_N,h the trace-space interpolants of the nodal gap and normal displacement,
-v_T,h the slip. The complementarity term is signed on each facet: its sum over Γ_C is the discrete complementarity
+v_T,h the slip. For a pair the contact term runs over both sides of Γ_C, each against its own traction (the master's
+from the forces the mortar coupling transfers to its nodes), and the other contact terms over the slave side with
+the pair's own discrete gap and relative slip. The complementarity term is signed on each facet: its sum over Γ_C is the discrete complementarity
 λᵀC(g − u_N), zero for the exact discrete solution. The obstacle's own interpolation error (g − g_h, O(h²) for a smooth obstacle) is not
 included. The 1/2μ weights put the residual terms in energy units (‖u − u_h‖² ≤ C/(2μ) ‖residual‖²
 by Korn's inequality).
