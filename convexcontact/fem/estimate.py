@@ -1,7 +1,7 @@
 """A residual a-posteriori estimate of the energy-norm discretization error, contact-aware (Hild–Nicaise).
 
-For the one-body scenes (a body against a rigid obstacle), any element (the residual terms are
-element-agnostic), in scaled units. Per cell T, with σ = σ(u_h), h the cell (facet) size, μ_T the shear
+For a body against a rigid obstacle or a pair of bodies, any element (the residual terms are element-agnostic), in
+scaled units. Per cell T, with σ = σ(u_h), h the cell (facet) size, μ_T the shear
 modulus, t_h the contact traction the discrete problem holds and g_N the applied traction::
 
     η_T² = (1/2μ_T) [ h_T² ‖f + div σ‖²_T                                   interior
@@ -17,7 +17,9 @@ traction is the field of the trace space whose moments are the discrete nodal co
 (t_h = Σ τ_i ψ_i with M τ = F, M the boundary mass of Γ_C): the same for lumped, weak (Hild's P1) and
 Gauss-point multipliers, and with it the residual vanishes on the discrete test functions. p_h = −t_h·n
 is the pressure, g and u_N,h the trace-space interpolants of the nodal gap and normal displacement,
-v_T,h the slip. The complementarity term is signed on each facet: its sum over Γ_C is the discrete complementarity
+v_T,h the slip. For a pair the contact term runs over both sides of Γ_C, each against its own traction (the master's
+from the forces the mortar coupling transfers to its nodes), and the other contact terms over the slave side with
+the pair's own discrete gap and relative slip. The complementarity term is signed on each facet: its sum over Γ_C is the discrete complementarity
 λᵀC(g − u_N), zero for the exact discrete solution. The obstacle's own interpolation error (g − g_h, O(h²) for a smooth obstacle) is not
 included. The 1/2μ weights put the residual terms in energy units (‖u − u_h‖² ≤ C/(2μ) ‖residual‖²
 by Korn's inequality).
@@ -222,17 +224,48 @@ def trace_field(fem: FEModel, nodal: np.ndarray) -> np.ndarray:
     return out
 
 
+def contact_facets(fem: FEModel) -> np.ndarray:
+    """The facets whose traction is the contact's: Γ_C (a pair's slave side) and the master sides of pairs."""
+    facets = [fem.contact.facets]
+    contact = fem.scene.contact
+    for pair in getattr(contact, "pairs", None) or (contact,):
+        if getattr(pair, "master", ""):
+            facets.append(check_boundary(fem.mesh, pair.master, "contact.master"))
+    return np.unique(np.concatenate(facets))
+
+
+def contact_forces(fem: FEModel, state: ContactState) -> np.ndarray:
+    """The nodal contact forces (scalar DOFs, d) on both sides of the contact: the slave's (a body's against an
+    obstacle) and, for a pair, the master's (mortar: the forces the mortar matrix transfers), zero elsewhere."""
+    forces = np.zeros((fem.basis.N // fem.dim, fem.dim))
+    np.add.at(forces, fem.contact.dofs[:, 0] // fem.dim, state.forces)
+    if state.master_forces is not None:
+        np.add.at(forces, fem.contact.master_dofs[:, 0] // fem.dim, state.master_forces)
+    return forces
+
+
+def contact_traction(fem: FEModel, space: dict, state: ContactState, facets: np.ndarray) -> np.ndarray:
+    """τ (d, scalar DOFs) of the discrete contact traction t_h = Σ τ_i ψ_i on the contact ``facets``: M τ = F, M the
+    consistent boundary mass of the facets' nodes and F the nodal contact forces on them (:func:`contact_forces`), so
+    that ∫ t_h ψ_i = F_i and the residual vanishes on the discrete test functions. For a pair each side holds its own
+    (the facets of the two bodies share no node: M is block diagonal); one body's M is its trace's ``mass``."""
+    mass = fe.asm(fe.BilinearForm(lambda u, v, w: u * v), fe.FacetBasis(fem.mesh, facets=facets, **space)).tocsr()
+    nodes = np.unique(fem.basis.get_dofs(facets).flatten() // fem.dim)  # (the others' rows hold round-off only)
+    tau = np.zeros((fem.basis.N // fem.dim, fem.dim))
+    tau[nodes] = splu(sp.csc_matrix(mass[nodes][:, nodes])).solve(np.ascontiguousarray(contact_forces(fem, state)[nodes]))
+    return tau.T
+
+
 def boundary_terms(fem: FEModel, space: dict, u_components: np.ndarray, state: ContactState) -> dict:
-    """The Neumann, contact, complementarity, penetration and friction terms per cell."""
+    """The Neumann, contact, complementarity, penetration and friction terms per cell; a pair's contact term on both
+    sides (each against its own traction), the others on the slave side (the relative gap and slip)."""
     contact, (lam, mu) = fem.contact, fem.lame
     boundary = fe.FacetBasis(fem.mesh, facets=fem.mesh.boundary_facets(), **space)
     cell = boundary.tind
-    on_contact = np.isin(boundary.find, contact.facets)
-    # t_h = Σ τ_i ψ_i with M τ = F: its moments against the trace space are the discrete nodal forces
-    tau = splu(sp.csc_matrix(contact.mass)).solve(np.ascontiguousarray(state.forces))
-    target = np.where(on_contact[None, :, None],
-                      interpolate(boundary, trace_field(fem, tau)),
-                      applied_traction(fem, boundary))
+    on = contact_facets(fem)
+    on_contact = np.isin(boundary.find, on)
+    tau = contact_traction(fem, space, state, on)
+    target = np.where(on_contact[None, :, None], interpolate(boundary, tau), applied_traction(fem, boundary))
     n = np.asarray(boundary.normals)
     residual = np.einsum("abep,bep->aep", stress(gradient(boundary, u_components), lam[cell], mu[cell]), n) - target
     residual = np.where(held_components(fem, boundary.find)[:, :, None], 0.0, residual)
@@ -244,7 +277,7 @@ def boundary_terms(fem: FEModel, space: dict, u_components: np.ndarray, state: C
 
     facets = fe.FacetBasis(fem.mesh, facets=contact.facets, **space)
     cell, n, dx, h = facets.tind, np.asarray(facets.normals), facets.dx, np.asarray(facets.mesh_parameters())
-    traction = interpolate(facets, trace_field(fem, tau))
+    traction = interpolate(facets, tau)
     pressure = -(traction * n).sum(axis=0)
     if state.constrained:
         opening = interpolate(facets, trace_field(fem, state.gap - state.normal_displacement))

@@ -39,10 +39,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..scene.meshing import check_boundary
 from . import flux_correction
 from .assembly import FEModel
-from .estimate import ContactState, applied_traction, components, held_components
+from .estimate import ContactState, applied_traction, components, contact_facets, contact_forces, held_components
 
 
 @dataclass(frozen=True)
@@ -400,24 +399,11 @@ def block_norms(at, sigma_h, lam, mu, area):
     return area * symmetric / (24 * mu), area * ((w * w).sum(axis=0) + w.sum(axis=0) ** 2) / (12 * mu)
 
 
-def contact_facets(fem: FEModel) -> np.ndarray:
-    """The facets whose traction is the contact's: Γ_C (a pair's slave side) and the master sides of pairs."""
-    facets = [fem.contact.facets]
-    contact = fem.scene.contact
-    for pair in getattr(contact, "pairs", None) or (contact,):
-        if getattr(pair, "master", ""):
-            facets.append(check_boundary(fem.mesh, pair.master, "contact.master"))
-    return np.unique(np.concatenate(facets))
-
-
 def lumped_traction(fem: FEModel, state: ContactState, facets: np.ndarray) -> np.ndarray:
     """t_a = F_a / w_a (vertices, d) at the nodes of the contact ``facets``, F the nodal contact forces (a pair's on
     both sides) and w_a = Σ |E| / 2 over a's contact facets on its side."""
     mesh = fem.mesh
-    forces = np.zeros((mesh.nvertices, fem.dim))
-    forces[fem.contact.dofs[:, 0] // fem.dim] = state.forces
-    if state.master_forces is not None:
-        forces[fem.contact.master_dofs[:, 0] // fem.dim] += state.master_forces
+    forces = contact_forces(fem, state)  # P1: the scalar DOFs are the vertices
     weights = np.bincount(mesh.facets[:, facets].ravel(), np.tile(0.5 * facet_lengths(mesh, facets), 2),
                           minlength=mesh.nvertices)
     return np.divide(forces, weights[:, None], out=np.zeros_like(forces), where=weights[:, None] > 0)

@@ -159,15 +159,14 @@ class ContactResult:
 
     @property
     def estimated(self) -> bool:
-        """Whether the result carries an error estimate: solved, not switched off (``estimate_error``), one body."""
-        return self.solved and self.estimate_error and (flux_supported(self.fem)
-                                                         or not isinstance(self.fem.contact, PairTrace))
+        """Whether the result carries an error estimate: solved and not switched off (``estimate_error``)."""
+        return self.solved and self.estimate_error
 
     @cached_property
     def residual_estimate(self) -> ErrorEstimate | None:
         """The residual estimate of the discretization error (:mod:`convexcontact.fem.estimate`), scaled units;
-        None without an answer, when switched off (``estimate_error``) or for two bodies (not estimated)."""
-        if not self.estimated or isinstance(self.fem.contact, PairTrace):
+        None without an answer or when switched off (``estimate_error``)."""
+        if not self.estimated:
             return None
         return estimate(self.fem, self.displacement / self.fem.scaling.displacement, contact_state(self))
 
