@@ -177,7 +177,6 @@ def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.nda
     P_kept, q_kept = sp.csc_matrix(program.P)[kept][:, kept], program.q[kept]
     active = touches & (equality | (solution.z > solution.s))
     scale_s = max(np.abs(program.b).max(initial=0.0), np.abs(solution.x).max(initial=0.0), 1.0)
-    scale_z = max(np.abs(solution.z).max(initial=0.0), 1.0)
     pairs, z = np.asarray(pairs, dtype=int), solution.z
     for _ in range(ROUNDS):
         both = pairs[active[pairs] & active[pairs + 1]]
@@ -189,6 +188,10 @@ def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.nda
         x[kept], z[active] = answer
         x = place_free(x, solution.x, A, program.b, free)
         s = np.where(equality, 0.0, program.b - A @ x)
+        # signs judged on the scale of this KKT answer's multipliers, not the interior point's: an inaccurate
+        # (AlmostSolved) iterate's are unbounded where a ball's radius is 0 (1.9e5 on the Cattaneo–Mindlin dual
+        # at ν = 0.499), which passed a slip against its force (z = −1.3e-6) and left the friction law at 3e-3
+        scale_z = max(np.abs(z).max(initial=0.0), 1.0)
         violated = touches & ~equality & (s < -FEASIBLE * scale_s)
         negative = active & ~equality & (z < -FEASIBLE * scale_z)
         if not violated.any() and not negative.any():
