@@ -126,7 +126,7 @@ def polish(program: ConicProgram, solution: ConicSolution) -> ConicSolution:
     first = soc_rows & (np.asarray(H.sum(axis=1)).ravel() == 0)
     pairs = np.flatnonzero(first & (empty | np.roll(empty, -1)))
     transformed = replace(solution, z=half * (H @ solution.z), s=H @ solution.s)
-    polished = _polish_linear(linear, transformed, pairs, soc_rows)
+    polished = _polish_linear(linear, transformed, pairs)
     if polished is transformed:  # failed (a guess may carry an earlier answer's "polished" flag: not a test)
         return solution
     return replace(polished, z=H.T @ polished.z, s=half * (H.T @ polished.s))
@@ -165,24 +165,22 @@ def place_free(x: np.ndarray, guess: np.ndarray, A: sp.csr_matrix, b: np.ndarray
     return x
 
 
-def sign_scale(z: np.ndarray, friction_rows: np.ndarray | None) -> np.ndarray:
-    """The scale each multiplier's sign is judged on: the largest of its kind (half-plane rows, the others) in this
-    KKT answer, at least 1. Not the interior point's: an inaccurate (AlmostSolved) iterate's are unbounded where a
-    ball's radius is 0 (1.9e5 on the Cattaneo–Mindlin dual at ν = 0.499), which passed a slip against its force
-    (z = −1.3e-6) and left the friction law at 3e-3. Not the other rows' either: there the open nodes' gaps (228)
-    passed a slip of −4.4e-9 beside slips of 1e-6 (ν = 0.4999: friction law 1e-5)."""
-    groups = np.zeros(z.size, bool) if friction_rows is None else friction_rows
-    scale = np.ones(z.size)
-    for group in (groups, ~groups):
-        scale[group] = max(np.abs(z[group]).max(initial=0.0), 1.0)
-    return scale
+def sign_scale(program: ConicProgram, x: np.ndarray) -> np.ndarray:
+    """The rounding in each row's multiplier z = −(P x + q) through A: FEASIBLE times it is the most negative a
+    multiplier may be in the polish's first, strict rounds. Not the largest multiplier: an inaccurate (AlmostSolved)
+    iterate's reach 1.9e5 where a ball's radius is 0, and even the KKT answer's open-node gaps (228) passed a slip of
+    −4.4e-9 against its force beside slips of 1e-6 (the Cattaneo–Mindlin dual at ν = 0.4999: the Tresca step's
+    friction law at 1e-5). Where W is so ill-conditioned that the KKT solve's own error exceeds it (the same at
+    ν = 0.49999, condition 1e11: slips' noise 1e5 times this), the rounds run again judged on the interior point's
+    largest multiplier, as before, and the certificate judges their answer (there 9e-8)."""
+    A = abs(sp.csr_matrix(program.A))
+    terms = abs(program.P) @ np.abs(x) + np.abs(program.q)
+    return (A @ terms) / np.maximum(np.asarray(A.multiply(A).sum(axis=1)).ravel(), 1e-300)
 
 
-def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.ndarray = (),
-                   friction_rows: np.ndarray | None = None) -> ConicSolution:
+def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.ndarray = ()) -> ConicSolution:
     """Polish a linear program; ``pairs``: first rows of half-plane pairs b₀ ∓ a x ≥ 0 of which at
-    most one is active (both active pin the same variable twice: a singular KKT system); ``friction_rows``: mask of
-    the half-plane rows, whose multipliers' signs are judged on their own scale (:func:`sign_scale`)."""
+    most one is active (both active pin the same variable twice: a singular KKT system)."""
     equality = np.zeros(program.n_constraints, bool)
     for cone, rows in program.blocks():
         equality[rows] = cone.kind == "zero"
@@ -193,24 +191,26 @@ def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.nda
     touches = np.diff(A_kept.indptr) > 0  # an empty row has no say in the determined variables
     touches &= np.diff(A[:, np.flatnonzero(free)].tocsr().indptr) == 0  # a free variable's rows carry no force
     P_kept, q_kept = sp.csc_matrix(program.P)[kept][:, kept], program.q[kept]
-    active = touches & (equality | (solution.z > solution.s))
     scale_s = max(np.abs(program.b).max(initial=0.0), np.abs(solution.x).max(initial=0.0), 1.0)
-    pairs, z = np.asarray(pairs, dtype=int), solution.z
-    for _ in range(ROUNDS):
-        both = pairs[active[pairs] & active[pairs + 1]]
-        active[np.where(z[both] < z[both + 1], both, both + 1)] = False
-        answer = kkt_solve(P_kept, q_kept, A_kept[active], program.b[active])
-        if answer is None:
-            return solution
-        x, z = np.zeros(program.n_variables), np.zeros(program.n_constraints)
-        x[kept], z[active] = answer
-        x = place_free(x, solution.x, A, program.b, free)
-        s = np.where(equality, 0.0, program.b - A @ x)
-        scale_z = sign_scale(z, friction_rows)
-        violated = touches & ~equality & (s < -FEASIBLE * scale_s)
-        negative = active & ~equality & (z < -FEASIBLE * scale_z)
-        if not violated.any() and not negative.any():
-            return replace(solution, x=x, z=z, s=np.maximum(s, 0.0), status="solved",
-                           info={**solution.info, "polished": True})
-        active = (active | violated) & ~negative
+    pairs = np.asarray(pairs, dtype=int)
+    loose = max(np.abs(solution.z).max(initial=0.0), 1.0)
+    for strict in (True, False):  # signs judged against the rounding first, then on the iterate's scale
+        active, z = touches & (equality | (solution.z > solution.s)), solution.z
+        for _ in range(ROUNDS):
+            both = pairs[active[pairs] & active[pairs + 1]]
+            active[np.where(z[both] < z[both + 1], both, both + 1)] = False
+            answer = kkt_solve(P_kept, q_kept, A_kept[active], program.b[active])
+            if answer is None:
+                return solution
+            x, z = np.zeros(program.n_variables), np.zeros(program.n_constraints)
+            x[kept], z[active] = answer
+            x = place_free(x, solution.x, A, program.b, free)
+            s = np.where(equality, 0.0, program.b - A @ x)
+            scale_z = sign_scale(program, x) if strict else loose
+            violated = touches & ~equality & (s < -FEASIBLE * scale_s)
+            negative = active & ~equality & (z < -FEASIBLE * scale_z)
+            if not violated.any() and not negative.any():
+                return replace(solution, x=x, z=z, s=np.maximum(s, 0.0), status="solved",
+                               info={**solution.info, "polished": True})
+            active = (active | violated) & ~negative
     return solution
