@@ -1,8 +1,10 @@
 """Cattaneo–Mindlin: press with P, pull with Q < F P; the stick zone is c/a = sqrt(1 − Q/(F P)) (case 5).
 
-β = 0 needs an incompressible body (ν → 0.5): Q2 elements (Q1/P1 lock), a large block on
-rollers (a clamped base couples normal and tangential response), and a small static
-regularization for Clarabel (the KKT matrix is ill-conditioned by λ/μ ≈ 1e5).
+β = 0 needs an incompressible body (ν → 0.5): Q2 elements (Q1/P1 lock) and a large block on
+rollers (a clamped base couples normal and tangential response). ``auto`` condenses K onto the
+157 contact nodes (the dual: the Picard map's Tresca steps on 314 unknowns) and certifies the answer
+in 8 Picard steps (certificate 1e-7, 3–6 s); Clarabel on the sparse primal with a static
+regularization took 8 solves of ~6 s.
 
     python examples/cattaneo_mindlin.py [--h 0.01] [--ratio 0.5] [--out out/cattaneo]
 """
@@ -31,7 +33,7 @@ def scene(h: float, ratio: float, friction: float = 0.6) -> cc.Scene:
 
 
 def main(h: float = 0.01, ratio: float = 0.5, out: str = "out/cattaneo"):
-    result = cc.solve(scene(h, ratio), "clarabel", static_regularization_constant=1e-12)
+    result = cc.solve(scene(h, ratio))
     s, status = result.contact.coordinate, result.contact.status
     c, a = np.ptp(s[status == "stick"]) / 2, np.ptp(s[status != "open"]) / 2
     print(f"c/a = {c / a:.3f}, Cattaneo–Mindlin {np.sqrt(1 - ratio):.3f}; Q/(F P) = "

@@ -3,7 +3,7 @@
 Loading: the stick zone is c/a = sqrt(1 − Q*/(F P)) (Cattaneo–Mindlin). Unloading to Q reverses the
 slip in an annulus c′ < |x| < a, c′/a = sqrt(1 − (Q* − Q)/(2 F P)), while the points inside keep their
 position: friction acts on the slip increment of each step, so this comes out of the law. β = 0 needs
-ν → ½ (the Cattaneo–Mindlin example's Q2 block on rollers).
+ν → ½ (the Cattaneo–Mindlin example's Q2 block on rollers), solved as that example (auto: the dual).
 
     python examples/cattaneo_mindlin_cycle.py [--h 0.01] [--peak 0.75] [--back 0.25] [--out out/cycle]
 """
@@ -40,7 +40,7 @@ def main(h: float = 0.01, peak: float = 0.75, back: float = 0.25, out: str = "ou
     loads = [0.0, peak, back]  # Q / (F P) at each step: press, pull, pull back
     history = cc.History(times=[1.0, 2.0, 3.0],
                          values={"obstacle.tangential_force": [q * FRICTION * HERTZ_FORCE for q in loads]})
-    result = cc.run_history(dataclasses.replace(static_scene(h), history=history))
+    result = cc.run_history(dataclasses.replace(static_scene(h), history=history), "auto")
     loading, unloading = result.steps[1], result.steps[2]
     measured = {"stick on loading": ratio(loading, "stick"), "stick on unloading": ratio(unloading, "stick")}
     theory = {"stick on loading": np.sqrt(1 - peak), "stick on unloading": np.sqrt(1 - (peak - back) / 2)}

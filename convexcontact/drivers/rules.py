@@ -12,9 +12,15 @@ from ..conic import ConicProgram
 from ..fem.assembly import FEModel
 from ..scene.description import Coulomb, compliance_of
 
-INCOMPRESSIBLE = 1000.0
-"""λ/μ (ν ≈ 0.4995) from which "auto" keeps the primal: on the Cattaneo–Mindlin scene the
-dual's certificate was 1e-9 at ν = 0.499 (λ/μ = 499), 9e-5 at 0.4999 and 3e-2 at 0.49999."""
+INCOMPRESSIBLE = 1e5
+"""λ/μ (ν ≈ 0.499995) from which "auto" keeps the primal: beyond what was measured. Below it the dual is certified
+and faster (docs/performance.md, "Near-incompressible bodies"; dual / primal, certificate and time). Cattaneo–Mindlin
+(Q2, 25,115 DOFs, Coulomb F = 0.6, tol 1e-7): ν = 0.499 (λ/μ = 499) 2e-8 in 4.2 s / 3e-8 in 25 s; 0.4999 1e-8 in
+6.1 s / —; 0.49999 1e-7 in 13 s / no answer in 15 min (auto's primal map failed before). The stability study's Hertz
+rows (Signorini, nx = 32): P2 ν = 0.49 9e-13 in 2.9 s / 8e-13 in 1.2 s; P2 0.499 7e-12 0.7 s / 5e-12 1.4 s; P2 0.4999
+6e-11 0.6 s / 6e-11 1.5 s; Q2 0.4999 6e-11 0.7 s / 4e-11 2.6 s; Q2 0.49999 4e-10 0.9 s / inaccurate (6e-8) 2.2 s.
+The dual's Tresca steps at 0.499–0.49999 (W's condition 1e9–1e11) needed the polish to judge signs on the KKT
+solve's rounding (solvers/polish.py); before, its certificate was 3e-3 and 1e-5 and the rule stood at 1000."""
 
 DENSE_LIMIT = 10000
 """Most contact unknowns (rows of B) a dense W takes at all: memory grows as m² (800 MB at the limit).

@@ -27,8 +27,11 @@ import scipy.sparse.linalg as spla
 from ..conic import ConicProgram, ConicSolution, nonnegative
 from .cone_polish import FEASIBLE, bound_form, cone_polish
 
-ROUNDS = 10
-"""Active-set rounds before polishing gives up (and the interior-point answer stands)."""
+ROUNDS = 30
+"""Active-set rounds before polishing gives up (and the interior-point answer stands). Each is one KKT solve, about
+an interior-point iteration: 30 cost at most about one more interior point. The Cattaneo–Mindlin dual at ν = 0.4999
+(W's condition 1e11) needed 22 from an AlmostSolved iterate (non-penetration 5e-4); at 10 the Picard map's every
+other Tresca step stayed there and the map failed."""
 
 
 def kkt_solve(P: sp.spmatrix, q: np.ndarray, A: sp.csr_matrix, b: np.ndarray):
@@ -162,6 +165,19 @@ def place_free(x: np.ndarray, guess: np.ndarray, A: sp.csr_matrix, b: np.ndarray
     return x
 
 
+def sign_scale(program: ConicProgram, x: np.ndarray) -> np.ndarray:
+    """The rounding in each row's multiplier z = −(P x + q) through A: FEASIBLE times it is the most negative a
+    multiplier may be in the polish's first, strict rounds. Not the largest multiplier: an inaccurate (AlmostSolved)
+    iterate's reach 1.9e5 where a ball's radius is 0, and even the KKT answer's open-node gaps (228) passed a slip of
+    −4.4e-9 against its force beside slips of 1e-6 (the Cattaneo–Mindlin dual at ν = 0.4999: the Tresca step's
+    friction law at 1e-5). Where W is so ill-conditioned that the KKT solve's own error exceeds it (the same at
+    ν = 0.49999, condition 1e11: slips' noise 1e5 times this), the rounds run again judged on the interior point's
+    largest multiplier, as before, and the certificate judges their answer (there 9e-8)."""
+    A = abs(sp.csr_matrix(program.A))
+    terms = abs(program.P) @ np.abs(x) + np.abs(program.q)
+    return (A @ terms) / np.maximum(np.asarray(A.multiply(A).sum(axis=1)).ravel(), 1e-300)
+
+
 def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.ndarray = ()) -> ConicSolution:
     """Polish a linear program; ``pairs``: first rows of half-plane pairs b₀ ∓ a x ≥ 0 of which at
     most one is active (both active pin the same variable twice: a singular KKT system)."""
@@ -175,24 +191,26 @@ def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.nda
     touches = np.diff(A_kept.indptr) > 0  # an empty row has no say in the determined variables
     touches &= np.diff(A[:, np.flatnonzero(free)].tocsr().indptr) == 0  # a free variable's rows carry no force
     P_kept, q_kept = sp.csc_matrix(program.P)[kept][:, kept], program.q[kept]
-    active = touches & (equality | (solution.z > solution.s))
     scale_s = max(np.abs(program.b).max(initial=0.0), np.abs(solution.x).max(initial=0.0), 1.0)
-    scale_z = max(np.abs(solution.z).max(initial=0.0), 1.0)
-    pairs, z = np.asarray(pairs, dtype=int), solution.z
-    for _ in range(ROUNDS):
-        both = pairs[active[pairs] & active[pairs + 1]]
-        active[np.where(z[both] < z[both + 1], both, both + 1)] = False
-        answer = kkt_solve(P_kept, q_kept, A_kept[active], program.b[active])
-        if answer is None:
-            return solution
-        x, z = np.zeros(program.n_variables), np.zeros(program.n_constraints)
-        x[kept], z[active] = answer
-        x = place_free(x, solution.x, A, program.b, free)
-        s = np.where(equality, 0.0, program.b - A @ x)
-        violated = touches & ~equality & (s < -FEASIBLE * scale_s)
-        negative = active & ~equality & (z < -FEASIBLE * scale_z)
-        if not violated.any() and not negative.any():
-            return replace(solution, x=x, z=z, s=np.maximum(s, 0.0), status="solved",
-                           info={**solution.info, "polished": True})
-        active = (active | violated) & ~negative
+    pairs = np.asarray(pairs, dtype=int)
+    loose = max(np.abs(solution.z).max(initial=0.0), 1.0)
+    for strict in (True, False):  # signs judged against the rounding first, then on the iterate's scale
+        active, z = touches & (equality | (solution.z > solution.s)), solution.z
+        for _ in range(ROUNDS):
+            both = pairs[active[pairs] & active[pairs + 1]]
+            active[np.where(z[both] < z[both + 1], both, both + 1)] = False
+            answer = kkt_solve(P_kept, q_kept, A_kept[active], program.b[active])
+            if answer is None:
+                return solution
+            x, z = np.zeros(program.n_variables), np.zeros(program.n_constraints)
+            x[kept], z[active] = answer
+            x = place_free(x, solution.x, A, program.b, free)
+            s = np.where(equality, 0.0, program.b - A @ x)
+            scale_z = sign_scale(program, x) if strict else loose
+            violated = touches & ~equality & (s < -FEASIBLE * scale_s)
+            negative = active & ~equality & (z < -FEASIBLE * scale_z)
+            if not violated.any() and not negative.any():
+                return replace(solution, x=x, z=z, s=np.maximum(s, 0.0), status="solved",
+                               info={**solution.info, "polished": True})
+            active = (active | violated) & ~negative
     return solution
