@@ -8,11 +8,15 @@ nodes, 1024 extra unknowns on 3.4·10⁴). A grid needs only the DOFs' positions
 grid's hats interpolated at the DOFs), so K on slab + grid is a Galerkin approximation of K.
 
 Two bodies (the bench's punch on a foundation, graded meshes; generalized eigenvalues of W against the
-approximation, 2.5·10⁴ / 10⁵ DOFs): one grid over both bodies ties them together, and its spacing, two of the
-largest cells, is far coarser than a slab of graded cells is thick: [1, 52] / [1, 208]. Grids per body (K's
-connected components): [1, 6.7] / [1, 29]. Hats graded with the cells, a grid per octave of cell size from the slab's
-thickness out (hierarchical: each finer grid without the next one's nodes, whose hats its own reproduce):
-[1, 8.5] / [1, 6.8] (docs/performance.md, "The pair's preconditioner").
+approximation, Signorini, 2.5·10⁴ / 10⁵ DOFs): one grid over both bodies ties them together, and its spacing, two of
+the largest cells, is far coarser than a slab of graded cells is thick: [1, 52] / [1, 208] (the clamped slab at
+2.5·10⁴: [1, 60]). Grids per body (K's connected components): [1, 6.7] / [1, 29]. Graded with the cells too, a grid per
+octave of cell size from the slab's thickness out: [1, 1.9] / [1, 6.3]; each grid's hats kept over the DOFs of its
+octave and the finer ones (there with the finer grids' own nodes only: nested grids' hats are sums of finer ones), so
+their span holds the linear fields of the body, up to the hats that only graze its DOFs: a shear of the whole
+body among them (kept over its octave alone,
+the Tresca dual's tangential rows at 1.6·10⁴ DOFs kept an eigenvalue of 18, now 1.3; docs/performance.md, "The
+pair's matrix-free dual at scale").
 """
 
 from __future__ import annotations
@@ -63,10 +67,10 @@ def grid_shape(points: np.ndarray, spacing: float) -> np.ndarray:
 
 
 def graded_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, spacing: float) -> sp.csc_matrix:
-    """Hats of grids of ``spacing`` · 2^k, k = 0, 1, …, each kept for the points whose cells (``sizes``) it spans
-    by CELLS (a point's grid: the finest of spacing ≥ CELLS × its size) where it reaches KEEP at one of them; on
-    every grid but the coarsest only the nodes the next coarser grid lacks (nested grids: a coarse hat is a sum of
-    fine ones)."""
+    """Hats of grids of ``spacing`` · 2^k, k = 0, 1, …: a point's own grid is the finest whose spacing is at least
+    CELLS × its cells' size (``sizes``); a grid's hat is kept where it reaches KEEP at a point of that grid or of a
+    finer one, and on every grid but the coarsest only at the nodes the next coarser grid lacks (nested grids: a
+    coarse hat is a sum of fine ones)."""
     dim = points.shape[0]
     level = np.ceil(np.log2(np.maximum(CELLS * sizes / spacing, 1.0))).astype(np.int64)
     top = level.max(initial=0)
