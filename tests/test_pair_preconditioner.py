@@ -8,7 +8,7 @@ from scipy.sparse.csgraph import connected_components
 
 import convexcontact as cc
 from convexcontact.fem import factorization
-from convexcontact.fem.coarse import body_far_functions, far_functions, local_sizes
+from convexcontact.fem.coarse import body_far_functions, dof_cell_sizes, far_functions
 from convexcontact.scene.bodies_library import punch_on_foundation
 from convexcontact.scene.description import Tresca
 
@@ -61,7 +61,7 @@ def test_per_body_graded_functions_bound_the_pair_spectrum(pair):
     for component, dofs in enumerate(fem.basis.split_indices()):
         components[dofs] = component
     points = fem.basis.doflocs[:, fem.free]
-    joined = far_functions(points, components[fem.free], local_sizes(K, points), np.zeros(K.shape[0], int), K)
+    joined = far_functions(points, components[fem.free], dof_cell_sizes(fem), np.zeros(K.shape[0], int), K)
     one_grid = spectrum(factorization.slab(K, B, joined), W)
     assert min(per_body.min(), clamped.min(), one_grid.min()) > 1 - 1e-9
     assert per_body.max() < 2.0
