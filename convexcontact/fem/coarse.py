@@ -1,11 +1,22 @@
-"""Coarse functions of the body away from its contact face, for the preconditioner of the matrix-free dual.
+"""Coarse functions of each body away from its contact face, for the preconditioner of the matrix-free dual.
 
 The slab preconditioner (:func:`~convexcontact.fem.factorization.slab`) clamps the body a few layers from the
 contact face, so it has the face's long waves too stiff: on a 2-D strip 124 cells high with a 16-layer slab the
 generalized eigenvalues of W against the slab's W spread over [1, 10]. Adding, outside the slab, the bilinear
-(trilinear) hat functions of a regular grid whose spacing is the slab's thickness brings them to [1, 1.07]
-(1001 bottom nodes, 1024 extra unknowns on 3.4·10⁴). A grid needs only the DOFs' positions; the functions are
-FE functions (the grid's hats interpolated at the DOFs), so K on slab + grid is a Galerkin approximation of K.
+(trilinear) hats of a regular grid whose spacing is the slab's thickness brings them to [1, 1.07] (1001 bottom
+nodes, 1024 extra unknowns on 3.4·10⁴). A grid needs only the DOFs' positions; the functions are FE functions (the
+grid's hats interpolated at the DOFs), so K on slab + grid is a Galerkin approximation of K.
+
+Two bodies (the bench's punch on a foundation, graded meshes; generalized eigenvalues of W against the
+approximation, Signorini, 2.5·10⁴ / 10⁵ DOFs): one grid over both bodies ties them together, and its spacing, two of
+the largest cells, is far coarser than a slab of graded cells is thick: [1, 52] / [1, 208] (the clamped slab at
+2.5·10⁴: [1, 60]). Grids per body (K's connected components): [1, 6.7] / [1, 29]. Graded with the cells too, a grid per
+octave of cell size from the slab's thickness out: [1, 1.9] / [1, 6.3]; each grid's hats kept over the DOFs of its
+octave and the finer ones (there with the finer grids' own nodes only: nested grids' hats are sums of finer ones), so
+their span holds the linear fields of the body, up to the hats that only graze its DOFs: a shear of the whole
+body among them (kept over its octave alone,
+the Tresca dual's tangential rows at 1.6·10⁴ DOFs kept an eigenvalue of 18, now 1.3; docs/performance.md, "The
+pair's matrix-free dual at scale").
 """
 
 from __future__ import annotations
@@ -15,23 +26,34 @@ from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.linalg import lapack
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 CELLS = 2
-"""Least grid spacing, in the body's largest cells."""
+"""Least grid spacing, in the cells around the DOFs the grid's hats are kept for."""
 KEEP = 0.25
-"""A grid function is kept where it reaches this value at some DOF outside the slab: a hat that only grazes the
-rest (a corner of its support) adds a nearly dependent column."""
+"""A grid function is kept where it reaches this value at some DOF it is kept for: a hat that only grazes them (a
+corner of its support) adds a nearly dependent column."""
+INDEPENDENT = 1e-10
+"""Least pivot of the pivoted Cholesky factorization of the functions' stiffness (unit diagonal) a function must
+leave to be kept: the graded grids' hats near the slab and the edges of their levels can be dependent on the DOFs
+(the pair at 2.5·10⁴ / 10⁵ DOFs: 12 of 332, 14 of 774; none on the one-body shapes, whose cells are all alike)."""
+DENSE_COLUMNS = 4000
+"""Most functions whose independence is checked (a dense |F|² array, 128 MB, and its pivoted Cholesky, ~2·10¹⁰ flops);
+more are left to the slab's own check, which keeps or drops them all (see
+:func:`~convexcontact.fem.factorization.slab`)."""
 
 
 def grid_functions(points: np.ndarray, components: np.ndarray, spacing: float) -> sp.csr_matrix:
     """The hats of a regular grid of ``spacing`` over the points (dim × n), one column per grid node and
-    component, at each point in its own component (``components``, n): n × grid columns, 2^dim entries a row."""
+    component, at each point in its own component (``components``, n): n × grid columns, 2^dim entries a row.
+    A column is ``node · dim + component``, the nodes numbered in C order of :func:`grid_shape`."""
     dim, n = points.shape
     low = points.min(axis=1, keepdims=True)
     cell = np.floor((points - low) / spacing).astype(np.int64)
     local = (points - low) / spacing - cell
-    shape = cell.max(axis=1) + 2
+    shape = grid_shape(points, spacing)
     columns, values = [], []
     for corner in itertools.product((0, 1), repeat=dim):
         weight, node = np.ones(n), np.zeros(n, dtype=np.int64)
@@ -44,36 +66,92 @@ def grid_functions(points: np.ndarray, components: np.ndarray, spacing: float) -
                           np.arange(0, (n + 1) * 2**dim, 2**dim)), shape=(n, int(shape.prod()) * dim))
 
 
-def far_functions(points: np.ndarray, components: np.ndarray, cell_size: float) -> Callable:
-    """``coarse(inside, contact)`` for :func:`~convexcontact.fem.factorization.slab`: grid functions on the DOFs
-    outside the slab (``inside``, a mask), zero on it, the grid's spacing the slab's thickness (the farthest slab
-    DOF from the contact DOFs ``contact``) and at least two cells (``cell_size``: the largest), so each grid cell
-    holds DOFs; the functions that reach KEEP somewhere."""
+def grid_shape(points: np.ndarray, spacing: float) -> np.ndarray:
+    """The nodes along each axis of the grid of ``spacing`` from the points' least corner that covers them."""
+    return np.floor((points - points.min(axis=1, keepdims=True)) / spacing).astype(np.int64).max(axis=1) + 2
+
+
+def graded_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, spacing: float) -> sp.csc_matrix:
+    """Hats of grids of ``spacing`` · 2^k, k = 0, 1, …: a point's own grid is the finest whose spacing is at least
+    CELLS × its cells' size (``sizes``); a grid's hat is kept where it reaches KEEP at a point of that grid or of a
+    finer one, and on every grid but the coarsest only at the nodes the next coarser grid lacks (nested grids: a
+    coarse hat is a sum of fine ones)."""
+    dim = points.shape[0]
+    octaves = np.log2(np.maximum(CELLS * sizes / spacing, 1.0))
+    level = np.ceil(octaves - 1e-9).astype(np.int64)  # sizes of equal cells differ in their last bits
+    top = level.max(initial=0)
+    kept = []
+    for k in range(top + 1):
+        functions = grid_functions(points, components, spacing * 2**k)
+        own = functions[level <= k]
+        peak = np.zeros(functions.shape[1])
+        np.maximum.at(peak, own.indices, own.data)
+        keep = peak >= KEEP
+        if k < top:
+            nodes = np.unravel_index(np.arange(functions.shape[1]) // dim, tuple(grid_shape(points, spacing * 2**k)))
+            keep &= (np.stack(nodes) % 2).any(axis=0)
+        kept.append(functions.tocsc()[:, np.flatnonzero(keep)])
+    return sp.hstack(kept, format="csc")
+
+
+def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, bodies: np.ndarray,
+                  K: sp.spmatrix) -> Callable:
+    """``coarse(inside, contact)`` for :func:`~convexcontact.fem.factorization.slab`: on each body (``bodies``: a
+    number per DOF) with contact DOFs (``contact``), :func:`graded_functions` on its DOFs outside the slab
+    (``inside``, a mask), zero elsewhere, the finest spacing the body's slab's thickness (its farthest slab DOF from
+    its contact DOFs) and at least CELLS of the cells there; of them, those independent in K's energy."""
 
     def coarse(inside: np.ndarray, contact: np.ndarray) -> sp.csr_matrix:
-        thickness = cKDTree(points[:, contact].T).query(points[:, inside].T)[0].max(initial=0.0)
-        rest = np.flatnonzero(~inside)
-        functions = grid_functions(points[:, rest], components[rest], max(thickness, CELLS * cell_size))
-        peak = np.zeros(functions.shape[1])
-        np.maximum.at(peak, functions.indices, functions.data)
-        kept = np.flatnonzero(peak >= KEEP)
-        number = np.full(functions.shape[1], -1)
-        number[kept] = np.arange(kept.size)
-        entries = number[functions.indices] >= 0  # rows keep their kept entries, in the DOFs' numbering
-        counts = np.add.reduceat(entries, functions.indptr[:-1])  # rest is not empty (see slab)
-        indptr = np.zeros(inside.size + 1, dtype=np.int64)
-        indptr[rest + 1] = counts
-        return sp.csr_matrix((functions.data[entries], number[functions.indices[entries]], np.cumsum(indptr)),
-                             shape=(inside.size, kept.size))
+        columns = []
+        for body in np.unique(bodies[contact]):
+            mine = bodies == body
+            rest = np.flatnonzero(~inside & mine)
+            if rest.size == 0:
+                continue
+            own_contact = contact[bodies[contact] == body]
+            thickness = cKDTree(points[:, own_contact].T).query(points[:, inside & mine].T)[0].max()
+            spacing = max(thickness, CELLS * sizes[rest].min())
+            functions = graded_functions(points[:, rest], components[rest], sizes[rest], spacing)
+            columns.append(sp.csc_matrix((functions.data, rest[functions.indices], functions.indptr),
+                                         shape=(inside.size, functions.shape[1])))
+        if not columns:
+            return sp.csr_matrix((inside.size, 0))
+        return independent(sp.hstack(columns, format="csc"), K).tocsr()
 
     return coarse
 
 
+def independent(functions: sp.csc_matrix, K: sp.spmatrix) -> sp.csc_matrix:
+    """The columns of ``functions`` a pivoted Cholesky factorization of their stiffness Fᵀ K F (scaled to a unit
+    diagonal, LAPACK's pstrf) keeps with pivots above INDEPENDENT, in their order; all of them beyond DENSE_COLUMNS."""
+    if functions.shape[1] > DENSE_COLUMNS:
+        return functions
+    stiffness = (functions.T @ (K @ functions)).toarray()
+    scale = np.sqrt(np.maximum(np.diag(stiffness), np.finfo(float).tiny))
+    stiffness /= scale[:, None]  # in place: the one dense array
+    stiffness /= scale[None, :]
+    _, order, rank, _ = lapack.dpstrf(stiffness, lower=1, tol=INDEPENDENT, overwrite_a=1)
+    return functions[:, np.sort(order[:rank] - 1)]
+
+
+def dof_cell_sizes(fem) -> np.ndarray:
+    """Each free DOF's largest cell among those holding it (a cell's size: its bounding box's diagonal). A DOF's
+    farthest neighbour in K's graph would not do: on a triangulated strip it is an edge, not a diagonal, at some
+    nodes, and the finest grid then followed those (strip 100 : 1 clamped, Tresca: 148 products with W → 223)."""
+    corners = fem.mesh.p[:, fem.mesh.t]  # dim × corners × cells
+    cells = np.linalg.norm(corners.max(axis=1) - corners.min(axis=1), axis=0)
+    sizes = np.zeros(fem.basis.N)
+    dofs = fem.basis.element_dofs  # DOFs × cells
+    np.maximum.at(sizes, dofs.ravel(), np.broadcast_to(cells, dofs.shape).ravel())
+    return sizes[fem.free]
+
+
 def body_far_functions(fem) -> Callable:
-    """:func:`far_functions` of an assembled model (its free DOFs, their components, its largest cell)."""
+    """:func:`far_functions` of an assembled model: its free DOFs, their components, the cells around them, its
+    bodies (the connected components of K's graph: a pair's meshes share no node)."""
     components = np.zeros(fem.basis.N, dtype=np.int64)
     for component, dofs in enumerate(fem.basis.split_indices()):
         components[dofs] = component
-    corners = fem.mesh.p[:, fem.mesh.t]  # dim × corners × cells
-    cell_size = np.linalg.norm(corners.max(axis=1) - corners.min(axis=1), axis=0).max()
-    return far_functions(fem.basis.doflocs[:, fem.free], components[fem.free], cell_size)
+    points = fem.basis.doflocs[:, fem.free]
+    bodies = connected_components(fem.K, directed=False)[1]
+    return far_functions(points, components[fem.free], dof_cell_sizes(fem), bodies, fem.K)
