@@ -55,6 +55,15 @@ Schur complement is dense, 8·c² bytes (1.8 GB at the limit) before PARDISO's o
 bench at 1.4·10⁶ DOFs has 9816 unknowns, under DENSE_LIMIT, but 34,762 columns: its condensation passed
 18 GB and was stopped. Beyond it, the matrix-free dual (or the primal where that has no bound form)."""
 
+MATRIX_FREE_COLUMNS = 4000
+"""Most columns for a dense W where the matrix-free dual applies (newton-cg's bound form): forming W takes a solve
+per column and its Newton steps dense factorizations of the unknowns in contact, the matrix-free dual one
+factorization of K and its products. Measured on the 2-D pair (`bench --scenario two-body`, quiet; contact ratio and
+peak memory, dense / matrix-free; Signorini, Tresca, Coulomb): 1.0·10⁵ DOFs, 2,566 columns: 4.21 / 4.87, 9.12 / 11.4,
+6.33 / 15.1 (memory 2.6–3.1× / 1.7–1.8×); 2.8·10⁵ DOFs, 7,084 columns: 9.49 / 7.53, 27.5 / 14.6, 18.5 / 14.5 (memory
+5.0–6.3× / 1.8–1.9×); 6.0·10⁵ DOFs, 14,916 columns, Tresca: 83.6 (memory 12×) / 24.2 (1.9×). The 2-D punch at 10⁶
+DOFs condenses onto 2,002 columns and keeps its dense W."""
+
 MATRIX_FREE = "dual-matrix-free"
 """The dual with W as an operator (one solve with K's factors per product) and newton-cg."""
 
@@ -78,6 +87,8 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
     too_large = (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}" if unknowns > DENSE_LIMIT else
                  f"{closed} contact unknowns at closed nodes exceed {CLOSED_LIMIT}" if closed > CLOSED_LIMIT else
                  f"the {columns} DOFs to condense onto exceed {COLUMN_LIMIT}" if columns > COLUMN_LIMIT else
+                 f"the {columns} DOFs to condense onto exceed {MATRIX_FREE_COLUMNS}"
+                 if columns > MATRIX_FREE_COLUMNS and matrix_free_applies(fem, law) else
                  f"a 3-D body of {fem.n_free} DOFs (over {DENSE_DOFS_3D}) costs more to condense than to factorize"
                  if fem.dim == 3 and fem.n_free > DENSE_DOFS_3D else None)
     if too_large and matrix_free_applies(fem, law):
