@@ -17,6 +17,7 @@ when each cone bounds its own variables, as in the dual contact programs.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -170,17 +171,18 @@ def place_free(x: np.ndarray, guess: np.ndarray, A: sp.csr_matrix, b: np.ndarray
     return x
 
 
-def sign_scale(program: ConicProgram, x: np.ndarray) -> np.ndarray:
-    """The rounding in each row's multiplier z = −(P x + q) through A: FEASIBLE times it is the most negative a
+def sign_scale(program: ConicProgram) -> Callable[[np.ndarray], np.ndarray]:
+    """x ↦ the rounding in each row's multiplier z = −(P x + q) through A (|A|, |P| and the rows' norms taken once,
+    not in every round: a condensed program's P is a dense n × n block): FEASIBLE times it is the most negative a
     multiplier may be in the polish's first, strict rounds. Not the largest multiplier: an inaccurate (AlmostSolved)
     iterate's reach 1.9e5 where a ball's radius is 0, and even the KKT answer's open-node gaps (228) passed a slip of
     −4.4e-9 against its force beside slips of 1e-6 (the Cattaneo–Mindlin dual at ν = 0.4999: the Tresca step's
     friction law at 1e-5). Where W is so ill-conditioned that the KKT solve's own error exceeds it (the same at
     ν = 0.49999, condition 1e11: slips' noise 1e5 times this), the rounds run again judged on the interior point's
     largest multiplier, as before, and the certificate judges their answer (there 9e-8)."""
-    A = abs(sp.csr_matrix(program.A))
-    terms = abs(program.P) @ np.abs(x) + np.abs(program.q)
-    return (A @ terms) / np.maximum(np.asarray(A.multiply(A).sum(axis=1)).ravel(), 1e-300)
+    A, P, q = abs(sp.csr_matrix(program.A)), abs(program.P), np.abs(program.q)
+    norms = np.maximum(np.asarray(A.multiply(A).sum(axis=1)).ravel(), 1e-300)
+    return lambda x: (A @ (P @ np.abs(x) + q)) / norms
 
 
 def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.ndarray = ()) -> ConicSolution:
@@ -198,9 +200,10 @@ def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.nda
     P_kept, q_kept = sp.csc_matrix(program.P)[kept][:, kept], program.q[kept]
     scale_s = max(np.abs(program.b).max(initial=0.0), np.abs(solution.x).max(initial=0.0), 1.0)
     pairs = np.asarray(pairs, dtype=int)
-    loose = max(np.abs(solution.z).max(initial=0.0), 1.0)
-    for strict, rounds in ((True, ROUNDS), (False, LOOSE_ROUNDS)):  # signs judged against the rounding, then on the
-        active, z = touches & (equality | (solution.z > solution.s)), solution.z  # iterate's scale
+    loose, rounding = max(np.abs(solution.z).max(initial=0.0), 1.0), sign_scale(program)
+    # signs judged against the KKT solve's rounding first, then on the interior point's largest multiplier
+    for strict, rounds in ((True, ROUNDS), (False, LOOSE_ROUNDS)):
+        active, z = touches & (equality | (solution.z > solution.s)), solution.z
         for _ in range(rounds):
             both = pairs[active[pairs] & active[pairs + 1]]
             active[np.where(z[both] < z[both + 1], both, both + 1)] = False
@@ -211,7 +214,7 @@ def _polish_linear(program: ConicProgram, solution: ConicSolution, pairs: np.nda
             x[kept], z[active] = answer
             x = place_free(x, solution.x, A, program.b, free)
             s = np.where(equality, 0.0, program.b - A @ x)
-            scale_z = sign_scale(program, x) if strict else loose
+            scale_z = rounding(x) if strict else loose
             violated = touches & ~equality & (s < -FEASIBLE * scale_s)
             negative = active & ~equality & (z < -FEASIBLE * scale_z)
             if not violated.any() and not negative.any():
