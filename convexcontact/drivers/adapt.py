@@ -85,17 +85,22 @@ def inside(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
 
 def containing(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
     """For each point (n, d), the index of the simplex among ``corners`` (simplices, vertices, d: facets or cells) it
-    lies in: among the nearest by centroid, else (a large coarse simplex among small ones: graded meshes) among all."""
-    _, nearest = cKDTree(corners.mean(axis=1)).query(points, k=min(CANDIDATES, len(corners)))
+    lies in: among the nearest by centroid, more of them where a large coarse simplex lies among small ones (graded
+    meshes: its centroid is not among the point's nearest)."""
+    tree = cKDTree(corners.mean(axis=1))
     found = np.full(len(points), -1)
-    for column in nearest.reshape(len(points), -1).T:
-        hit = (found < 0) & inside(points, corners[column])
-        found[hit] = column[hit]
-    for k in np.flatnonzero(found < 0):
-        hits = np.flatnonzero(inside(np.broadcast_to(points[k], (len(corners), points.shape[1])), corners))
-        if hits.size == 0:
-            raise RuntimeError(f"a point of the refined mesh ({points[k]}) lies in no facet or cell of the coarse one")
-        found[k] = hits[0]
+    todo, count = np.arange(len(points)), CANDIDATES
+    while todo.size:
+        count = min(count, len(corners))
+        _, nearest = tree.query(points[todo], k=count)
+        for column in nearest.reshape(todo.size, -1).T:
+            hit = (found[todo] < 0) & inside(points[todo], corners[column])
+            found[todo[hit]] = column[hit]
+        todo = todo[found[todo] < 0]
+        if todo.size and count == len(corners):
+            raise RuntimeError(f"a point of the refined mesh ({points[todo[0]]}) lies in no facet or cell of the "
+                               "coarse one")
+        count *= 4
     return found
 
 
