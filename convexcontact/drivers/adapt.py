@@ -179,8 +179,8 @@ def refined_locally(mesh: fe.Mesh, marked: np.ndarray) -> fe.Mesh:
             padded = mesh if room == 0 else with_padding(mesh, room)
             refined = padded.refined(marked)
             break
-        except ValueError:
-            if not isinstance(mesh, fe.MeshTet1) or room > 64 * mesh.nelements:
+        except ValueError as error:  # numpy's, assigning past the room scikit-fem allotted
+            if "could not broadcast" not in str(error) or not isinstance(mesh, fe.MeshTet1) or room > 64 * mesh.nelements:
                 raise
             room = 4 * max(room, mesh.nelements)
     if room == 0:
