@@ -183,3 +183,15 @@ def test_tetrahedra_whose_bisection_overflows_scikit_fem_are_refined_whole():
         assert np.array_equal(np.unique(child.t), np.arange(child.nvertices))
         assert set(own) <= set(split_cells(mesh, child))
     assert overflowed >= 1 and fine.status == "solved" and fine.ndof > 5 * coarse.ndof
+
+
+def test_a_straight_quadratic_mesh_adapts_as_its_linear_mesh():
+    """A MeshTri2 with straight edges is refined as its linear mesh, the P2 element adding the middle nodes back: the
+    same levels and answers as the MeshTri1 (estimates equal to 1e-13)."""
+    scene = hertz_punch(nx=4, element="P2")
+    linear = build_mesh(scene.body)
+    quadratic = dataclasses.replace(fe.MeshTri2.from_mesh(linear), _boundaries=linear.boundaries)
+    levels = [adapt(s, target=1e-9, max_dofs=800) for s in (scene, dataclasses.replace(scene, body=cc.Body(quadratic, "P2")))]
+    assert [r.ndof for r in levels[0]] == [r.ndof for r in levels[1]] and len(levels[0]) >= 3
+    for a, b in zip(*levels):
+        assert b.error_budget["discretization"] == pytest.approx(a.error_budget["discretization"], rel=1e-12)
