@@ -11,7 +11,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from convexcontact import cli
-from convexcontact.scene.bodies_library import two_spheres
 from convexcontact.scene.library import hertz_punch, hertz_sphere
 from convexcontact.studies.precision import refinement
 
@@ -109,14 +108,6 @@ def test_compare_refuses_cells_that_are_no_simplices_before_any_solve(monkeypatc
     monkeypatch.setattr("convexcontact.studies.precision.refinement.solve", lambda *a, **k: pytest.fail("solved"))
     with pytest.raises(ValueError, match="^scene: .*give a P1 or P2 scene on triangles or tetrahedra"):
         refinement.compare(scene, 2)
-
-
-def test_compare_refuses_what_the_adaptive_loop_refuses_before_any_solve(monkeypatch):
-    """A 3-D pair (tetrahedra, which the comparison's true error reads) has no error bound to adapt by: refused by
-    the adaptive loop's own check before the uniform family is solved, not after it."""
-    monkeypatch.setattr("convexcontact.studies.precision.refinement.solve", lambda *a, **k: pytest.fail("solved"))
-    with pytest.raises(ValueError, match="^body: adaptive refinement of several bodies .*P1 triangles"):
-        refinement.compare(two_spheres(cells=2), 2)
 
 
 @pytest.mark.parametrize("value", ["P3", "Q1", "p2", "2", ""])

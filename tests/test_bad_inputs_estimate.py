@@ -90,24 +90,3 @@ def test_refinement_comparison_refuses_adaptive_dofs_that_are_no_count(value, mo
 @given(st.one_of(st.floats(max_value=1.0), st.just(float("nan")), st.text(max_size=5)))
 def test_any_growth_that_is_no_number_above_one_is_refused(value):
     raises(lambda: adapt(hertz_punch(nx=2), growth=value), "growth", "e.g. 2")
-
-
-FOUNDATION = SCENE.with_name("punch_on_foundation.toml")
-
-
-@pytest.mark.parametrize("element", ["P2", "Q1"])
-def test_adapt_refuses_bodies_its_bound_does_not_cover(element, monkeypatch):
-    """Several bodies are refined by their equilibrated bound, which covers 2-D P1 triangles: a P2 or quadrilateral
-    pair is refused before any solve, naming what is covered (it used to refuse every pair)."""
-    from convexcontact.scene.bodies_library import two_cylinders
-
-    monkeypatch.setattr("convexcontact.drivers.adapt.solve", lambda *a, **k: pytest.fail("solved a bad input"))
-    message = raises(lambda: adapt(two_cylinders(h=0.08, element=element)), "body", "P1 triangles")
-    assert element in message
-
-
-def test_run_adapt_refuses_a_quadrilateral_pair(capsys):
-    assert cli.main(["run", str(FOUNDATION), "--adapt"]) == 2
-    printed = capsys.readouterr()
-    assert "body: adaptive refinement of several bodies" in printed.err and "P1 triangles" in printed.err
-    assert "level 0" not in printed.out

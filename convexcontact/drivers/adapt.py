@@ -1,8 +1,10 @@
 """Adaptive refinement: solve → estimate → mark (Dörfler) → refine → solve again (docs/estimate.md).
 
 Triangles and tetrahedra (P1, P2) are refined where the residual indicators say
-(:func:`~convexcontact.fem.estimate.dorfler`, scikit-fem's local refinement); quadrilateral and hexahedral
-scenes refine uniformly, and say so. Each level is an ordinary certified solve of the scene on the new mesh.
+(:func:`~convexcontact.fem.estimate.dorfler`, scikit-fem's local refinement), one body or several (each where its
+own cells are marked; a pair's interface stays non-matching, as mortar takes it); quadrilateral and hexahedral
+scenes refine uniformly, and say so. The named boundaries and the subdomains are carried to the new cells. Each level
+is an ordinary certified solve of the scene on the new meshes.
 """
 
 from __future__ import annotations
@@ -21,8 +23,8 @@ from scipy.spatial import cKDTree
 
 from ..fem.estimate import dorfler
 from ..results.result import ContactResult
-from ..scene.bodies import Bodies, bodies_scene
-from ..scene.description import Body, Material, Scene, SceneError, of_type
+from ..scene.bodies import Bodies, bodies_scene, straight_sided
+from ..scene.description import Body, Scene, SceneError, of_type
 from ..scene.meshing import build_mesh
 from .solve import solve
 
@@ -57,16 +59,7 @@ def check_adapt_options(target, max_dofs, fraction, growth=GROWTH) -> tuple[floa
 def check_adapt_scene(scene: Scene) -> list[fe.Mesh]:
     """The meshes of a scene the adaptive loop can refine (see :func:`adapt`), else a SceneError naming the field."""
     of_type(scene, Scene, "scene", "build cc.Scene(...) or read a file with cc.load_scene(path)")
-    meshes = body_meshes(scene)
-    if isinstance(scene.body, Bodies):
-        if scene.body.element != "P1" or not isinstance(meshes[0], fe.MeshTri1):
-            raise SceneError("body", f"adaptive refinement of several bodies is driven by their error bound, which "
-                             f"covers 2-D P1 triangles only (got {scene.body.element} on {type(meshes[0]).__name__})",
-                             "give the parts P1 triangles, or solve the bodies on a finer mesh with cc.solve")
-    elif not isinstance(scene.materials, Material):
-        raise SceneError("materials", "materials per subdomain are not carried through local refinement",
-                         "give one material, or refine the mesh file yourself")
-    return meshes
+    return body_meshes(scene)
 
 
 def dofs_of(mesh: fe.Mesh, element: str) -> int:
@@ -90,23 +83,31 @@ def inside(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
     return (distance <= 1e-9 * size) & (local >= -1e-9).all(axis=1) & (local.sum(axis=1) <= 1 + 1e-9)
 
 
+def containing(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """For each point (n, d), the index of the simplex among ``corners`` (simplices, vertices, d: facets or cells) it
+    lies in: among the nearest by centroid, more of them where a large coarse simplex lies among small ones (graded
+    meshes: its centroid is not among the point's nearest)."""
+    tree = cKDTree(corners.mean(axis=1))
+    found = np.full(len(points), -1)
+    todo, count = np.arange(len(points)), CANDIDATES
+    while todo.size:
+        count = min(count, len(corners))
+        _, nearest = tree.query(points[todo], k=count)
+        for column in nearest.reshape(todo.size, -1).T:
+            hit = (found[todo] < 0) & inside(points[todo], corners[column])
+            found[todo[hit]] = column[hit]
+        todo = todo[found[todo] < 0]
+        if todo.size and count == len(corners):
+            raise RuntimeError(f"a point of the refined mesh ({points[todo[0]]}) lies in no facet or cell of the "
+                               "coarse one")
+        count *= 4
+    return found
+
+
 def parent_facets(new: fe.Mesh, old: fe.Mesh, facets: np.ndarray, candidates: np.ndarray) -> np.ndarray:
-    """For each of ``new``'s boundary ``facets``, the one of ``old``'s ``candidates`` (boundary facets) it lies in:
-    among the nearest by midpoint, else (a large coarse facet among small ones: graded meshes) among all."""
+    """For each of ``new``'s boundary ``facets``, the one of ``old``'s ``candidates`` (boundary facets) it lies in."""
     midpoints = new.p[:, new.facets[:, facets]].mean(axis=1).T
-    corners = old.p[:, old.facets[:, candidates]].transpose(2, 1, 0)  # (candidates, vertices, d)
-    _, nearest = cKDTree(corners.mean(axis=1)).query(midpoints, k=min(CANDIDATES, candidates.size))
-    parent = np.full(len(facets), -1)
-    for column in nearest.reshape(len(facets), -1).T:
-        found = (parent < 0) & inside(midpoints, corners[column])
-        parent[found] = candidates[column[found]]
-    for k in np.flatnonzero(parent < 0):
-        hits = np.flatnonzero(inside(np.broadcast_to(midpoints[k], (candidates.size, midpoints.shape[1])), corners))
-        if hits.size == 0:
-            raise RuntimeError(f"a boundary facet of the refined mesh (midpoint {midpoints[k]}) lies on no boundary "
-                               "facet of the coarse one")
-        parent[k] = candidates[hits[0]]
-    return parent
+    return candidates[containing(midpoints, old.p[:, old.facets[:, candidates]].transpose(2, 1, 0))]
 
 
 def inherit_boundaries(new: fe.Mesh, old: fe.Mesh) -> fe.Mesh:
@@ -120,6 +121,17 @@ def inherit_boundaries(new: fe.Mesh, old: fe.Mesh) -> fe.Mesh:
         member[old_facets] = True
         names[name] = facets[member[parent]]
     return contiguous(dataclasses.replace(new, _boundaries=names))
+
+
+def inherit_subdomains(new: fe.Mesh, old: fe.Mesh) -> fe.Mesh:
+    """``new`` (a local refinement of ``old``) with ``old``'s subdomains: each child cell in those of the coarse cell
+    holding its centroid. Done by hand: scikit-fem's local refinement of tetrahedra keeps the coarse index arrays,
+    which then name the wrong cells and miss the new ones (its triangles' are right, and found the same way here)."""
+    if not old.subdomains:
+        return new
+    parent = containing(new.p[:, new.t].mean(axis=1).T, old.p[:, old.t].transpose(2, 1, 0))
+    return dataclasses.replace(new, _subdomains={name: np.flatnonzero(np.isin(parent, cells))
+                                                 for name, cells in old.subdomains.items()})
 
 
 def contiguous(mesh: fe.Mesh) -> fe.Mesh:
@@ -144,14 +156,49 @@ def refine(meshes: Sequence[fe.Mesh], indicators: np.ndarray, fraction: float, g
         while True:
             marked = np.sort(order[:count])
             per_body = np.split(marked, np.searchsorted(marked, first[1:-1]))
-            refined = [mesh.refined(local - start) if local.size else mesh
+            refined = [refined_locally(mesh, local - start) if local.size else mesh
                        for mesh, local, start in zip(meshes, per_body, first)]
             added = sum(dofs_of(mesh, element) for mesh in refined) - before
             if added >= (growth - 1) * before or count == cells:
                 break
             # new DOFs grow about in proportion to the marked cells (plus the closure's): aim 10 % beyond the goal
             count = min(cells, max(count + 1, math.ceil(1.1 * count * (growth - 1) * before / max(added, 1))))
-    return [new if new is old else inherit_boundaries(new, old) for new, old in zip(refined, meshes)]
+    return [new if new is old else inherit_subdomains(inherit_boundaries(new, old), old)
+            for new, old in zip(refined, meshes)]
+
+
+def refined_locally(mesh: fe.Mesh, marked: np.ndarray) -> fe.Mesh:
+    """``mesh`` with its ``marked`` cells refined by scikit-fem (triangles: red-green-blue; tetrahedra: longest-edge
+    bisection with its closure). scikit-fem's bisection allots room for 8 cells per cell and 9 nodes per node, which
+    the closure of a small graded mesh exceeds (a quarter sphere cap of 60 cells became 800 in one step: numpy's "could
+    not broadcast"); there it is given the room by isolated padding cells, dropped after: never marked and sharing no
+    edge, they keep their indices while the new cells and nodes are appended."""
+    room = 0
+    while True:
+        try:
+            padded = mesh if room == 0 else with_padding(mesh, room)
+            refined = padded.refined(marked)
+            break
+        except ValueError as error:  # numpy's, assigning past the room scikit-fem allotted
+            if "could not broadcast" not in str(error) or not isinstance(mesh, fe.MeshTet1) or room > 64 * mesh.nelements:
+                raise
+            room = 4 * max(room, mesh.nelements)
+    if room == 0:
+        return refined
+    cells, nodes, added = mesh.nelements, mesh.nvertices, 4 * room  # the padding: cells [cells, cells + room), nodes
+    t = np.delete(refined.t, np.s_[cells:cells + room], axis=1)
+    return dataclasses.replace(refined, doflocs=np.delete(refined.p, np.s_[nodes:nodes + added], axis=1),
+                               t=np.where(t >= nodes + added, t - added, t))
+
+
+def with_padding(mesh: fe.MeshTet1, count: int) -> fe.MeshTet1:
+    """``mesh`` and ``count`` separate tetrahedra of its size beyond it (after its own cells and nodes)."""
+    size = np.ptp(mesh.p, axis=1).max()
+    corners = np.array([[0.0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) * size
+    shifts = mesh.p.max(axis=1)[:, None] + size * (2.0 + 2.0 * np.arange(count))
+    p = (corners[:, :, None] + shifts[:, None, :]).reshape(3, -1, order="F")
+    t = mesh.nvertices + np.arange(4 * count).reshape(count, 4).T
+    return type(mesh)(np.hstack([mesh.p, p]), np.hstack([mesh.t, t]), validate=False)
 
 
 def refined_uniformly(mesh: fe.Mesh, times: int) -> fe.Mesh:
@@ -176,8 +223,20 @@ def names_dropped_quietly():
 def body_meshes(scene: Scene) -> list[fe.Mesh]:
     """The mesh of the scene's body, or of each of its bodies (in the order of its parts, placed)."""
     if isinstance(scene.body, Bodies):
-        return [part.mesh() for part in scene.body.parts]
-    return [build_mesh(scene.body)]
+        return [part.mesh() for part in scene.body.parts]  # linear: the parts are joined as linear meshes
+    return [linear_mesh(build_mesh(scene.body))]
+
+
+def linear_mesh(mesh: fe.Mesh) -> fe.Mesh:
+    """A quadratic mesh with straight edges as its linear mesh (a P2/Q2 element adds the middle nodes back), since
+    scikit-fem refines linear meshes; a curved one is refused: its refinement would lose the curve."""
+    try:
+        return straight_sided(mesh)
+    except SceneError:
+        raise SceneError("body.geometry", f"a {type(mesh).__name__} with curved edges: adaptive refinement splits "
+                         "straight cells, and would lose the curve", "give a mesh with straight edges, finer where the "
+                         "boundary curves (gmsh: element order 1; element = 'P2' adds the middle nodes), or solve it "
+                         "without adaptive refinement") from None
 
 
 def scene_on(scene: Scene, meshes: Sequence[fe.Mesh]) -> Scene:
@@ -196,8 +255,9 @@ def adapt(scene: Scene, target: float = 1e-2, max_dofs: int = 200_000, fraction:
     """Solve ``scene`` on meshes refined where the error indicators are largest, until the estimated relative
     discretization error (``result.error_budget["discretization"]``) is at most ``target`` or the next mesh would
     exceed ``max_dofs``. Each level marks Dörfler's cells (``fraction`` of η²) and more, by indicator, until its
-    DOFs grow by ``growth`` at least (None: Dörfler's alone). Several bodies (2-D P1 triangles: their bound) are
-    marked together and each refined where its cells are. Returns every level's certified result;
+    DOFs grow by ``growth`` at least (None: Dörfler's alone). Several bodies are marked together (one η² over all
+    their cells) and each refined where its own cells are; the named boundaries, the contact pairs and the subdomains
+    (with their materials) are carried to every level. Returns every level's certified result;
     ``progress(level, result)`` after each."""
     target, max_dofs, fraction, growth = check_adapt_options(target, max_dofs, fraction, growth)
     meshes = check_adapt_scene(scene)
