@@ -9,6 +9,7 @@ Build a :class:`Scene`, call :func:`solve`, read the :class:`ContactResult`::
 """
 
 from .conic import ConicProgram, ConicSolution
+from .drivers.adapt import adapt
 from .drivers.history_run import HistoryResult
 from .drivers.history_run import run as run_history
 from .drivers.parameters import with_parameter
@@ -42,7 +43,7 @@ from .scene.toml import load_scene
 __all__ = [
     "Body", "Box", "ConicProgram", "ConicSolution", "Contact", "ContactResult", "Coulomb", "Dirichlet", "History",
     "HistoryResult", "Material", "MeshFile", "Model", "NormalCompliance", "Obstacle", "Pair", "Part", "Rectangle",
-    "Scene", "SceneError", "Signorini", "SolutionSet", "Traction", "Tresca", "all_solutions", "bodies_library",
+    "Scene", "SceneError", "Signorini", "SolutionSet", "Traction", "Tresca", "adapt", "all_solutions", "bodies_library",
     "bodies_scene", "gradient", "library", "load_scene", "prepare", "run_history", "sensitivity", "solve",
     "with_parameter",
 ]

@@ -12,11 +12,12 @@ from hypothesis import strategies as st
 from refusals import raises
 
 from convexcontact import cli
+import convexcontact as cc
 from convexcontact.drivers.adapt import adapt
 from convexcontact.scene.library import hertz_punch
 from convexcontact.studies.precision import refinement
 
-SURFACES = ("convexcontact run",)
+SURFACES = ("convexcontact run", "cc.adapt")
 
 SCENE = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "patch.toml"
 
@@ -90,3 +91,15 @@ def test_refinement_comparison_refuses_adaptive_dofs_that_are_no_count(value, mo
 @given(st.one_of(st.floats(max_value=1.0), st.just(float("nan")), st.text(max_size=5)))
 def test_any_growth_that_is_no_number_above_one_is_refused(value):
     raises(lambda: adapt(hertz_punch(nx=2), growth=value), "growth", "e.g. 2")
+
+
+@pytest.mark.parametrize("field, value, fix", [
+    ("scene", "patch.toml", "cc.load_scene"), ("fraction", 0.0, "0.5 is usual"), ("fraction", 1.5, "0.5 is usual"),
+    ("fraction", float("nan"), "0.5 is usual"), ("max_dofs", 0, "e.g. 200000"), ("max_dofs", 1e5, "e.g. 200000"),
+    ("max_dofs", True, "e.g. 200000"), ("target", -1e-2, "1e-2 for 1 %")])
+def test_the_public_adapt_refuses_each_option_before_any_solve(field, value, fix, monkeypatch):
+    """``cc.adapt``: a scene that is none, a fraction outside (0, 1], DOFs that are no positive integer, a target
+    outside (0, 1): a ValueError naming the field and a fix, before any solve."""
+    monkeypatch.setattr("convexcontact.drivers.adapt.solve", lambda *a, **k: pytest.fail("solved a bad input"))
+    options = {} if field == "scene" else {field: value}
+    raises(lambda: cc.adapt(value if field == "scene" else hertz_punch(nx=2), **options), field, fix)
