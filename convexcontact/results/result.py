@@ -306,8 +306,9 @@ def effectivity(element: str, dim: int) -> float:
 
 LARGE_ERROR = 0.5
 """Estimated relative discretization error (energy norm) above which a result warns and names the remedy: an answer
-not resolved at all. Measured (docs/estimate.md): Hertz P1 ν = 0.3 on the stability study's nx = 32 mesh 0.19, the
-library's nx = 80 0.08; the locking row (P1, ν = 0.4999, 71 % off Hertz) 77, P1 at ν = 0.49 (15 % off) 2.7."""
+not resolved at all. Measured (docs/estimate.md, the equilibrated bound that 2-D P1 reports): Hertz P1 ν = 0.3 on the
+stability study's nx = 32 mesh 0.21; the locking row (P1, ν = 0.4999, 71 % off Hertz) 28.6, P1 at ν = 0.49 (15 % off)
+0.81."""
 
 
 def contact_state(result: ContactResult) -> ContactState:
