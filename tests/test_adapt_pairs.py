@@ -94,12 +94,13 @@ def test_the_boundaries_and_the_contact_pair_stay_whole(pair, request):
     assert all(b >= a for a, b in itertools.pairwise(slaves)) and slaves[-1] > slaves[0]
 
 
-@pytest.mark.parametrize("pair, calibrated", [("cylinders", (0.9, 1.3)), ("spheres", (0.5, 1.2))])
+@pytest.mark.parametrize("pair, calibrated", [("cylinders", (1.0, 2.0)), ("spheres", (0.8, 1.6))])
 def test_the_true_error_falls_with_the_estimate(pair, calibrated, request):
     """Against the last level's meshes refined uniformly once (finer than every level, nested in it), the true energy
     error falls level by level (measured P2 6.9, 3.9, 2.6 %; tetrahedra 99, 89, 69, 52 %: the contact radius, ≈ 0.1,
-    inside the first cells), and the calibrated estimate stays near it (measured P2 1.04, 1.03, 1.05; tetrahedra
-    0.69, 0.64, 0.81, 0.94: low on the coarse levels, as the uniform ones' 0.89 at 288 DOFs, docs/estimate.md)."""
+    inside the first cells), and the calibrated estimate stays near it (measured P2 1.44, 1.42, 1.46 with 5.2;
+    tetrahedra 0.96, 0.89, 1.13, 1.31 with 2.8: low on the two coarsest levels, whose answers are ~100 % off,
+    pre-asymptotic; docs/estimate.md, "The calibration, family by family")."""
     levels = request.getfixturevalue(pair)
     scene = levels[-1].scene
     reference = cc.solve(scene_on(scene, [refined_uniformly(mesh, 1) for mesh in body_meshes(scene)]))

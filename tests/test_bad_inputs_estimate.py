@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from refusals import raises
 
-from convexcontact import cli
 import convexcontact as cc
+from convexcontact import cli
 from convexcontact.drivers.adapt import adapt
 from convexcontact.scene.library import hertz_punch
 from convexcontact.studies.precision import refinement

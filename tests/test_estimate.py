@@ -118,27 +118,27 @@ def test_hertz_effectivity_is_a_bounded_band_and_rates_match(hertz_p1):
 
 def test_contact_terms_keep_the_estimate_above_the_error(hertz_p1):
     """On the coarsest Hertz mesh the contact zone spans a few cells and the contact terms carry over a quarter of
-    η² (measured 29 %): calibrated, the estimate is near the true error with them (measured 0.92: the facet-wise
-    complementarity leaves out the tension of t_h beyond the contact edge, which the former pointwise term counted,
-    1.004) and far below it without them (0.78)."""
+    η² (measured 29 %): calibrated (`EFFECTIVITY["P1"]` 3.8), the estimate is above the true error with them
+    (measured 1.12) and below it without them (0.94)."""
     result, error = hertz_p1[0]
     estimated = result.residual_estimate
     contact_share = sum(estimated.terms[name] for name in ("contact", "complementarity")) / estimated.eta**2
     assert contact_share > 0.25
     without = np.sqrt(sum(estimated.terms[name] for name in TERMS if name not in ("contact", "complementarity")))
     calibration = EFFECTIVITY["P1"]
-    assert without / calibration < 0.85 * error and 0.9 * error <= estimated.eta / calibration
+    assert without / calibration < error <= estimated.eta / calibration
 
 
 def test_tetrahedra_have_their_own_calibration():
-    """3-D Hertz on P1 tetrahedra, two uniform levels against a reference two levels finer than the second: η / 3.9
-    (the 3-D constant) is not below the true error and within 1.4× of it; the 2-D constant 4.6 would read it low, as
-    the adaptive 3-D meshes showed (docs/estimate.md, "A 3-D calibration")."""
+    """3-D Hertz on P1 tetrahedra, two uniform levels against a reference two levels finer than the second: η / 2.8
+    (the 3-D constant, set by the adaptive 3-D levels: tests/test_calibration.py) is within 1–3 times the true error
+    (measured 1.42, 1.53; docs/estimate.md, "The calibration, family by family")."""
     runs = uniform_levels(hertz_3d("P1"), 4)
     del runs[2]  # levels 0 and 1 against level 3
-    assert all(r.error_budget["calibration"] == effectivity("P1", 3) == 3.9 for r in runs)
+    assert all(r.error_budget["calibration"] == effectivity("P1", 3) == 2.8 for r in runs)
     ratio = calibrated_effectivity(runs)
-    assert np.all(1.0 <= ratio) and np.all(ratio <= 1.4) and np.any(ratio * 3.9 / EFFECTIVITY["P1"] < 1.0)
+    assert np.all(1.0 <= ratio) and np.all(ratio <= 3.0)
+
 
 def cell_centres(result) -> np.ndarray:
     mesh = result.fem.mesh
@@ -266,11 +266,11 @@ def test_the_complementarity_term_falls_with_the_mesh_on_p2_tetrahedra(p2_tetrah
 
 
 def test_p2_tetrahedra_have_their_own_calibration(p2_tetrahedra):
-    """η / 5.1 (`EFFECTIVITY_3D["P2"]`) on the first two levels against the third (13,328 DOFs): not below the true
-    error and within 1.5× of it (measured 1.04, 1.41); the 2-D 7.2 read the coarse level at 0.74."""
-    assert all(r.error_budget["calibration"] == effectivity("P2", 3) == 5.1 for r in p2_tetrahedra)
+    """η / 4.7 (`EFFECTIVITY_3D["P2"]`) on the first two levels against the third (13,328 DOFs): within 1–3 times the
+    true error (measured 1.13, 1.53); the 2-D P2 constant of before, 7.2, read the coarse level at 0.74."""
+    assert all(r.error_budget["calibration"] == effectivity("P2", 3) == 4.7 for r in p2_tetrahedra)
     ratio = calibrated_effectivity(p2_tetrahedra)
-    assert np.all(1.0 <= ratio) and np.all(ratio <= 1.5) and ratio[0] * 5.1 / EFFECTIVITY["P2"] < 1.0
+    assert np.all(1.0 <= ratio) and np.all(ratio <= 3.0) and ratio[0] * 4.7 / 7.2 < 1.0
 
 
 @pytest.mark.parametrize("non_penetration", ["nodal", "weak", "gauss"])
