@@ -81,15 +81,17 @@ def _per_axis(spacing, dim: int) -> np.ndarray:
 
 
 def fitted_spacing(points: np.ndarray, spacing: float) -> np.ndarray:
-    """Per axis, the least spacing of at least ``spacing`` that puts a whole number of cells across the points'
+    """Per axis, the largest spacing of at most ``spacing`` that puts a whole number of cells across the points'
     bounding box, so that its far sides lie on grid nodes. A side inside a cell (a fraction f past the last node)
     had its points held only by hats reaching f there; KEEP dropped them for f < KEEP, and the grid then missed the
     linear fields of that side: on a strip 20 : 1 clamped at its ends (10⁵ DOFs, its top 5.25 cells above the
     slab) the beam's bending on the slab and grid cost 3·10³ times its true energy, W against the approximation
-    had eigenvalues to 2·10³, and CG took up to 32 iterations a Newton system."""
+    had eigenvalues to 2·10³, and CG took up to 32 iterations a Newton system. The largest spacing at least
+    ``spacing`` instead (fewer cells) coarsened a grid of 2.47 cells across to 2 (strip 100 : 1 clamped, 2·10⁴
+    DOFs: 148 products with W → 194)."""
     extent = np.ptp(points, axis=1)
-    cells = np.maximum(np.floor(extent / spacing * (1 + 1e-9)), 1.0)  # 1e-9: an extent of whole cells, rounded
-    return np.where(extent > 0, np.maximum(extent / cells, spacing), spacing)
+    cells = np.maximum(np.ceil(extent / spacing * (1 - 1e-9)), 1.0)  # 1e-9: an extent of whole cells, rounded
+    return np.where(extent > 0, extent / cells, spacing)
 
 
 def graded_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, spacing: float) -> sp.csc_matrix:
