@@ -52,7 +52,7 @@ def test_coarse_functions_stay_on_one_body(pair):
 def test_per_body_graded_functions_bound_the_pair_spectrum(pair):
     """K on slab + functions is a Galerkin approximation (W's eigenvalues against it ≥ 1); with the functions per
     body the largest is below 2, where the clamped slab leaves 47 and one grid over both bodies (tying them
-    together) 22."""
+    together) 12 (22 before the finest grid was fitted to the points' box, :func:`~convexcontact.fem.coarse.fitted_spacing`)."""
     model, B, W = pair
     fem, K = model.fem, model.fem.K
     per_body = spectrum(factorization.slab(K, B, body_far_functions(fem)), W)
@@ -65,7 +65,7 @@ def test_per_body_graded_functions_bound_the_pair_spectrum(pair):
     one_grid = spectrum(factorization.slab(K, B, joined), W)
     assert min(per_body.min(), clamped.min(), one_grid.min()) > 1 - 1e-9
     assert per_body.max() < 2.0
-    assert clamped.max() > 40.0 and one_grid.max() > 15.0
+    assert clamped.max() > 40.0 and one_grid.max() > 10.0
 
 
 def test_matrix_free_pair_is_the_dense_dual(pair):
