@@ -554,9 +554,15 @@ def _stored_sum(H: sp.csr_matrix, A: sp.spmatrix) -> sp.csr_matrix:
 
 def _scaled(P, scale: np.ndarray):
     """P̃ = diag(scale) P diag(scale) for the dense Newton steps: an array where P is mostly nonzero (a dense W held
-    as a sparse matrix: its reduced Hessians were sparse products, 3-D punch at 2.8·10⁵ DOFs), sparse otherwise."""
-    if sp.issparse(P) and P.nnz < 0.25 * P.shape[0] ** 2:
+    as a sparse matrix: its reduced Hessians were sparse products, 3-D punch at 2.8·10⁵ DOFs), sparse otherwise.
+    A CSC P that stores every entry in order (a dense W, formulations/dual.py) is read as its values' array, without a
+    copy where the scale is 1 (the contact dual's)."""
+    n = P.shape[0]
+    if sp.issparse(P) and P.nnz < 0.25 * n**2:
         return sp.diags(scale) @ sp.csr_matrix(P) @ sp.diags(scale)
+    if sp.issparse(P) and P.format == "csc" and P.nnz == n**2 and P.has_canonical_format:  # each column: rows 0..n-1
+        dense = P.data.reshape((n, n), order="F")
+        return dense if (scale == 1).all() else scale[:, None] * dense * scale
     return scale[:, None] * (P.toarray() if sp.issparse(P) else np.asarray(P, dtype=float)) * scale
 
 
