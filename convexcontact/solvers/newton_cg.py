@@ -289,7 +289,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     """Newton's method on the natural map from ``start`` (x; None: the projected gradient step from 0);
     ``cache`` keeps the preconditioner for the next solve of a session; ``coupling``: see :func:`coupled`."""
     began = time.perf_counter()
-    P = spla.aslinearoperator(program.P)
+    P = _operator(program.P)
     sets = _bounds(program, form, coupling)
     matrix = None if isinstance(program.P, spla.LinearOperator) else functools.cache(  # P̃, made at a dense step
         lambda: _scaled(program.P, sets.scale))
@@ -555,13 +555,12 @@ def _stored_sum(H: sp.csr_matrix, A: sp.spmatrix) -> sp.csr_matrix:
 def _scaled(P, scale: np.ndarray):
     """P̃ = diag(scale) P diag(scale) for the dense Newton steps: an array where P is mostly nonzero (a dense W held
     as a sparse matrix: its reduced Hessians were sparse products, 3-D punch at 2.8·10⁵ DOFs), sparse otherwise.
-    A CSC P that stores every entry in order (a dense W, formulations/dual.py) is read as its values' array, without a
-    copy where the scale is 1 (the contact dual's)."""
-    n = P.shape[0]
-    if sp.issparse(P) and P.nnz < 0.25 * n**2:
+    A CSC P that stores every entry in order (a dense W) is read as its values' array (:func:`_dense_values`), without
+    a copy where the scale is 1 (the contact dual's)."""
+    if sp.issparse(P) and P.nnz < 0.25 * P.shape[0] ** 2:
         return sp.diags(scale) @ sp.csr_matrix(P) @ sp.diags(scale)
-    if sp.issparse(P) and P.format == "csc" and P.nnz == n**2 and P.has_canonical_format:  # each column: rows 0..n-1
-        dense = P.data.reshape((n, n), order="F")
+    dense = _dense_values(P)
+    if dense is not None:
         return dense if (scale == 1).all() else scale[:, None] * dense * scale
     return scale[:, None] * (P.toarray() if sp.issparse(P) else np.asarray(P, dtype=float)) * scale
 
@@ -620,8 +619,24 @@ def _affine(program: ConicProgram):
     computes it from the displacement its multipliers leave, K⁻¹(f − Bᵀx), as the answer's fields are recovered:
     P x and q cancel where the loads bend a body its contact holds up, and the sum's rounding ε‖q‖ passed the gaps
     the certificate checks; formulations/dual.py)."""
-    P = spla.aslinearoperator(program.P)
+    P = _operator(program.P)
     return (lambda x: P.matvec(x) + program.q), program.gradient
+
+
+def _operator(P) -> spla.LinearOperator:
+    """x ↦ P x: a dense product where P is a CSC matrix of every entry (a dense W: csc_matvec also read its row
+    indices, 1.5 times the bytes), else P's own."""
+    dense = _dense_values(P)
+    return spla.aslinearoperator(P if dense is None else dense)
+
+
+def _dense_values(P) -> np.ndarray | None:
+    """P's values as an (n, n) array without a copy where P is a CSC matrix that stores every entry in order (a dense
+    W, formulations/dual.py: each column holds the rows 0..n−1), else None."""
+    n = P.shape[0]
+    if sp.issparse(P) and P.format == "csc" and P.nnz == n**2 and P.has_canonical_format:
+        return P.data.reshape((n, n), order="F")
+    return None
 
 
 def _natural(v, g, c, sets: _Bounds, q, metric=None):
