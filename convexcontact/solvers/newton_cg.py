@@ -86,7 +86,7 @@ Newton points on grown faces, GROW: the segment alone left the two-body Tresca d
 1e-2–1e-4 for 100 steps); with the grown faces the segment first is as sure and shorter: that dual 17 Newton steps /
 91 Newton systems → 8 / 33, Signorini 12 → 5; the 2-D block at 2·10⁴ DOFs, Tresca, 8 → 4, the 3-D tall block 10 → 7,
 the clamped strip 20 : 1 at 10⁵ 9 → 8; the 2-D punch at 10⁵ Signorini 4 → 5 and the pair at 2·10⁴ Tresca 6 → 7
-(docs/performance.md, "The dense dual's cost on the pair")."""
+(docs/performance.md, "The dense dual's cost on the pair and whole faces")."""
 ARMIJO = 1e-4
 """Fraction of the projected gradient's first-order decrease of f (κ in "Convergence") a point towards Newton's must
 reach. Measured against the first-order decrease of its own direction instead (before), the point of the segment was
