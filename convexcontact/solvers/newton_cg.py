@@ -778,7 +778,7 @@ def _system(matrix, Z, R, free: int, curvature, shift) -> np.ndarray:
     H = _reduced(matrix(), Z, R)
     H[free:, free:] += np.diag(curvature)
     H[np.diag_indices(H.shape[0])] += shift
-    H[np.diag_indices(H.shape[0])] += 1e-14 * np.abs(H).max(initial=0.0)
+    H[np.diag_indices(H.shape[0])] += 1e-14 * max(H.max(initial=0.0), -H.min(initial=0.0))  # no |H| copy
     return H
 
 
