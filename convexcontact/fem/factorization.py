@@ -305,24 +305,30 @@ class Condensation(Factorization):
     Attributes
     ----------
     C : sorted contact DOF indices.
-    S : dense symmetric Schur complement K_CC − K_CI K_II⁻¹ K_IC, (|C|, |C|).
+    S : dense symmetric Schur complement K_CC − K_CI K_II⁻¹ K_IC, (|C|, |C|): computed again from its Cholesky
+        factor where asked for (the derivatives, drivers/linearized.py), not held beside it.
     backend : "pardiso" or "superlu".
     timings : seconds for "factorization", "schur" (building S; PARDISO returns S with its
         factors, so there "factorization" includes it) and "cholesky" (of S).
     """
 
     def _finish(self, K: sp.spmatrix, S: np.ndarray, start: float) -> None:
-        S += S.T  # in place: S is the one |C|² array kept besides its Cholesky factor
-        S *= 0.5
-        self.S = S
         self.timings["schur"] = time.perf_counter() - start
         start = time.perf_counter()
-        try:
-            self._cho = la.cho_factor(self.S)
+        try:  # S's lower triangle (S.T's upper, Fortran order), factored in S's own memory: S (|C|² doubles) held
+            # beside its factor and symmetrized by S += S.T (a transposed copy) were three |C|² arrays at once, the
+            # dense dual's peak on the 2-D pair (|C| = 2566: 53 MB each), and the symmetrization 0.15 s of its 1.2 s
+            self._cho = la.cho_factor(S.T, overwrite_a=True, check_finite=False)
         except la.LinAlgError:
             raise singular_stiffness("its Schur complement on the contact DOFs is not positive definite") from None
         self.timings["cholesky"] = time.perf_counter() - start
         _check_definite(K, self.solve)
+
+    @functools.cached_property
+    def S(self) -> np.ndarray:
+        """S = UᵀU from its Cholesky factor (symmetric: numpy forms Xᵀ X by BLAS's syrk)."""
+        U = np.triu(self._cho[0])
+        return U.T @ U
 
     @abstractmethod
     def load(self, f: np.ndarray) -> np.ndarray:
@@ -343,12 +349,11 @@ class Condensation(Factorization):
         outside[self.C] = False
         if abs(B[:, outside]).sum() > 0:
             raise ValueError("B has nonzero columns outside the condensed DOFs C: condense onto every DOF B touches")
-        BC = sp.csr_matrix(B[:, self.C])  # sparse: a dense rows × |C| copy and a dense product cost a pair at 10⁵
-        # DOFs 64 MB beside its S (docs/performance.md, "Peak memory on thin bodies and pairs")
-        W = BC @ la.cho_solve(self._cho, BC.T.toarray(order="F"), overwrite_b=True)
-        W += W.T
-        W *= 0.5
-        return W
+        # W = XᵀX, X = U⁻ᵀ B_Cᵀ (S = UᵀU): one triangular solve and BLAS's syrk (numpy's Xᵀ X; symmetric as it is
+        # formed), half the flops of S⁻¹ B_Cᵀ by two (cho_solve) and a product (the pair at 10⁵ DOFs: 0.67 → 0.4 s)
+        X = la.solve_triangular(self._cho[0], sp.csr_matrix(B[:, self.C]).T.toarray(order="F"), trans="T",
+                                lower=self._cho[1], overwrite_b=True, check_finite=False)
+        return X.T @ X
 
 
 class _Interior(Condensation):
@@ -394,7 +399,8 @@ class _Schur(Condensation):
         self.C, self.backend = C, "pardiso"
         self._factors = _pardiso_factors(K, schur=C)
         self.timings = {"factorization": time.perf_counter() - start}
-        self._finish(K, self._factors.S, time.perf_counter())
+        S, self._factors.S = self._factors.S, None  # factored in place: no name left on what becomes its factor
+        self._finish(K, S, time.perf_counter())
 
     def load(self, f: np.ndarray) -> np.ndarray:
         return self._factors.forward(f)[self.C]

@@ -77,14 +77,16 @@ ACCEPT = 0.5
 """Newton's point is taken outright where its natural residual is below ACCEPT × the least so far (and f there is at
 most its value at the start: see "Convergence")."""
 ARC = 6
-"""Points Π(v + α(Newton's point − v)), α = 1, ½, …, tried before the least f on the segment to Π(Newton's point)
-where P is a matrix: a point of the arc holds its bounds exactly, one inside the segment does not. On the dense
-two-body Tresca dual (1434 unknowns) the segment alone left the residual wandering at 1e-2–1e-4 for 100 Newton steps;
-with the arc it converged in 42. On the matrix-free whole faces, where each point is also a solve with K, the arc
-took more Newton steps (Tresca, 10,001 nodes: 15 against 8): there the least f on the segment to Newton's point is tried
-first, and the arc only where that gains too little (two-body Tresca dual applied matrix-free, 1.4·10⁴ DOFs: 68 Newton
-steps and 740 products so, 326 and 4016 without the arc, most of them projected-gradient steps, 36 and 410 with the arc
-first; but the 2-D whole face of 1001 nodes then took 16 steps and 70 products against 8 and 39)."""
+"""Points Π(v + α(Newton's point − v)), α = ½, ¼, …, tried where the least f on the segment to Π(Newton's point)
+gains too little: a point of the arc holds its bounds exactly, one inside the segment does not (two-body Tresca dual
+applied matrix-free, 1.4·10⁴ DOFs: 68 Newton steps and 740 products so, 326 and 4016 without the arc; the arc
+before the segment: 36 and 410, but the 2-D whole face of 1001 nodes then 16 steps and 70 products against 8 and 39).
+One order whether P is a matrix or an operator. A dense W took Π(Newton's point) first, then the arc (before its
+Newton points on grown faces, GROW: the segment alone left the two-body Tresca dual at 1434 unknowns wandering at
+1e-2–1e-4 for 100 steps); with the grown faces the segment first is as sure and shorter: that dual 17 Newton steps /
+91 Newton systems → 8 / 33, Signorini 12 → 5; the 2-D block at 2·10⁴ DOFs, Tresca, 8 → 4, the 3-D tall block 10 → 7,
+the clamped strip 20 : 1 at 10⁵ 9 → 8; the 2-D punch at 10⁵ Signorini 4 → 5 and the pair at 2·10⁴ Tresca 6 → 7
+(docs/performance.md, "The dense dual's cost on the pair and whole faces")."""
 ARMIJO = 1e-4
 """Fraction of the projected gradient's first-order decrease of f (κ in "Convergence") a point towards Newton's must
 reach. Measured against the first-order decrease of its own direction instead (before), the point of the segment was
@@ -287,7 +289,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     """Newton's method on the natural map from ``start`` (x; None: the projected gradient step from 0);
     ``cache`` keeps the preconditioner for the next solve of a session; ``coupling``: see :func:`coupled`."""
     began = time.perf_counter()
-    P = spla.aslinearoperator(program.P)
+    P = _operator(program.P)
     sets = _bounds(program, form, coupling)
     matrix = None if isinstance(program.P, spla.LinearOperator) else functools.cache(  # P̃, made at a dense step
         lambda: _scaled(program.P, sets.scale))
@@ -348,25 +350,21 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         """The step from v to Newton's point ``towards`` or towards it (see "Convergence" in the module's docstring):
         Π(``towards``) where its natural residual is below ``residual`` and f there is at most f(v₀) (f − f(v₀) =
         ``risen`` at v); else the first point that lowers f by ARMIJO × |``cauchy``|, the projected gradient's
-        first-order decrease, of: Π(``towards``) where P is a matrix, the least f on the segment to it where P is an
-        operator, the projection arc towards it (ARC), the least f on the segment; else the least f on the projected
-        gradient's segment. The point, ∇f there, f's change and which point it is."""
+        first-order decrease, of: the least f on the segment to Π(``towards``), the projection arc towards it (ARC);
+        else the least f on the projected gradient's segment. The point, ∇f there, f's change and which point it is.
+        One order whether P is a matrix or an operator (see ARC)."""
         end = _project(towards, sets)  # the points themselves are returned: v + (w − v) would leave bounds by round-off
         g_end, change, Pd = move(v, g, end)
         if risen + change <= 0 and natural(end, g_end)[0] < residual:
             return end, g_end, change, "residual"
-        if matrix is not None and change <= ARMIJO * cauchy:
-            return end, g_end, change, "newton"
         on_segment = least_on_segment(v, g, end, Pd)
-        if matrix is None and on_segment[2] <= ARMIJO * cauchy:
+        if on_segment[2] <= ARMIJO * cauchy:
             return (*on_segment, "segment")
         for alpha in 0.5 ** np.arange(1, ARC):
             w = _project(v + alpha * (towards - v), sets)
             gw, change, _ = move(v, g, w)
             if change <= ARMIJO * cauchy:
                 return w, gw, change, "arc"
-        if on_segment[2] <= ARMIJO * cauchy:
-            return (*on_segment, "segment")
         return (*gradient_step(v, g), "gradient")
 
     def gradient_step(v, g):
@@ -378,15 +376,16 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         """Newton's point from v on the face y holds, the CG iterations it took and how far the first solve went
         (‖point − v‖∞, see FAR); with balls (friction) and fixed radii the face grown by the sets that point leaves
         until it leaves none (at most GROW times; see GROW), each solve started from the last point, projected."""
+        face = {}  # the dense Cholesky factor of this step's first system, for its grown faces (_direct)
         newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix, damping,
-                                   proximal=proximal)
+                                   proximal=proximal, face=face)
         reach = np.abs(newton - v).max(initial=0.0)
         for _ in range(GROW if sets.coupling is None and sets.balls.size else 0):
             y = _grown(y, newton, sets)
             if y is None:
                 break
             newton, more = _step(P, affine, sets, _project(newton, sets), y, c, target, products,
-                                 cache["precondition"], matrix, damping, GROWN_FORCING, proximal)
+                                 cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face)
             iterations += more
             faces[0] += 1
         return newton, iterations, reach
@@ -407,7 +406,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
 
     residual = first = None
     best, history = np.inf, []
-    risen, kinds, descent = 0.0, dict.fromkeys(("residual", "newton", "arc", "segment", "gradient"), 0), []
+    risen, kinds, descent = 0.0, dict.fromkeys(("residual", "segment", "arc", "gradient"), 0), []
     steps = cg_total = 0
     faces = [0]  # the faces grown (see GROW)
     damping = 0.0  # μ of the Newton systems (see DAMPING)
@@ -555,9 +554,14 @@ def _stored_sum(H: sp.csr_matrix, A: sp.spmatrix) -> sp.csr_matrix:
 
 def _scaled(P, scale: np.ndarray):
     """P̃ = diag(scale) P diag(scale) for the dense Newton steps: an array where P is mostly nonzero (a dense W held
-    as a sparse matrix: its reduced Hessians were sparse products, 3-D punch at 2.8·10⁵ DOFs), sparse otherwise."""
+    as a sparse matrix: its reduced Hessians were sparse products, 3-D punch at 2.8·10⁵ DOFs), sparse otherwise.
+    A CSC P that stores every entry in order (a dense W) is read as its values' array (:func:`_dense_values`), without
+    a copy where the scale is 1 (the contact dual's)."""
     if sp.issparse(P) and P.nnz < 0.25 * P.shape[0] ** 2:
         return sp.diags(scale) @ sp.csr_matrix(P) @ sp.diags(scale)
+    dense = _dense_values(P)
+    if dense is not None:
+        return dense if (scale == 1).all() else scale[:, None] * dense * scale
     return scale[:, None] * (P.toarray() if sp.issparse(P) else np.asarray(P, dtype=float)) * scale
 
 
@@ -615,8 +619,24 @@ def _affine(program: ConicProgram):
     computes it from the displacement its multipliers leave, K⁻¹(f − Bᵀx), as the answer's fields are recovered:
     P x and q cancel where the loads bend a body its contact holds up, and the sum's rounding ε‖q‖ passed the gaps
     the certificate checks; formulations/dual.py)."""
-    P = spla.aslinearoperator(program.P)
+    P = _operator(program.P)
     return (lambda x: P.matvec(x) + program.q), program.gradient
+
+
+def _operator(P) -> spla.LinearOperator:
+    """x ↦ P x: a dense product where P is a CSC matrix of every entry (a dense W: csc_matvec also read its row
+    indices, 1.5 times the bytes), else P's own."""
+    dense = _dense_values(P)
+    return spla.aslinearoperator(P if dense is None else dense)
+
+
+def _dense_values(P) -> np.ndarray | None:
+    """P's values as an (n, n) array without a copy where P is a CSC matrix that stores every entry in order (a dense
+    W, formulations/dual.py: each column holds the rows 0..n−1), else None."""
+    n = P.shape[0]
+    if sp.issparse(P) and P.format == "csc" and P.nnz == n**2 and P.has_canonical_format:
+        return P.data.reshape((n, n), order="F")
+    return None
 
 
 def _natural(v, g, c, sets: _Bounds, q, metric=None):
@@ -643,12 +663,13 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
 
 
 def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, damping=0.0,
-          relative=0.0, proximal=0.0):
+          relative=0.0, proximal=0.0, face=None):
     """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v and the CG
     (GMRES, where radii move) iterations it took, CG stopping at ``target`` or ``relative`` × its first residual
     (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃) and the system has at most DIRECT_LIMIT unknowns, a dense
-    LU instead. ``damping`` μ adds μ/c to the system's diagonal (:func:`_damped`, DAMPING), ``proximal`` (0 or one
-    number per variable) its own number to each variable's (:func:`_inert`)."""
+    Cholesky (LU where that fails or radii move) instead, or the factor kept in ``face`` (:func:`_direct`).
+    ``damping`` μ adds μ/c to the system's diagonal (:func:`_damped`, DAMPING), ``proximal`` (0 or one number per
+    variable) its own number to each variable's (:func:`_inert`)."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
@@ -703,25 +724,11 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     count = [0]
     direct = size and matrix is not None and size <= DIRECT_LIMIT
     if direct:
-        H = R.T @ (Z.T @ matrix()).T  # P̃ symmetric
-        H = H.toarray() if sp.issparse(H) else np.asarray(H)
-        H[free.size:, free.size:] += np.diag(curvature)
-        H[np.diag_indices(size)] += shift
-        # a relative 1e-14 on the diagonal: W is singular where a multiplier's DOFs are all held (a 3-D
-        # punch's symmetry planes); such a variable then stays where it is
-        H[np.diag_indices(size)] += 1e-14 * np.abs(H).max(initial=0.0)
-        direct = False
-        for kind in ("pos", "gen") if moving is None else ("gen",):  # Cholesky where H is symmetric, else LU
-            try:
-                with warnings.catch_warnings():  # a beam's bending: rcond 1e-16 on a clamped 20 : 1 strip's face.
-                    # The point is a trial that the residual and decrease rules accept or not, the answer is
-                    # certified from the displacement, and a warning per step says nothing the certificate does not
-                    warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)
-                    new = new + Z @ (start + scipy.linalg.solve(H, rhs, assume_a=kind, check_finite=False))
-                direct = True
-                break
-            except np.linalg.LinAlgError:  # rounding left H indefinite (LU next), or H = 0 (Krylov below)
-                continue
+        system = functools.partial(_system, matrix, Z, R, free.size, curvature, shift)
+        xi = _direct(system, free, rhs, moving is None, face if k * t == 0 else None)
+        direct = xi is not None
+        if direct:
+            new = new + Z @ (start + xi)
     if size and not direct:
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
@@ -734,6 +741,92 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
                                maxiter=CG_LIMIT // GMRES_RESTART, M=M, callback=callback, callback_type="pr_norm")
         new = new + Z @ (start + xi)
     return new, count[0]
+
+
+def _direct(system, free, rhs, symmetric: bool, face: dict | None):
+    """ξ of the dense Newton system ``system()`` ξ = ``rhs``, or None where it is singular: Cholesky where it is
+    ``symmetric`` and positive definite, else LU. ``face`` (None where the system has tangent coordinates) keeps the
+    Cholesky factor of a Newton step's first system; a grown face only holds more variables (bounds and intervals:
+    :func:`_grown`), so its system is a principal submatrix of that one, solved from the kept factor
+    (:func:`_on_face`) while that costs less than a factorization of its own."""
+    if symmetric and face and _cheaper_on_face(face["free"], free):
+        xi = _on_face(face["factor"], np.isin(face["free"], free), rhs)
+        if xi is not None:
+            return xi
+    with warnings.catch_warnings():  # a beam's bending: rcond 1e-16 on a clamped 20 : 1 strip's face.
+        # The point is a trial that the residual and decrease rules accept or not, the answer is
+        # certified from the displacement, and a warning per step says nothing the certificate does not
+        warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)
+        if symmetric:
+            try:  # H.T: H's own memory in Fortran order (H is symmetric), factored in place
+                factor = scipy.linalg.cho_factor(system().T, overwrite_a=True, check_finite=False)
+                if face is not None:
+                    face.update(free=free, factor=factor)
+                return scipy.linalg.cho_solve(factor, rhs, check_finite=False)
+            except np.linalg.LinAlgError:  # rounding left H indefinite: LU next
+                pass
+        try:
+            return scipy.linalg.solve(system(), rhs, assume_a="gen", overwrite_a=True, check_finite=False)
+        except np.linalg.LinAlgError:  # H = 0: Krylov instead
+            return None
+
+
+def _system(matrix, Z, R, free: int, curvature, shift) -> np.ndarray:
+    """The dense Newton system Rᵀ P̃ Z + curvature (on the tangent coordinates, after the ``free`` variables) + shift,
+    with a relative 1e-14 on its diagonal: W is singular where a multiplier's DOFs are all held (a 3-D punch's
+    symmetry planes); such a variable then stays where it is."""
+    H = _reduced(matrix(), Z, R)
+    H[free:, free:] += np.diag(curvature)
+    H[np.diag_indices(H.shape[0])] += shift
+    H[np.diag_indices(H.shape[0])] += 1e-14 * max(H.max(initial=0.0), -H.min(initial=0.0))  # no |H| copy
+    return H
+
+
+def _reduced(tilde, Z: sp.csr_matrix, R: sp.csr_matrix) -> np.ndarray:
+    """Rᵀ P̃ Z as a dense array, from the block of P̃ on the rows Z touches (one gather; where Z only picks variables,
+    that block itself). Through sparse products with all of P̃ (scipy copied it in and out of Fortran order) this took
+    1.0 s of the 1.8 s of newton-cg on the pair's dense Tresca dual (1434 unknowns, 91 systems)."""
+    rows = np.flatnonzero(np.diff(Z.indptr))
+    block = tilde[np.ix_(rows, rows)] if isinstance(tilde, np.ndarray) else tilde[rows][:, rows].toarray()
+    if R is Z and Z.nnz == Z.shape[1] == rows.size and (Z.data == 1).all() and (Z.indices == np.arange(rows.size)).all():
+        return block  # Z picks the variables ``rows``, in order
+    Z, R = Z[rows], R[rows]
+    return np.ascontiguousarray(R.T @ np.ascontiguousarray((Z.T @ block).T))
+
+
+REFACTOR = 1 / 3
+"""A grown face is solved from its step's first factor (:func:`_on_face`, ~n² k flops for k variables held more on n)
+while n² k < REFACTOR × n'³ (n' = n − k), the flops of a Cholesky of its own."""
+
+
+def _cheaper_on_face(factored: np.ndarray, free: np.ndarray) -> bool:
+    """Whether the system on the variables ``free`` is a principal submatrix of the one factored on ``factored``
+    (both sorted) that its factor solves in fewer flops than a factorization (REFACTOR)."""
+    held = factored.size - free.size
+    return held >= 0 and np.isin(free, factored).all() and factored.size**2 * held < REFACTOR * free.size**3
+
+
+def _on_face(factor, keep: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
+    """x solving H[keep, keep] x = ``rhs`` from the Cholesky ``factor`` of H (scipy's cho_factor, upper: H = UᵀU):
+    H x̃ = b̃ + E μ with x̃_E = 0 on the variables E held more, μ from the k × k system (XᵀX) μ = −Xᵀ z, X = U⁻ᵀE,
+    z = U⁻ᵀ b̃ (a Schur complement of H⁻¹ on E). By hand: scipy has Cholesky updates for neither deleted rows nor
+    columns (only QR's ``qr_delete``), and a rank-k downdate would change the factor this keeps for the next grown
+    face. None where XᵀX is numerically singular (a fresh factorization then)."""
+    U, lower = factor
+    held = np.flatnonzero(~keep)
+    b = np.zeros(keep.size)
+    b[keep] = rhs
+    z = scipy.linalg.solve_triangular(U, b, trans="T", lower=lower, check_finite=False)
+    if not held.size:
+        return scipy.linalg.solve_triangular(U, z, lower=lower, check_finite=False)
+    E = np.zeros((keep.size, held.size))
+    E[held, np.arange(held.size)] = 1.0
+    X = scipy.linalg.solve_triangular(U, E, trans="T", lower=lower, check_finite=False)
+    try:
+        mu = -scipy.linalg.cho_solve(scipy.linalg.cho_factor(X.T @ X, check_finite=False), X.T @ z, check_finite=False)
+    except np.linalg.LinAlgError:
+        return None
+    return scipy.linalg.solve_triangular(U, z + X @ mu, lower=lower, check_finite=False)[keep]
 
 
 def _expansion(n: int, free, sphere_vars, bases, coupling=None) -> sp.csr_matrix:
