@@ -134,3 +134,27 @@ def test_refactorize_of_terms_solves_with_their_sum(strip, backend):
     by_terms = factors.solve(b)
     factors.refactorize((2.0 * K + block).tocsr())
     np.testing.assert_allclose(by_terms, factors.solve(b), rtol=0, atol=1e-12 * np.abs(by_terms).max())
+
+
+def test_refactorize_keeps_each_term_s_places_while_its_pattern_stays(strip, monkeypatch):
+    """Each Newton step passes K and a contact block of the same patterns: their places in PARDISO's data are searched
+    once; a block of another pattern in the same place (another free set) is placed anew, and the solves are those of
+    the sum factorized afresh."""
+    if factorization._pardiso() is None:
+        pytest.skip("PARDISO does not load here")
+    K, B = sp.csr_matrix(strip.fem.K), sp.csr_matrix(strip.program.P.B)
+    rng = np.random.default_rng(6)
+    factors = factorization.factorize(newton_cg._stored_sum(K, (B.T @ B).tocsr()), "pardiso")
+    searched = []
+    places = pardiso.Pardiso._places
+    monkeypatch.setattr(pardiso.Pardiso, "_places", lambda self, *args: searched.append(1) or places(self, *args))
+    b = rng.standard_normal(K.shape[0])
+    counts = []
+    for rows in (B, B, B[: B.shape[0] // 2]):
+        block = (rows.T @ sp.diags(rng.uniform(1.0, 2.0, rows.shape[0])) @ rows).tocsr()
+        before = len(searched)
+        factors.refactorize(K, block)
+        counts.append(len(searched) - before)
+        fresh = factorization.factorize((K + block).tocsr(), "pardiso").solve(b)
+        np.testing.assert_allclose(factors.solve(b), fresh, rtol=0, atol=1e-10 * np.abs(fresh).max())
+    assert counts[0] > counts[2] > counts[1] == 0  # both terms; none; the new block only

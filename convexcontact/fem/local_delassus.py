@@ -21,12 +21,17 @@ Newton steps there, but its cruder step lengths c_j = 0.1 / d_j on the near-null
 (tangential multipliers of the nodes on its symmetry planes) left its Tresca row at 10⁵ DOFs `inaccurate` after 100
 Newton steps (6 steps with two layers) and its Coulomb row matrix-free stalled (docs/performance.md, "Thin bodies")."""
 
+QUANTUM = 2.0 ** -32
+"""Patches whose entries agree to this fraction of their largest are solved once (see :func:`local_diagonal`)."""
+
 
 def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.ndarray:
     """d_j = b_jᵀ K_Ω⁻¹ b_j for each row b_j of B, Ω_j its support grown through K's graph ``layers`` times. Rows
     whose supports grown once are alike (a node's normal and tangential rows, whose own supports are a component
     each) share their patch: the patches are coloured, and each colour is one factorization with a right-hand side
-    per row of a patch (3-D: a third of the factorizations of a colouring by the rows' own supports)."""
+    per row of a patch (3-D: a third of the factorizations of a colouring by the rows' own supports). A patch the
+    same as one solved before (its K block and its rows' loads, numbered in the patch, equal to :data:`QUANTUM`: a
+    regular mesh's patches, translated) takes that one's d_j instead of being solved again."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
     graph = sp.csr_matrix((np.ones(K.nnz, dtype=np.int32), K.indices, K.indptr), shape=K.shape)
     reach = _pattern(graph @ B.T).T.tocsr() if layers else B  # each row's support grown once
@@ -36,20 +41,45 @@ def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.n
     for _ in range(layers - 1):
         patch = _pattern(graph @ patch)
     conflict = _pattern(patch.T @ _pattern(graph @ patch))  # patches that overlap or touch
-    diagonal = np.zeros(B.shape[0])
+    rows_of = np.full((first.size, slot.max(initial=0) + 1), -1)  # each patch's rows by slot
+    rows_of[support, slot] = np.arange(B.shape[0])
+    B_first = _per_row(np.minimum, B.indices, B.indptr)
+    K_rows, B_rows = _row_hashes(K, np.arange(K.shape[0])), _row_hashes(B, B_first)
+    diagonal, solved = np.zeros(B.shape[0]), {}  # solved: a patch's key -> the patch solved for it
     colours = colouring(conflict)
     for colour in range(colours.max(initial=-1) + 1):
         members = np.flatnonzero(colours == colour)
-        region = np.flatnonzero(np.asarray(patch[:, members].sum(axis=1)).ravel())
+        members_patch = patch[:, members]
+        owner = np.full(K.shape[0], -1)
+        owner[members_patch.indices] = np.repeat(np.arange(members.size), np.diff(members_patch.indptr))
+        region = np.flatnonzero(owner >= 0)
+        owner = owner[region]  # each DOF's member: the patches of a colour do not overlap
         rows = np.flatnonzero(np.isin(support, members))
-        load = B[rows][:, region]
-        by_slot = sp.csr_matrix((np.ones(rows.size), (slot[rows], np.arange(rows.size))))
-        response = spla.splu(sp.csc_matrix(K[region][:, region])).solve((by_slot @ load).T.toarray())
-        # b_j · (the response of row j's slot): other rows of a slot act on other blocks of K_region. Picked from
-        # the rows × slots products; the rows × region array of each row's slot's response this replaces was
-        # the contact solve's peak on thin bodies (strip 400 : 1 clamped, 3.4·10⁴ DOFs: 67 of 97 MB)
-        diagonal[rows] = (load @ response)[np.arange(rows.size), slot[rows]]
+        of_row = np.searchsorted(members, support[rows])
+        base = np.zeros(members.size, dtype=np.int64)
+        base[owner[::-1]] = region[::-1]  # each member's first DOF (of repeated writes, the last)
+        K_keys = _sums(_mix(K_rows[region] ^ _mix(region - base[owner])), owner, members.size)
+        B_keys = _sums(_mix(B_rows[rows] ^ _mix((B_first[rows] - base[of_row]) << 16 | slot[rows])), of_row,
+                       members.size)
+        sizes = np.bincount(owner, minlength=members.size)
+        twin = np.array([solved.setdefault(key, p) for p, key in zip(members, zip(K_keys, B_keys, sizes))])
+        fresh = twin == members
+        region, rows = region[fresh[owner]], rows[fresh[of_row]]
+        if rows.size:
+            diagonal[rows] = _solved(K[region][:, region], B[rows][:, region], slot[rows])
+        copies, originals = rows_of[members[~fresh]].ravel(), rows_of[twin[~fresh]].ravel()
+        diagonal[copies[copies >= 0]] = diagonal[originals[copies >= 0]]  # twins: the same slots
     return diagonal
+
+
+def _solved(K_region: sp.csr_matrix, load: sp.csr_matrix, slot: np.ndarray) -> np.ndarray:
+    """b_jᵀ K_region⁻¹ b_j for the rows b_j of ``load``, one factorization with a right-hand side per slot."""
+    by_slot = sp.csr_matrix((np.ones(slot.size), (slot, np.arange(slot.size))))
+    response = spla.splu(sp.csc_matrix(K_region)).solve((by_slot @ load).T.toarray())
+    # b_j · (the response of row j's slot): other rows of a slot act on other blocks of K_region. Picked from the
+    # rows × slots products; the rows × region array of each row's slot's response this replaces was the contact
+    # solve's peak on thin bodies (strip 400 : 1 clamped, 3.4·10⁴ DOFs: 67 of 97 MB)
+    return (load @ response)[np.arange(slot.size), slot]
 
 
 def supports(B: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
@@ -58,11 +88,7 @@ def supports(B: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
     numbers: dict = {}
     support = np.array([numbers.setdefault(B.indices[B.indptr[j]:B.indptr[j + 1]].tobytes(), len(numbers))
                         for j in range(B.shape[0])], dtype=int)
-    order = np.argsort(support, kind="stable")
-    starts = np.searchsorted(support[order], support[order])  # each row's support's first place in the order
-    slot = np.empty_like(support)
-    slot[order] = np.arange(support.size) - starts
-    return support, slot
+    return support, _ranks(support)
 
 
 def colouring(conflict: sp.csr_matrix) -> np.ndarray:
@@ -83,6 +109,55 @@ def colouring(conflict: sp.csr_matrix) -> np.ndarray:
         colours[row] = np.argmin(taken)
         taken[around] = False
     return colours
+
+
+def _ranks(groups: np.ndarray) -> np.ndarray:
+    """Each item's rank among the items of its group, in their order."""
+    order = np.argsort(groups, kind="stable")
+    starts = np.searchsorted(groups[order], groups[order])  # each item's group's first place in the order
+    ranks = np.empty_like(groups)
+    ranks[order] = np.arange(groups.size) - starts
+    return ranks
+
+
+def _row_hashes(A: sp.csr_matrix, reference: np.ndarray, chunk: int = 1 << 14) -> np.ndarray:
+    """A 64-bit hash of each row of ``A``: its stored columns less the row's ``reference`` column, and its entries
+    rounded to QUANTUM of the row's largest. Rows alike up to a shift of the numbering hash alike. By rows of about
+    ``chunk`` entries: a few arrays of A's entries at once held ~5 × K's bytes (the diagonal's peak)."""
+    hashes = np.zeros(A.shape[0], dtype=np.uint64)
+    step = max(1, A.shape[0] * chunk // max(A.nnz, 1))
+    for start in range(0, A.shape[0], step):
+        rows = A[start:start + step]
+        row = np.repeat(np.arange(rows.shape[0]), np.diff(rows.indptr))
+        largest = _per_row(np.maximum, np.abs(rows.data), rows.indptr)
+        level = np.rint(rows.data / np.where(largest > 0, largest, 1.0)[row] / QUANTUM).astype(np.int64)
+        hashed = _mix(_mix(rows.indices - reference[start + row]) ^ level.view(np.uint64))
+        hashes[start:start + step] = _sums(hashed, row, rows.shape[0])
+    return hashes
+
+
+def _per_row(ufunc: np.ufunc, values: np.ndarray, indptr: np.ndarray) -> np.ndarray:
+    """``ufunc`` reduced over each row's ``values`` (CSR ``indptr``), 0 for an empty row."""
+    out = np.zeros(indptr.size - 1, dtype=values.dtype)
+    stored = np.diff(indptr) > 0
+    if stored.any():  # reduceat over the rows that store: an empty row's start is the next row's
+        out[stored] = ufunc.reduceat(values, indptr[:-1][stored])
+    return out
+
+
+def _sums(hashed: np.ndarray, group: np.ndarray, groups: int) -> np.ndarray:
+    """The sum of the ``hashed`` of each group (wrapping): a hash of the group's items whatever their order."""
+    total = np.zeros(groups, dtype=np.uint64)
+    np.add.at(total, group, hashed)
+    return total
+
+
+def _mix(x: np.ndarray) -> np.ndarray:
+    """splitmix64's finalizer on integers as uint64s (wrapping): numpy has no vectorized hash."""
+    x = np.asarray(x).astype(np.int64).view(np.uint64) + np.uint64(0x9E3779B97F4A7C15)
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
 
 
 def _pattern(A: sp.spmatrix) -> sp.csc_matrix:

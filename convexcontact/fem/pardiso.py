@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import hashlib
 import os
 import weakref
 
@@ -69,6 +70,15 @@ def _call(handle: tuple, phase: int, b: np.ndarray, x: np.ndarray, nrhs: int) ->
     return error.value
 
 
+def _canonical(term: sp.spmatrix) -> sp.csr_matrix:
+    """``term`` as CSR with each entry stored once (a copy only if it repeats some)."""
+    term = sp.csr_matrix(term)
+    if not term.has_canonical_format:
+        term = term.copy()
+        term.sum_duplicates()
+    return term
+
+
 def _release(handle: tuple) -> None:
     empty = np.zeros(1)
     _call(handle, -1, empty, empty, 1)
@@ -107,6 +117,7 @@ class Pardiso:
         self._handle = (pt, iparm, n, np.ascontiguousarray(U.data, dtype=float), U.indptr.astype(np.int32),
                         U.indices.astype(np.int32), perm)
         weakref.finalize(self, _release, self._handle)
+        self._cache: dict = {}  # a term's position -> (its pattern's fingerprint, its places): see refactorize
         S = np.zeros((len(schur), len(schur))) if schur is not None else np.zeros(1)
         self._run(12, np.zeros(1), S, 1)
         self.S = S if schur is not None else None  # row-major, symmetric up to rounding
@@ -134,40 +145,68 @@ class Pardiso:
     def refactorize(self, *terms: sp.spmatrix) -> None:
         """New values, the sum of ``terms`` (one matrix, or a few whose sum is not formed: a preconditioner's K and its
         contact block), on the sparsity pattern of the matrix factorized (or part of it): the numeric factorization
-        only (phase 22), keeping the ordering — 0.14 s against 0.65 s on a 2-D slab of 1.4·10⁵ DOFs."""
-        terms = [sp.csr_matrix(term) for term in terms]
-        places = [[self._places(term, rows) for rows in self._chunks(term)] for term in terms]  # all checked first
+        only (phase 22), keeping the ordering — 0.14 s against 0.65 s on a 2-D slab of 1.4·10⁵ DOFs. Where each
+        term's entries go is kept while its pattern stays (each Newton step of newton-cg passes H and a contact block
+        of the same patterns): finding it took a third of a refactorization of a 3-D plate's K."""
+        terms = [_canonical(term) for term in terms]
+        places = [self._placed(position, term) for position, term in enumerate(terms)]  # all checked first
         data = self._handle[3]
         data[:] = 0.0  # in place: PARDISO holds a pointer to it
-        for term, where_upper in zip(terms, places):
-            for rows, (where, upper) in zip(self._chunks(term), where_upper):
-                np.add.at(data, where, term.data[term.indptr[rows.start]:term.indptr[rows.stop]][upper])
+        for term, where in zip(terms, places):
+            done = 0
+            for rows in self._chunks(term):
+                upper = self._upper(term, rows)
+                values = term.data[term.indptr[rows.start]:term.indptr[rows.stop]][upper]
+                data[where[done:done + values.size]] += values  # a canonical term: each place once
+                done += values.size
         self._run(22, np.zeros(1), np.zeros(1), 1)
+
+    def _placed(self, position: int, term: sp.csr_matrix) -> np.ndarray:
+        """Where the upper-triangle entries of the ``position``-th term sit in the data factorized (row by row, int32:
+        4 bytes an entry kept), from the cache if the term's pattern is the last one placed there."""
+        pattern = (REFACTOR_CHUNK, hashlib.blake2b(term.indptr).digest(), hashlib.blake2b(term.indices).digest())
+        cached = self._cache.get(position)
+        if cached is None or cached[0] != pattern:
+            self._cache.pop(position, None)  # its memory free before the new places
+            chunks = self._chunks(term)
+            where = np.empty(sum(int(self._upper(term, rows).sum()) for rows in chunks),
+                             dtype=np.int32 if self._handle[3].size < 2**31 else np.int64)
+            done = 0
+            for rows in chunks:
+                places = self._places(term, rows)
+                where[done:done + places.size] = places
+                done += places.size
+            cached = self._cache[position] = (pattern, where)
+        return cached[1]
 
     def _chunks(self, K: sp.csr_matrix) -> list:
         """K's rows in slices of about REFACTOR_CHUNK stored entries each."""
         step = max(1, self.n * REFACTOR_CHUNK // max(K.nnz, 1))
         return [slice(start, min(start + step, self.n)) for start in range(0, self.n, step)]
 
-    def _places(self, K: sp.csr_matrix, rows: slice) -> tuple[np.ndarray, np.ndarray]:
-        """Where the upper-triangle entries of K's ``rows`` sit in the data factorized, and which of the rows'
-        entries are upper; ValueError for an entry outside the pattern."""
+    @staticmethod
+    def _upper(K: sp.csr_matrix, rows: slice) -> np.ndarray:
+        """Which stored entries of K's ``rows`` are in its upper triangle."""
+        row = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), np.diff(K.indptr[rows.start:rows.stop + 1]))
+        return K.indices[K.indptr[rows.start]:K.indptr[rows.stop]] >= row
+
+    def _places(self, K: sp.csr_matrix, rows: slice) -> np.ndarray:
+        """Where the upper-triangle entries of K's ``rows`` sit in the data factorized; ValueError for an entry outside
+        the pattern. Searched among the keys row · n + column of those rows' entries factorized (increasing: rows
+        sorted, then columns), not of all of them: a chunk's temporaries only."""
         start, stop = K.indptr[rows.start], K.indptr[rows.stop]
         row = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), np.diff(K.indptr[rows.start:rows.stop + 1]))
         column = K.indices[start:stop]
         upper = column >= row
         wanted = row[upper] * self.n + column[upper]
-        keys = self._keys
+        _, _, n, _, indptr, indices, _ = self._handle
+        first, last = indptr[rows.start], indptr[rows.stop]
+        keys = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), np.diff(indptr[rows.start:rows.stop + 1]))
+        keys = keys * n + indices[first:last]
         where = np.searchsorted(keys, wanted)
         if (where >= keys.size).any() or (keys[np.minimum(where, keys.size - 1)] != wanted).any():
             raise ValueError("refactorize: the matrix has entries outside the pattern factorized")
-        return where, upper
-
-    @functools.cached_property
-    def _keys(self) -> np.ndarray:
-        """row · n + column of each stored entry of the upper triangle, increasing (rows sorted, then columns)."""
-        _, _, n, _, indptr, indices, _ = self._handle
-        return np.repeat(np.arange(n, dtype=np.int64), np.diff(indptr)) * n + indices
+        return where + first
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """K⁻¹ b (phase 33)."""
