@@ -31,7 +31,9 @@ def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.n
     each) share their patch: the patches are coloured, and each colour is one factorization with a right-hand side
     per row of a patch (3-D: a third of the factorizations of a colouring by the rows' own supports). A patch the
     same as one solved before (its K block and its rows' loads, numbered in the patch, equal to :data:`QUANTUM`: a
-    regular mesh's patches, translated) takes that one's d_j instead of being solved again."""
+    regular mesh's patches, translated) takes that one's d_j instead of being solved again. Patches are matched by a
+    64-bit hash (a collision's odds: patches² / 2⁶⁵); a wrong d_j would only set a step length and a shift of the
+    preconditioner, never the answer, which the certificate judges."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
     graph = sp.csr_matrix((np.ones(K.nnz, dtype=np.int32), K.indices, K.indptr), shape=K.shape)
     reach = _pattern(graph @ B.T).T.tocsr() if layers else B  # each row's support grown once
