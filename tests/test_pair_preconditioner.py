@@ -78,3 +78,19 @@ def test_matrix_free_pair_is_the_dense_dual(pair):
     assert matrix_free.certificate.worst <= 1e-10
     scale = np.abs(dense.displacement).max()
     assert np.abs(matrix_free.displacement - dense.displacement).max() <= 1e-6 * scale
+
+
+
+def test_a_body_past_the_budget_gets_a_coarser_grid_all_of_it_checked(pair, monkeypatch):
+    """A body whose grids would pass DENSE_COLUMNS functions gets coarser grids instead (unchecked beyond it, the pair
+    at 1.4·10⁶ DOFs kept 1,764 dependent functions, and the slab then dropped them all): with a budget of 150 a body,
+    the slab keeps the functions (they are independent), at most 150 a body, and W against the approximation stays
+    far below the clamped slab's 47 (below 2 with the full budget)."""
+    from convexcontact.fem import coarse
+
+    model, B, W = pair
+    monkeypatch.setattr(coarse, "DENSE_COLUMNS", 150)
+    approximation = factorization.slab(model.fem.K, B, body_far_functions(model.fem))
+    functions = approximation.H.shape[0] - approximation.slab
+    assert 150 < functions <= 2 * 150
+    assert spectrum(approximation, W).max() < 10.0

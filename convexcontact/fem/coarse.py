@@ -41,9 +41,10 @@ INDEPENDENT = 1e-10
 leave to be kept: the graded grids' hats near the slab and the edges of their levels can be dependent on the DOFs
 (the pair at 2.5·10⁴ / 10⁵ DOFs: 12 of 332, 14 of 774; none on the one-body shapes, whose cells are all alike)."""
 DENSE_COLUMNS = 4000
-"""Most functions whose independence is checked (a dense |F|² array, 128 MB, and its pivoted Cholesky, ~2·10¹⁰ flops);
-more are left to the slab's own check, which keeps or drops them all (see
-:func:`~convexcontact.fem.factorization.slab`)."""
+"""Most functions of a body (a dense |F|² array for their independence check, 128 MB, and its pivoted Cholesky,
+~2·10¹⁰ flops, 0.7 s): its grids are coarsened to stay within it. Unchecked beyond it (before), the pair at 1.4·10⁶
+DOFs had 10,092 functions, 1,764 of them dependent (a dense check: 14.6 s, 815 MB); the slab's own check then
+dropped them all, and its Tresca dual ran over an hour of products with W."""
 
 
 def grid_functions(points: np.ndarray, components: np.ndarray, spacing) -> sp.csr_matrix:
@@ -123,7 +124,8 @@ def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray,
     """``coarse(inside, contact)`` for :func:`~convexcontact.fem.factorization.slab`: on each body (``bodies``: a
     number per DOF) with contact DOFs (``contact``), :func:`graded_functions` on its DOFs outside the slab
     (``inside``, a mask), zero elsewhere, the finest spacing the body's slab's thickness (its farthest slab DOF from
-    its contact DOFs) and at least CELLS of the cells there; of them, those independent in K's energy."""
+    its contact DOFs) and at least CELLS of the cells there, coarser where that would give a body more than
+    DENSE_COLUMNS functions; of them, those independent in K's energy, checked body by body."""
 
     def coarse(inside: np.ndarray, contact: np.ndarray) -> sp.csr_matrix:
         columns = []
@@ -135,24 +137,28 @@ def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray,
             own_contact = contact[bodies[contact] == body]
             thickness = cKDTree(points[:, own_contact].T).query(points[:, inside & mine].T)[0].max()
             spacing = max(thickness, CELLS * sizes[rest].min())
-            functions = graded_functions(points[:, rest], components[rest], sizes[rest], spacing)
-            columns.append(sp.csc_matrix((functions.data, rest[functions.indices], functions.indptr),
-                                         shape=(inside.size, functions.shape[1])))
+            while True:  # at most DENSE_COLUMNS functions a body, so that all of them are checked
+                functions = graded_functions(points[:, rest], components[rest], sizes[rest], spacing)
+                if functions.shape[1] <= DENSE_COLUMNS:
+                    break
+                spacing *= (functions.shape[1] / DENSE_COLUMNS) ** (1 / points.shape[0])
+            functions = sp.csc_matrix((functions.data, rest[functions.indices], functions.indptr),
+                                      shape=(inside.size, functions.shape[1]))
+            columns.append(independent(functions, K))  # K couples no two bodies: each body's check is the whole's
         if not columns:
             return sp.csr_matrix((inside.size, 0))
-        return independent(sp.hstack(columns, format="csc"), K).tocsr()
+        return sp.hstack(columns, format="csc").tocsr()
 
     return coarse
 
 
 def independent(functions: sp.csc_matrix, K: sp.spmatrix) -> sp.csc_matrix:
-    """The columns of ``functions`` a pivoted Cholesky factorization of their stiffness Fᵀ K F (scaled to a unit
-    diagonal, LAPACK's pstrf) keeps with pivots above INDEPENDENT, in their order; all of them beyond DENSE_COLUMNS,
-    and all of them where a sparse LDLᵀ of that stiffness (:func:`_least_pivot`) has no pivot below INDEPENDENT (the
-    one-body shapes: the dense factorization took 0.4 of the 1.25 s of CPU of the free strip 100 : 1's formulation
-    at 10⁵ DOFs)."""
-    if functions.shape[1] > DENSE_COLUMNS:
-        return functions
+    """The columns of ``functions`` (at most DENSE_COLUMNS) a pivoted Cholesky factorization of their stiffness
+    Fᵀ K F (scaled to a unit diagonal, LAPACK's pstrf) keeps with pivots above INDEPENDENT, in their order; all of
+    them where a sparse LDLᵀ of that stiffness (:func:`_least_pivot`) has no pivot below INDEPENDENT (the one-body
+    shapes: the dense factorization took 0.4 of the 1.25 s of CPU of the free strip 100 : 1's formulation at 10⁵
+    DOFs). A sparse selection (dropping the LDLᵀ's small pivots and factorizing again) was tried on the pair at
+    7.7·10⁵ DOFs: after 20 rounds it kept 2,131 of 3,632 functions and a singular set, where pstrf keeps 3,270."""
     stiffness = sp.csc_matrix(functions.T @ (K @ functions))
     scale = np.sqrt(np.maximum(stiffness.diagonal(), np.finfo(float).tiny))
     stiffness = sp.csc_matrix(sp.diags(1.0 / scale) @ stiffness @ sp.diags(1.0 / scale))
