@@ -106,15 +106,16 @@ Coulomb Newton. 10,000 is ``auto``'s largest dense W; a Cholesky there is ~3·10
 FIRST_FORCING = 1e-6
 """A solve from no start with P an operator takes as its first Newton point that of the empty face (every set free:
 P̃'s unconstrained minimizer, the face then grown by the sets it leaves, GROW), CG stopping at FIRST_FORCING (not
-FORCING) × ‖F‖. The natural map's face at a point with an error in W's long waves (a thin body's bending) follows that error: c is the
-short waves' step length and cW's largest eigenvalues are ~10³ on the clamped strip 400 : 1, whose Tresca answer is
-all in contact and sticking (the empty face's point) while its path held 300–2,500 nodes open and 1,000–2,000
-slipping, a different count each step (Newton steps / products, 5·10⁴ DOFs: 16–26 / 300–572 with d_j's round-off
-→ 3 / 30; 10⁵ 12–14 → 2 / 20). Solved to FORCING (0.1 × ‖F‖, and ‖F‖ there is relative to ‖c q‖ = 10³ ‖v‖) the
-empty face's point carried the same long-wave error and the path was as long (17 steps at 5·10⁴), and FIRST_FORCING
-on every step 21 (docs/performance.md, "The clamped strip's Newton path"). The point is a trial that the step rules
-judge ("Convergence"): where the answer's face is not empty it costs one step's systems. Not where P is a matrix:
-its systems are solved directly, and the pair's dense Tresca dual at 3·10⁴ DOFs grew 23 faces against 12 so."""
+FORCING) × ‖F‖. The natural map's face at a point with an error in W's long waves (a thin body's bending) follows
+that error: c is the short waves' step length and cW's largest eigenvalues are ~10³ on the clamped strip 400 : 1,
+whose Tresca answer is all in contact and sticking (the empty face's point) while its path held 300–2,500 nodes open
+and 1,000–2,000 slipping, a different count each step (Newton steps / products, 5·10⁴ DOFs: 16–26 / 300–572 with
+d_j's round-off → 3 / 30; 10⁵ 12–14 → 2 / 20). Solved to FORCING (0.1 × ‖F‖, and ‖F‖ there is relative to
+‖c q‖ = 10³ ‖v‖) the empty face's point carried the same long-wave error and the path was as long (17 steps at
+5·10⁴), and FIRST_FORCING on every step 21 (docs/performance.md, "The clamped strip's Newton path"). The point is a
+trial that the step rules judge ("Convergence"): where the answer's face is not empty it costs one step's systems
+(the pairs of the bench's family at 2·10⁴ DOFs, 2-D and 3-D: 6 → 7 steps). Not where P is a matrix: its systems are
+solved directly, and the pair's dense Tresca dual at 3·10⁴ DOFs grew 23 faces against 12 so."""
 GROW = 10
 """Times Newton's face may grow per step where the program has balls: the sets its point leaves are held too and the
 point solved for again, until it leaves none (a feasible point; :func:`_grown`). Tresca's slip zone was otherwise
