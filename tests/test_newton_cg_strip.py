@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import convexcontact as cc
-import convexcontact.fem.local_delassus as local_delassus
+from convexcontact.fem import local_delassus
 from convexcontact.solvers import newton_cg
 from convexcontact.studies.benchmarks.bench import law_of
 from convexcontact.studies.benchmarks.shapes import shape_scene
