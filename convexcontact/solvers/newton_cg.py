@@ -25,9 +25,10 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
     (the exact line search of a quadratic on a feasible segment; no bound of P is needed to take it).
 
 Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
-way; after a point far from v its systems are damped (FAR, DAMPING: a face with a near-singular system). With balls
-(friction) it is Newton's point on a face grown until the point is feasible (GROW): the face the
-natural map holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends,
+way; after a point far from v its systems are damped (FAR, DAMPING: a face with a near-singular system), and a solve
+from no start with P an operator takes the empty face's first (FIRST_FORCING), which (a) or (b) judges as any other.
+With balls (friction) it is Newton's point on a face grown until the point is feasible (GROW): the face the natural
+map holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends,
 and a step solves at most GROW + 1 Newton systems.
 
 All points lie in {f ≤ f(v₀)}, so between two steps (a) the steps (b) with ‖p(v) − v‖_{C⁻¹} > ε number at most
