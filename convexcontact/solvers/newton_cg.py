@@ -25,9 +25,10 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
     (the exact line search of a quadratic on a feasible segment; no bound of P is needed to take it).
 
 Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
-way; after a point far from v its systems are damped (FAR, DAMPING: a face with a near-singular system). With balls
-(friction) it is Newton's point on a face grown until the point is feasible (GROW): the face the
-natural map holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends,
+way; after a point far from v its systems are damped (FAR, DAMPING: a face with a near-singular system), and a solve
+from no start with P an operator takes the empty face's first (FIRST_FORCING), which (a) or (b) judges as any other.
+With balls (friction) it is Newton's point on a face grown until the point is feasible (GROW): the face the natural
+map holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends,
 and a step solves at most GROW + 1 Newton systems.
 
 All points lie in {f ≤ f(v₀)}, so between two steps (a) the steps (b) with ‖p(v) − v‖_{C⁻¹} > ε number at most
@@ -103,6 +104,19 @@ DIRECT_LIMIT = 10_000
 systems took hundreds of unpreconditioned Krylov iterations per step (a mortar pair on graded meshes; the 3-D punch at
 2.8·10⁵ DOFs, ~5000 unknowns: 180–400 a step, 52 s against 8 s by Cholesky), and an inexact direction stalled the
 Coulomb Newton. 10,000 is ``auto``'s largest dense W; a Cholesky there is ~3·10¹¹ flops."""
+FIRST_FORCING = 1e-6
+"""A solve from no start with P an operator takes as its first Newton point that of the empty face (every set free:
+P̃'s unconstrained minimizer, the face then grown by the sets it leaves, GROW), CG stopping at FIRST_FORCING (not
+FORCING) × ‖F‖. The natural map's face at a point with an error in W's long waves (a thin body's bending) follows
+that error: c is the short waves' step length and cW's largest eigenvalues are ~10³ on the clamped strip 400 : 1,
+whose Tresca answer is all in contact and sticking (the empty face's point) while its path held 300–2,500 nodes open
+and 1,000–2,000 slipping, a different count each step (Newton steps / products, 5·10⁴ DOFs: 16–26 / 300–572 with
+d_j's round-off → 3 / 30; 10⁵ 12–14 → 2 / 20). Solved to FORCING (0.1 × ‖F‖, and ‖F‖ there is relative to
+‖c q‖ = 10³ ‖v‖) the empty face's point carried the same long-wave error and the path was as long (17 steps at
+5·10⁴), and FIRST_FORCING on every step 21 (docs/performance.md, "The clamped strip's Newton path"). The point is a
+trial that the step rules judge ("Convergence"): where the answer's face is not empty it costs one step's systems
+(the pairs of the bench's family at 2·10⁴ DOFs, 2-D and 3-D: 6 → 7 steps). Not where P is a matrix: its systems are
+solved directly, and the pair's dense Tresca dual at 3·10⁴ DOFs grew 23 faces against 12 so."""
 GROW = 10
 """Times Newton's face may grow per step where the program has balls: the sets its point leaves are held too and the
 point solved for again, until it leaves none (a feasible point; :func:`_grown`). Tresca's slip zone was otherwise
@@ -432,8 +446,10 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             break
         if steps == max_iter:
             break
-        target = FORCING * min(1.0, residual / first) * residual * size / np.max(c)
-        newton, iterations, reach = newton_point(v, y, max(target, 0.1 * tol * answer(v, size) / np.max(c)), damping)
+        empty = steps == 0 and start is None and sets.coupling is None and matrix is None  # see FIRST_FORCING
+        target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
+        newton, iterations, reach = newton_point(v, np.zeros_like(y) if empty else y,
+                                                 max(target, 0.1 * tol * answer(v, size) / np.max(c)), damping)
         cg_total += iterations
         best = min(best, residual)
         damping = _damped(damping, reach > FAR * size, residual)
