@@ -136,3 +136,16 @@ def test_a_dense_w_takes_the_segment_before_the_arc():
     solution = newton_cg.solve(model.program)
     assert solution.status == "solved" and solution.iterations <= 6 and solution.info["grown"] <= 16
     assert model.result(solution, {}, model.slip_bound).certificate.worst < 1e-10
+
+
+def test_a_zero_column_stored_by_dense_csc_is_still_costless():
+    """dense_csc keeps W's exact zeros (a contact node with no free DOF: its row and column of W), and the polish
+    must still read that variable as costless (a failed grazing Coulomb polish, pressure 6e-9 where 0, when it
+    counted stored entries)."""
+    from convexcontact.solvers.polish import free_variables
+
+    W = np.array([[2.0, 0.0, 1.0], [0.0, 0.0, 0.0], [1.0, 0.0, 3.0]])
+    A = sp.csr_matrix(-np.eye(3))
+    by_values = free_variables(sp.csc_matrix(W), np.zeros(3), A, np.zeros(3, bool))
+    assert by_values.tolist() == [False, True, False]
+    assert free_variables(dense_csc(W), np.zeros(3), A, np.zeros(3, bool)).tolist() == by_values.tolist()

@@ -146,7 +146,10 @@ def free_variables(P: sp.spmatrix, q: np.ndarray, A: sp.csr_matrix, equality: np
     bound). Left in, they make the KKT system singular and the polish fail; they are placed after
     the others are solved for instead."""
     columns = sp.csc_matrix(A)
-    costless = (np.diff(sp.csc_matrix(P).indptr) == 0) & (q == 0)
+    P = sp.csc_matrix(P)
+    nonzeros = np.concatenate([[0], np.cumsum(P.data != 0)])  # by value: a dense W (formulations/dual.py) stores
+    # its exact zeros, which a column's stored entries would count
+    costless = (nonzeros[P.indptr[1:]] == nonzeros[P.indptr[:-1]]) & (q == 0)
     in_equality = np.diff(sp.csc_matrix(columns[equality]).indptr) > 0
     signs = sp.csc_matrix(columns.sign())
     one_sign = np.abs(np.asarray(signs.sum(axis=0)).ravel()) == np.diff(signs.indptr)
