@@ -96,7 +96,8 @@ def test_any_growth_that_is_no_number_above_one_is_refused(value):
 @pytest.mark.parametrize("field, value, fix", [
     ("scene", "patch.toml", "cc.load_scene"), ("fraction", 0.0, "0.5 is usual"), ("fraction", 1.5, "0.5 is usual"),
     ("fraction", float("nan"), "0.5 is usual"), ("max_dofs", 0, "e.g. 200000"), ("max_dofs", 1e5, "e.g. 200000"),
-    ("max_dofs", True, "e.g. 200000"), ("target", -1e-2, "1e-2 for 1 %")])
+    ("max_dofs", True, "e.g. 200000"), ("max_dofs", "1e5", "e.g. 200000"), ("target", -1e-2, "1e-2 for 1 %"),
+    ("target", float("nan"), "1e-2 for 1 %"), ("target", "1 %", "1e-2 for 1 %")])
 def test_the_public_adapt_refuses_each_option_before_any_solve(field, value, fix, monkeypatch):
     """``cc.adapt``: a scene that is none, a fraction outside (0, 1], DOFs that are no positive integer, a target
     outside (0, 1): a ValueError naming the field and a fix, before any solve."""
