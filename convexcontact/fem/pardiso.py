@@ -196,9 +196,8 @@ class Pardiso:
         sorted, then columns), not of all of them: a chunk's temporaries only."""
         start, stop = K.indptr[rows.start], K.indptr[rows.stop]
         row = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), np.diff(K.indptr[rows.start:rows.stop + 1]))
-        column = K.indices[start:stop]
-        upper = column >= row
-        wanted = row[upper] * self.n + column[upper]
+        upper = self._upper(K, rows)
+        wanted = row[upper] * self.n + K.indices[start:stop][upper]
         _, _, n, _, indptr, indices, _ = self._handle
         first, last = indptr[rows.start], indptr[rows.stop]
         keys = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), np.diff(indptr[rows.start:rows.stop + 1]))
