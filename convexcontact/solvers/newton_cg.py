@@ -394,11 +394,13 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix, damping,
                                    proximal=proximal, face=face)
         reach = np.abs(newton - v).max(initial=0.0)
-        for _ in range(GROW if sets.coupling is None and sets.balls.size else 0):
-            y = _grown(y, newton, sets)
+        at = v
+        for _ in range(GROW if sets.balls.size else 0):
+            y = _grown(y, newton, sets, sets.radii(at))
             if y is None:
                 break
-            newton, more = _step(P, affine, sets, _project(newton, sets), y, c, target, products,
+            at = _project(newton, sets)
+            newton, more = _step(P, affine, sets, at, y, c, target, products,
                                  cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face)
             iterations += more
             faces[0] += 1
@@ -617,12 +619,14 @@ def _inert(c, tol: float):
     return (np.where(inert, np.min(c), c), np.where(inert, floor, 0.0)) if inert.any() else None
 
 
-def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds) -> np.ndarray | None:
-    """y (v − c∇f, whose outside sets :func:`_step` holds) with the sets it leaves free and Newton's point leaves
-    added, at Newton's point (so held on that side, a ball on its sphere through it); None where there are none."""
+def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds, radius: np.ndarray) -> np.ndarray | None:
+    """y (v − c∇f, whose outside sets :func:`_step` holds under the radii ``radius``, those at v) with the sets it
+    leaves free and Newton's point leaves added, at Newton's point (so held on that side, a ball on its sphere
+    through it; where radii move, a ball Newton's point leaves under the radii it reaches); None where there are
+    none."""
     bounds = sets.bounds[(y[sets.bounds] >= 0) & (newton[sets.bounds] < 0)]
-    balls = sets.balls[(np.linalg.norm(y[sets.balls], axis=1) <= sets.radius)
-                       & (np.linalg.norm(newton[sets.balls], axis=1) > sets.radius)]
+    balls = sets.balls[(np.linalg.norm(y[sets.balls], axis=1) <= radius)
+                       & (np.linalg.norm(newton[sets.balls], axis=1) > sets.radii(newton))]
     if not (bounds.size or balls.size):
         return None
     grown = y.copy()
