@@ -389,12 +389,20 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     def newton_point(v, y, target, damping):
         """Newton's point from v on the face y holds, the CG iterations it took and how far the first solve went
         (‖point − v‖∞, see FAR); with balls (friction) and fixed radii the face grown by the sets that point leaves
-        until it leaves none (at most GROW times; see GROW), each solve started from the last point, projected."""
+        (:func:`grown_point`)."""
         face = {}  # the dense Cholesky factor of this step's first system, for its grown faces (_direct)
         newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix, damping,
                                    proximal=proximal, face=face)
         reach = np.abs(newton - v).max(initial=0.0)
-        at = v
+        if sets.coupling is None:
+            newton, more = grown_point(v, y, newton, target, damping, face)
+            iterations += more
+        return newton, iterations, reach
+
+    def grown_point(v, y, newton, target, damping, face=None):
+        """Newton's point on the face y holds grown by the sets ``newton`` leaves until it leaves none (at most GROW
+        times; see GROW), each solve started from the last point, projected; the CG iterations it took."""
+        iterations, at = 0, v
         for _ in range(GROW if sets.balls.size else 0):
             y = _grown(y, newton, sets, sets.radii(at))
             if y is None:
@@ -404,12 +412,12 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
                                  cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face)
             iterations += more
             faces[0] += 1
-        return newton, iterations, reach
+        return newton, iterations
 
-    def backtrack(v, g, towards, residual):
-        """Without an f (moving balls), the first of 1, ½, …, 1/16 of the way to ``towards`` (projected)
-        whose natural residual is below ``residual``; ``v`` itself where none is."""
-        for alpha in 0.5 ** np.arange(5):
+    def backtrack(v, g, towards, residual, lengths=(1.0, 0.5, 0.25, 0.125, 0.0625)):
+        """Without an f (moving balls), the first of ``lengths`` (1, ½, …, 1/16) of the way to ``towards``
+        (projected) whose natural residual is below ``residual``; ``v`` itself where none is."""
+        for alpha in lengths:
             w = _project(v + alpha * (towards - v), sets)
             gw = gradient(w)
             if natural(w, gw)[0] < residual:
@@ -450,13 +458,20 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             break
         empty = steps == 0 and start is None and sets.coupling is None and matrix is None  # see FIRST_FORCING
         target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
-        newton, iterations, reach = newton_point(v, np.zeros_like(y) if empty else y,
-                                                 max(target, 0.1 * tol * answer(v, size) / np.max(c)), damping)
+        target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
+        newton, iterations, reach = newton_point(v, np.zeros_like(y) if empty else y, target, damping)
         cg_total += iterations
         best = min(best, residual)
         damping = _damped(damping, reach > FAR * size, residual)
         if sets.coupling is not None:
-            v, g, moved = backtrack(v, g, newton, residual)
+            v, g, moved = backtrack(v, g, newton, residual, (1.0,))
+            if not moved:  # Newton's point refused: first on the face grown by the sets it leaves (see GROW)
+                grown, more = grown_point(v, y, newton, target, damping)
+                cg_total += more
+                if grown is not newton:
+                    v, g, moved = backtrack(v, g, grown, residual)
+            if not moved:
+                v, g, moved = backtrack(v, g, newton, residual, (0.5, 0.25, 0.125, 0.0625))
             if not moved:  # a projected-gradient segment, as for a fixed f: Newton stalled on a punch with F = 2
                 v, g, moved = backtrack(v, g, _project(v - c * g, sets), residual)
             if not moved and inert is not None:  # the inert sets' rounding may be what stalls it: see INERT
