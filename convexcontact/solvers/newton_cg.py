@@ -126,6 +126,17 @@ decided. Matrix-free (Newton steps / products with P, before → now): tall 2-D 
 5 / 118 (23 faces grown), at 10⁵ failed after 100 → 5 / 97; the two-body pair at 3·10⁴ DOFs 30 / 412 → 4 / 150, at
 10⁵ 47 / 1147 → 7 / 444; the dense W of the tall block 95 → 4 (docs/performance.md). Not for bounds alone: an opening
 zone grows as a front, a few nodes a solve (clamped strip 400 : 1, Signorini: 385 products against 54)."""
+GROW_MOVING = 3
+"""Times the face may grow where radii move (:func:`coupled`), and only after Newton's point was refused (its natural
+residual not below the step's): a node that leaves its interval at Newton's point made its projection raise the
+residual, and each step went half way to that same point (clamped strip 400 : 1, 4·10⁴ DOFs: 7 Newton steps, the
+residual halved 5 times, an answer the certificate refused, 7.6e-6). Grown at every step, as with fixed radii, the
+faces cost more than the steps they saved where P is a matrix (each is an LU of its own: strip 20 : 1 free, 2·10⁴
+DOFs, 5 → 13 systems) and on the clamped plate (3-D, 2·10⁴ DOFs: 33 → 75 products, 5 steps both). Refused points
+only (steps / products / faces grown, 2·10⁴ DOFs unless said; docs/performance.md, "The clamped strip 400 : 1's
+Coulomb row"): GROW_MOVING = 1: tall block stalled after 16 steps, strip 400 : 1 at 5·10⁴ 6 / 208 / 5; 2: tall 12 /
+134 / 22; 3: block 13 → 9 / 38 / 12, tall (stalled after 18 before) 2 / 13 / 4, clamped plate 5 / 51 / 3, strip
+400 : 1 at 5·10⁴ 3 / 67 / 2; 10 (GROW): block 6 / 23 / 7, tall 1 / 10 / 4, clamped plate 5 / 75 / 10."""
 GROWN_FORCING = 0.1
 """CG on a grown face stops at GROWN_FORCING × its first residual (or the step's own target, if larger): the point
 is a trial, and the face it finds is what counts. Solved to the step's target as the first face is, the grown faces
@@ -399,11 +410,12 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             iterations += more
         return newton, iterations, reach
 
-    def grown_point(v, y, newton, target, damping, face=None):
-        """Newton's point on the face y holds grown by the sets ``newton`` leaves until it leaves none (at most GROW
-        times; see GROW), each solve started from the last point, projected; the CG iterations it took."""
+    def grown_point(v, y, newton, target, damping, face=None, limit=None):
+        """Newton's point on the face y holds grown by the sets ``newton`` leaves until it leaves none (at most
+        ``limit`` times, GROW by default; see GROW), each solve started from the last point, projected; the CG
+        iterations it took."""
         iterations, at = 0, v
-        for _ in range(GROW if sets.balls.size else 0):
+        for _ in range((GROW if limit is None else limit) if sets.balls.size else 0):
             y = _grown(y, newton, sets, sets.radii(at))
             if y is None:
                 break
@@ -466,7 +478,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if sets.coupling is not None:
             v, g, moved = backtrack(v, g, newton, residual, (1.0,))
             if not moved:  # Newton's point refused: first on the face grown by the sets it leaves (see GROW)
-                grown, more = grown_point(v, y, newton, target, damping)
+                grown, more = grown_point(v, y, newton, target, damping, limit=min(GROW, GROW_MOVING))
                 cg_total += more
                 if grown is not newton:
                     v, g, moved = backtrack(v, g, grown, residual)
