@@ -33,7 +33,7 @@ def test_newton_on_the_coulomb_problem_takes_newton_s_points_on_the_clamped_stri
 def test_the_clamped_strip_s_coulomb_problem_is_newton_s_at_5e4_dofs():
     """5·10⁴ DOFs, ``auto`` (the matrix-free dual): before, the start (the frictionless answer at a natural residual of
     1e-2 relative to ‖c q‖ = 10³ ‖v‖) held 1,400 of 3,200 nodes open where the answer has none, Newton stalled after 4
-    steps and the Picard map took 7 steps (16–40 s); from the start at START_TOL with grown faces only, Newton's answer
+    steps and the Picard map took 7 steps (16–40 s); from the START_TOL start without grown faces, Newton's answer
     failed the certificate (1.7e-5) and the primal map ran. Now Newton answers alone, certified to the law's 1e-8."""
     result = cc.prepare(shape_scene("strip-clamped-400", law_of("coulomb"), 5e4), "auto").solve()
     residuals, attempt = newton_record(result)
