@@ -289,8 +289,8 @@ def coupled(program: ConicProgram, coupling: sp.spmatrix, start: np.ndarray, tol
             max_iter: int = 30, verbose: bool = False, cache: dict | None = None) -> ConicSolution:
     """Newton's method from ``start`` on the program whose ball radii move with x: ‖v_k‖ ≤ (coupling x)_k,
     a quasi-variational inequality (no f is minimized: the Newton system is not symmetric, GMRES solves it,
-    and a step is taken where it lowers the natural residual, towards Newton's point or else the projected
-    gradient's). ``coupling`` (balls × variables) may not involve the balls' own variables. The answer is that
+    and a step is taken where it lowers the natural residual: Newton's point, else the point on the face grown by the
+    sets it leaves (GROW_MOVING), else a point towards Newton's or the projected gradient's). ``coupling`` (balls × variables) may not involve the balls' own variables. The answer is that
     of the program whose radius rows hold the radii it reached (also ``info["radii"]``); "failed" (solver
     status "stalled") where no step lowers the residual: without a convexity argument Newton's method is local,
     so start near the answer (a fixed point of x ↦ the program's answer with radii coupling x)."""
