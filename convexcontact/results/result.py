@@ -8,11 +8,11 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
+from ..fem import flux, flux3d
 from ..fem.assembly import FEModel
 from ..fem.estimate import ContactState, ErrorEstimate, algebraic_error, estimate
 from ..fem.factorization import Condensation
-from ..fem.flux import FluxEstimate, flux_estimate
-from ..fem.flux import supported as flux_supported
+from ..fem.flux import FluxEstimate
 from ..fem.friction import FrictionPoints
 from ..fem.mortar import PairTrace
 from ..formulations.fields import ContactFields
@@ -150,11 +150,14 @@ class ContactResult:
     @cached_property
     def error_estimate(self) -> ErrorEstimate | FluxEstimate | None:
         """The estimate of the discretization error, scaled units: the equilibrated-flux bound for 2-D P1 triangles
-        (:mod:`convexcontact.fem.flux`), else :attr:`residual_estimate`; None where that is."""
+        (:mod:`convexcontact.fem.flux`) and one body of P1 tetrahedra (:mod:`convexcontact.fem.flux3d`), else
+        :attr:`residual_estimate`; None where that is."""
         if not self.estimated:
             return None
-        if flux_supported(self.fem):
-            return flux_estimate(self.fem, self.displacement / self.fem.scaling.displacement, contact_state(self))
+        for bound in (flux, flux3d):
+            if bound.supported(self.fem):
+                return bound.flux_estimate(self.fem, self.displacement / self.fem.scaling.displacement,
+                                           contact_state(self))
         return self.residual_estimate
 
     @property
