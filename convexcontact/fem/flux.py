@@ -30,6 +30,9 @@ divergence constraint per cell on the two fluxes through its facets at a, solved
 flux, with one free circulation where none is known; assembling scikit-fem forms would be one Python call per patch.
 Here the cells of all patches are sorted into their chains once, and every patch is solved at once by one
 np.cumsum per row of the stress: no linear system, no loop over patches or sweeps.
+
+What does not depend on the chains (σ_h, σ̂ at the vertices, the cell norms, the facet data, the contact terms and
+:func:`bound`) is written for triangles and tetrahedra alike: :mod:`.flux3d` solves the patches of P1 tetrahedra.
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ from .estimate import ContactState, applied_traction, components, contact_facets
 class Equilibrated:
     """The equilibrated stress of one P1 solution (scaled units) and its estimates per cell (squares).
 
-    ``vertex_stress`` σ̂ at the three vertices of each cell (d, d, cells, 3; row i is the reconstructed flux of
+    ``vertex_stress`` σ̂ at the d + 1 vertices of each cell (d, d, cells, d + 1; row i is the reconstructed flux of
     component i); ``symmetric`` ‖C^{-½}(sym σ̂ − σ_h)‖²_T, ``skew`` ‖(2μ)^{-½} skew σ̂‖²_T per cell; ``defect`` the
     largest |∫_T (f + div σ̂)| over the cells, relative to the largest |∫_T f| + Σ|fluxes| (round-off and the algebraic
     error of u_h: the patch problems are compatible only for the exact discrete solution).

@@ -19,9 +19,10 @@ incompatibility, round-off for the exact discrete solution: the ``defect``). The
 the dropped cell's row are kept as rows of the identity, so the systems' shapes depend on the mesh only, not on the
 row i or the Dirichlet conditions.
 
-All patches are solved at once in blocks of equal size by LAPACK on stacks (``np.linalg.solve``): measured against
-one block-diagonal sparse KKT factored by SuperLU (docs/estimate.md, "Cost"), the stacks were faster and need no
-ordering. The systems are assembled by hand from the cells' corners (a scikit-fem RT0 form per patch would be one
+All patches are solved in stacks of equal size by LAPACK (``np.linalg.solve``): 2.0–3.2 s for the 4,913 patches × 3
+rows of a 13,328-DOF mesh, against 11.1 s for the same systems as one block-diagonal sparse KKT per row factored by
+SuperLU and 18.9 s by PARDISO (off by 10⁻⁶: its pivot perturbation on the indefinite KKT; docs/estimate.md, "The
+equilibrated bound on P1 tetrahedra"). The systems are assembled by hand from the cells' corners (a scikit-fem RT0 form per patch would be one
 Python call per patch).
 """
 
