@@ -36,8 +36,9 @@ from .assembly import FEModel
 from .estimate import ContactState
 from .flux import Equilibrated, FluxEstimate, bound, cell_norms, elastic_stress, opposite_facets, vertex_values
 
-CHUNK = 4096
-"""Patches per stacked solve: its dense systems (patches × n² doubles, n ≈ 60 on a uniform mesh) stay below ~0.1 GB."""
+CHUNK = 1024
+"""Patches per stacked solve: its dense systems (rows × patches × n² doubles, n ≈ 60 on a uniform mesh) stay near
+0.1 GB; 256 to 4,096 cost the same (0.47 s CPU for the whole bound at 13,328 DOFs)."""
 
 
 def supported(fem: FEModel) -> bool:
