@@ -92,6 +92,15 @@ def test_the_stress_is_equilibrated_with_the_data_and_its_normal_flux_continuous
     np.testing.assert_allclose(through[prescribed], data[prescribed], atol=1e-11 * scale)
 
 
+def test_a_flat_tetrahedron_is_refused_by_name():
+    """A cell with no volume (its four vertices in a plane) is refused with the field and a fix, not a LinAlgError."""
+    mesh = build_mesh(box_patch("P1").body)
+    points = mesh.p.copy()
+    points[:, mesh.t[3, 0]] = points[:, mesh.t[:3, 0]].mean(axis=1)  # the fourth vertex into the first three's plane
+    with pytest.raises(ValueError, match="^mesh: a tetrahedron has no volume.*Mesh.is_valid"):
+        flux3d.tetrahedra(dataclasses.replace(mesh, doflocs=points))
+
+
 @pytest.fixture(scope="module")
 def hertz_levels():
     """3-D Hertz on the 0.4 box: levels 0–2 (42, 260, 1,800 DOFs) and the reference, level 3 (13,328 DOFs)."""

@@ -58,10 +58,14 @@ def tetrahedra(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     (x, k, cells): those of k = 1, 2, 3 are the rows of the inverse Jacobian of x = p_0 + Σ_k λ_k (p_k − p_0)."""
     xyz = np.take(mesh.p, mesh.t, axis=1)
     jacobian = (xyz[:, 1:] - xyz[:, :1]).transpose(2, 0, 1)  # (cells, x, k)
+    det = np.linalg.det(jacobian)
+    if not np.all(np.abs(det) > 0):
+        raise ValueError("mesh: a tetrahedron has no volume (flat or repeated vertices); check the mesh (skfem's "
+                         "Mesh.is_valid(), or a fresh one from the geometry)")
     grads = np.empty_like(xyz)
     grads[:, 1:] = np.linalg.inv(jacobian).transpose(2, 1, 0)
     grads[:, 0] = -grads[:, 1:].sum(axis=1)
-    return xyz, np.linalg.det(jacobian), grads
+    return xyz, det, grads
 
 
 def rt0_mass(xyz: np.ndarray, volume: np.ndarray) -> np.ndarray:
