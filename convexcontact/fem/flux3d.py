@@ -80,7 +80,7 @@ def rt0_mass(xyz: np.ndarray, volume: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class Patches:
     """The patch problems' layout. Corner (k, c): cell c in the patch of vertex t[k, c]; its slots s = 0, 1, 2 are
-    its facets opposite the vertices ``slot_vertex`` = (k + 1 + s) mod 4, all three containing t[k, c].
+    its facets opposite the vertices ``SLOTS[k, s]`` = (k + 1 + s) mod 4, all three containing t[k, c].
 
     Per patch a: ``facets`` F_a (the facets ∋ a), ``cells`` T_a and ``boundary`` B_a (the boundary facets ∋ a) give
     the unknowns [x (F_a) | λ (T_a) | μ (B_a)], ``size`` n_a = F_a + T_a + B_a. Per corner: its ``cell`` row (local λ index) and per
