@@ -35,9 +35,8 @@ def flat_punch(element: str, law=None, graded: bool = False) -> cc.Scene:
 
 
 def effectivities(levels, calibration: float | None = None) -> np.ndarray:
-    """(η / calibration) / true error of each (result, error) pair; ``calibration`` None: the element's own (the
-    residual's constant, also where the budget reports an equilibrated bound)."""
-    return np.array([r.residual_estimate.eta / (calibration or effectivity(r.scene.body.element, r.fem.dim)) / e
+    """(η / calibration) / true error of each (result, error) pair; ``calibration`` None: the result's own."""
+    return np.array([r.residual_estimate.eta / (calibration or r.error_budget["calibration"]) / e
                      for r, e in levels])
 
 
@@ -62,10 +61,9 @@ def test_p2_flat_and_coulomb_punches_are_calibrated():
 
 
 def test_adaptive_3d_hertz_is_calibrated():
-    """3-D Hertz on P1 tetrahedra (the 0.4 quarter box of 2³ cubes), nine adaptive levels to 296 DOFs (marked by the
-    equilibrated bound's indicators since it is the budget's on P1 tetrahedra) against the last one's mesh refined
-    uniformly (2,000 DOFs): calibrated within 1–3 (measured 1.26–1.71 with 2.8; 1.21–1.70 on the residual-marked
-    levels before); the former 3.9, set on uniform levels, reads some of them below 1."""
+    """3-D Hertz on P1 tetrahedra (the 0.4 quarter box of 2³ cubes), ten adaptive levels to 411 DOFs against the last
+    one's mesh refined uniformly (2,756 DOFs): calibrated within 1–3 (measured 1.21–1.70 with 2.8); the former 3.9,
+    set on uniform levels, read the adaptive ones at 0.87–1.22."""
     sphere = cc.Obstacle("parabolic", radius=1.0, center=(0.0, 0.0, 0.0), force=HERTZ_SPHERE_FORCE / 4)
     levels = adapt(quarter_box(2, "P1", 1.0, sphere, None, "hertz_sphere", size=0.4), target=1e-9, max_dofs=500)
     scene = levels[-1].scene
@@ -74,6 +72,6 @@ def test_adaptive_3d_hertz_is_calibrated():
     errors = np.array(true_errors(levels, reference)) * np.sqrt(u @ (reference.fem.K_full @ u))
     measured = list(zip(levels, errors))
     calibrated = effectivities(measured)
-    assert len(levels) >= 8 and effectivity("P1", 3) == 2.8
+    assert len(levels) >= 8 and all(r.error_budget["calibration"] == effectivity("P1", 3) for r in levels)
     assert np.all((1.0 <= calibrated) & (calibrated <= 3.0)), calibrated
     assert effectivities(measured, FORMER["P1", 3]).min() < 1.0

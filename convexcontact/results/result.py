@@ -150,15 +150,25 @@ class ContactResult:
     @cached_property
     def error_estimate(self) -> ErrorEstimate | FluxEstimate | None:
         """The estimate of the discretization error, scaled units: the equilibrated-flux bound for 2-D P1 triangles
-        (:mod:`convexcontact.fem.flux`) and one body of P1 tetrahedra (:mod:`convexcontact.fem.flux3d`), else
-        :attr:`residual_estimate`; None where that is."""
+        (:attr:`equilibrated_bound`), else :attr:`residual_estimate` (calibrated); None where that is. On P1
+        tetrahedra the calibrated residual stays the budget's: the bound over-reads by 3–7× on stretched cells
+        (docs/estimate.md, "The equilibrated bound on P1 tetrahedra")."""
+        if self.fem.dim == 2 and self.equilibrated_bound is not None:
+            return self.equilibrated_bound
+        return self.residual_estimate
+
+    @cached_property
+    def equilibrated_bound(self) -> FluxEstimate | None:
+        """The guaranteed equilibrated-flux bound of the discretization error (given Korn's constant), scaled
+        units: one body of P1 triangles (:mod:`convexcontact.fem.flux`) or tetrahedra
+        (:mod:`convexcontact.fem.flux3d`); None elsewhere, without an answer or when switched off."""
         if not self.estimated:
             return None
         for bound in (flux, flux3d):
             if bound.supported(self.fem):
                 return bound.flux_estimate(self.fem, self.displacement / self.fem.scaling.displacement,
                                            contact_state(self))
-        return self.residual_estimate
+        return None
 
     @property
     def estimated(self) -> bool:
