@@ -182,6 +182,21 @@ Only from a stall: from the start, step lengths capped at 0.1 / (ε max P̃) sta
 solve after 3 steps at 8e-5 and the proximal term after 4 at 1e-1 (the large c_j is what puts such a ball on its
 sphere in the first steps); the Tresca dual under the answer's radii from the stick start, capped, failed after 100
 steps (3.3e-5) where it takes 8 (docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs")."""
+REUSE = 4.0
+"""Where a Newton system's preconditioner (:class:`_Preconditioner`, with balls) keeps its factors instead of a
+numeric refactorization of H + Gᵀ D⁻¹ G, each K-sized on a body that is its own approximation (a plate 20 : 20 : 1:
+9 refactorizations, 35 of the 53 s of its Tresca solve at 7.9·10⁴ DOFs). Two cases, each with a bound:
+
+- the same face as the system factored (free variables, spheres, tangent bases) and D within a spread of REUSE
+  (max over min of d/d_kept): the kept system's exact inverse then has its eigenvalues against this one's within
+  [min d/d_kept, max d/d_kept] (the two differ by a diagonal), so CG's condition number is at most REUSE;
+- a grown face (:func:`_grown`) of a step whose first system was factored: its variables held more only remove terms
+  (a bound's 1/δ) or shrink them (a ball's two δ⁻¹ e eᵀ to one b bᵀ/(bᵀδb + curvature), smaller by Cauchy–Schwarz),
+  so the factors of H + G₀ᵀ D₀⁻¹ G₀ with this face's G and D are the exact inverse of D + G H′⁻¹ Gᵀ with H′ ⪰ H
+  (Woodbury): SPD, its eigenvalues against the system's ≥ 1, those above 1 at most the rank of the terms removed."""
+ROTATION = 0.3
+"""Largest change of a tangent basis's entries (~ its angle) for which a Newton system is the same face as the one
+factored (REUSE)."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
@@ -501,9 +516,10 @@ def _damped(damping: float, far: bool, residual: float) -> float:
 class _Preconditioner:
     """For each Newton system D + Rᵀ P̃ R (R: the step's free variables and tangent coordinates; D: the curvature
     there, + δ) from P ≈ G H⁻¹ Gᵀ (in v: G̃ = diag(scale) G). With balls (friction), the exact inverse of
-    D + Rᵀ P̃_approx R by Woodbury, D⁻¹(ξ − Gᵣ (H + Gᵣᵀ D⁻¹ Gᵣ)⁻¹ Gᵣᵀ D⁻¹ ξ) with Gᵣ = Rᵀ G̃: one numeric
-    refactorization per Newton step, on a pattern ordered once. With bounds alone, the restriction to R of
-    (P̃_approx + δI)⁻¹, the same formula with every variable free: one factorization per session.
+    D + Rᵀ P̃_approx R by Woodbury, D⁻¹(ξ − Gᵣ (H + Gᵣᵀ D⁻¹ Gᵣ)⁻¹ Gᵣᵀ D⁻¹ ξ) with Gᵣ = Rᵀ G̃: factorized at the first
+    system on a pattern that holds every later one, then a numeric refactorization where the factors kept cannot
+    serve (REUSE). With bounds alone, the restriction to R of (P̃_approx + δI)⁻¹, the same formula with every
+    variable free: one factorization per session.
     Measured on whole faces (contact solve, the other choice in brackets): 3-D Tresca 10.4 s (restriction first,
     exact after a step of more than 8 Krylov iterations: 12.8 s; the restriction alone left 24–36 iterations a
     step), 2-D Tresca 7.0 s (8.0 s); Signorini 3.6 s (3.9 s) in 2-D and 3.6 s (4.5 s) in 3-D, whose held variables
@@ -513,22 +529,63 @@ class _Preconditioner:
         self.G, self.H = sp.csr_matrix(sp.diags(scale) @ approximation.G), approximation.H
         self.shift = np.broadcast_to(np.asarray(shift, dtype=float), scale.shape)  # δ, one or per variable
         self.exact = balls.size > 0
-        contact = self.G.T @ sp.diags(1.0 / self.shift) @ self.G  # on G's columns only: small beside H
-        if self.exact:  # every later R D⁻¹ Rᵀ is on E: order the pattern they all fit
-            n, p = scale.size, balls.shape[1]
-            pairs = (np.repeat(balls, p, axis=1).ravel(), np.tile(balls, (1, p)).ravel())
-            E = sp.eye(n) + sp.csr_matrix((np.ones(pairs[0].size), pairs), shape=(n, n))
-            contact = _with_pattern(contact, abs(self.G).T @ E @ abs(self.G))
-        self.factors = approximation.factorize(_stored_sum(sp.csr_matrix(self.H), contact))
+        self.factorizations = 0  # of H + Gᵀ D⁻¹ G, the first included
+        self._factored = None  # (R, G, d) of the system the factors are of (see system)
+        self._grows = False  # whether the factors are of this Newton step's first face (see system)
+        self._factorize = approximation.factorize
+        if not self.exact:
+            self.factors = self._factorize(_stored_sum(sp.csr_matrix(self.H),
+                                                       self.G.T @ sp.diags(1.0 / self.shift) @ self.G))
+            return
+        # every R D⁻¹ Rᵀ is on E: the pattern they all fit, factorized at the first system with its values (one
+        # numeric factorization fewer than ordering it here with D = δ: the first system then refactorized at once)
+        n, p = scale.size, balls.shape[1]
+        pairs = (np.repeat(balls, p, axis=1).ravel(), np.tile(balls, (1, p)).ravel())
+        E = sp.eye(n) + sp.csr_matrix((np.ones(pairs[0].size), pairs), shape=(n, n))
+        self._pattern = abs(self.G).T @ E @ abs(self.G)  # on G's columns only: small beside H
+        self.factors = None
 
-    def system(self, R: sp.csr_matrix, curvature: np.ndarray):
-        """ξ ↦ the preconditioner of D + Rᵀ P̃ R, D = δ + ``curvature``."""
+    def system(self, R: sp.csr_matrix, curvature: np.ndarray, grown: bool = False):
+        """ξ ↦ the preconditioner of D + Rᵀ P̃ R, D = δ + ``curvature``; ``grown``: R's face is a grown face of the
+        step's last system (:func:`_grown`). Refactorizes only where the factors kept cannot serve (REUSE)."""
         if not self.exact:
             return lambda xi: R.T @ _woodbury(self.factors, self.G, self.shift, R @ xi)
         d = R.multiply(R).T @ self.shift + curvature  # a tangent coordinate's δ: its ball's, weighted by its basis
         G = sp.csr_matrix(R.T @ self.G)
-        self.factors.refactorize(self.H, G.T @ sp.diags(1.0 / d) @ G)  # summed in place: no K-sized sum
+        if grown and self._grows:  # H + Gᵀ D⁻¹ G of the face it grew from bounds this one's: see REUSE
+            return lambda xi: _woodbury(self.factors, G, d, xi)
+        kept = self._factored
+        signs = None if grown or kept is None else _face_signs(R, kept[0])
+        if signs is not None and _ratio_spread(d, kept[2]) <= REUSE:
+            self._grows = False
+            return lambda xi: signs * _woodbury(self.factors, kept[1], kept[2], signs * xi)
+        contact = G.T @ sp.diags(1.0 / d) @ G
+        if self.factors is None:
+            self.factors = self._factorize(_stored_sum(sp.csr_matrix(self.H), _with_pattern(contact, self._pattern)))
+            self._pattern = None
+        else:
+            self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
+        self.factorizations += 1
+        self._factored, self._grows = (R, G, d), True
         return lambda xi: _woodbury(self.factors, G, d, xi)
+
+
+def _face_signs(R: sp.csr_matrix, other: sp.csr_matrix) -> np.ndarray | None:
+    """Signs s of R's columns such that R diag(s) is ``other``'s face: the same free variables and spheres, each
+    tangent basis turned by at most ROTATION (a basis may come out of :func:`tangent_bases` reversed); None where
+    there are none."""
+    if not (R.shape == other.shape and R.nnz == other.nnz and np.array_equal(R.indptr, other.indptr)
+            and np.array_equal(R.indices, other.indices)):
+        return None
+    signs = np.where(np.asarray(R.multiply(other).sum(axis=0)).ravel() < 0, -1.0, 1.0)
+    return signs if np.abs(R.data * signs[R.indices] - other.data).max(initial=0.0) <= ROTATION else None
+
+
+def _ratio_spread(d: np.ndarray, kept: np.ndarray) -> float:
+    """max(d / kept) / min(d / kept): the condition number of the kept system's inverse times this one's, where the
+    two differ only in D (see REUSE)."""
+    ratio = d / kept
+    return float(ratio.max(initial=1.0) / max(ratio.min(initial=1.0), 1e-300))
 
 
 def _shifts(approximation, sets: _Bounds, curvature: float) -> np.ndarray:
@@ -748,7 +805,8 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     if size and not direct:
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
-            (size, size), matvec=precondition.system(R, np.concatenate([np.zeros(free.size), curvature]) + shift), dtype=float)
+            (size, size), matvec=precondition.system(R, np.concatenate([np.zeros(free.size), curvature]) + shift,
+                                                     grown=relative > 0), dtype=float)
         callback = lambda *_: count.__setitem__(0, count[0] + 1)
         if moving is None:
             xi, _ = spla.cg(H, rhs, rtol=relative, atol=target, maxiter=CG_LIMIT, M=M, callback=callback)
