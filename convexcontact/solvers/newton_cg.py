@@ -41,7 +41,7 @@ GPCG, SIAM J. Optim. 1, 1991, takes its Newton-like steps); Newton's steps are i
 3-variable SPD box programs (tests/test_global_convergence.py; Ben Gharbia & Gilbert, Math. Program. 134, 2012, for
 P-matrices), and did on a tall 3-D Tresca block and the two-body duals applied matrix-free (docs/performance.md).
 ``info["steps"]`` counts the steps of each kind, ``info["descent"]`` holds (kind, f's change, κ) of each,
-``info["grown"]`` the faces grown.
+``info["grown"]`` the faces grown, ``info["factorizations"]`` those of the preconditioner's H + Gᵀ D⁻¹ G (REUSE).
 
 An operator P may carry ``approximation`` with sparse ``G``, ``H`` (SPD) and ``factorize`` such that
 P ≈ G H⁻¹ Gᵀ (a Delassus operator of a thin slab of the body and coarse functions beyond it): each Newton
@@ -194,6 +194,13 @@ numeric refactorization of H + Gᵀ D⁻¹ G, each K-sized on a body that is its
   (a bound's 1/δ) or shrink them (a ball's two δ⁻¹ e eᵀ to one b bᵀ/(bᵀδb + curvature), smaller by Cauchy–Schwarz),
   so the factors of H + G₀ᵀ D₀⁻¹ G₀ with this face's G and D are the exact inverse of D + G H′⁻¹ Gᵀ with H′ ⪰ H
   (Woodbury): SPD, its eigenvalues against the system's ≥ 1, those above 1 at most the rank of the terms removed."""
+KEPT_FORCING = 0.01
+"""CG on a grown face preconditioned by the factors of the face it grew from (REUSE) stops at KEPT_FORCING × its first
+residual, not GROWN_FORCING: the exact inverse went well past GROWN_FORCING in its one or two iterations, and at
+GROWN_FORCING the first step's point on the free strips 100 / 400 : 1 (10⁴ DOFs) was 10 times farther from the answer
+and they took 3 Newton steps instead of 2 (0.01: 2 steps, 32–33 products; 0.001: 2, 35–37; the step's own target:
+2, 41–44; the plate 20 : 20 : 1 at 2·10⁴ DOFs 5 steps and 59 / 65 / 92 products; the exact inverse 25 on the strips,
+43 on the plate, with 6 and 9 factorizations against 2)."""
 ROTATION = 0.3
 """Largest change of a tangent basis's entries (~ its angle) for which a Newton system is the same face as the one
 factored (REUSE)."""
@@ -344,6 +351,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         approximation = getattr(program.P, "approximation", None)
         cache["precondition"] = approximation and _Preconditioner(approximation, sets.scale, sets.balls,
                                                                   SHIFT * _shifts(approximation, sets, curvature))
+    factorized = getattr(cache["precondition"], "factorizations", 0)  # before this solve (info["factorizations"])
     v = np.zeros(program.n_variables) if start is None else (start - sets.shift) / sets.scale
     if start is not None and sets.coupling is None:  # the last answer may be outside this program's sets (a Picard
         v = _project(v, sets)  # step's smaller radii), and the convergence argument needs v₀ in them
@@ -492,7 +500,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         descent.append((kind, change, cauchy))
     x = sets.shift + sets.scale * v
     info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history,
-            "steps": kinds, "descent": descent, "grown": faces[0]}
+            "steps": kinds, "descent": descent, "grown": faces[0],
+            "factorizations": getattr(cache["precondition"], "factorizations", 0) - factorized}
     if sets.coupling is not None:  # the program of the radii reached: x is its answer
         b = program.b.copy()
         b[form.ball_radius_rows] = info["radii"] = sets.radii(v)
@@ -532,6 +541,7 @@ class _Preconditioner:
         self.factorizations = 0  # of H + Gᵀ D⁻¹ G, the first included
         self._factored = None  # (R, G, d) of the system the factors are of (see system)
         self._grows = False  # whether the factors are of this Newton step's first face (see system)
+        self.kept = False  # whether the last system's are those of the face it grew from (see KEPT_FORCING)
         self._factorize = approximation.factorize
         if not self.exact:
             self.factors = self._factorize(_stored_sum(sp.csr_matrix(self.H),
@@ -552,7 +562,8 @@ class _Preconditioner:
             return lambda xi: R.T @ _woodbury(self.factors, self.G, self.shift, R @ xi)
         d = R.multiply(R).T @ self.shift + curvature  # a tangent coordinate's δ: its ball's, weighted by its basis
         G = sp.csr_matrix(R.T @ self.G)
-        if grown and self._grows:  # H + Gᵀ D⁻¹ G of the face it grew from bounds this one's: see REUSE
+        self.kept = grown and self._grows
+        if self.kept:  # H + Gᵀ D⁻¹ G of the face it grew from bounds this one's: see REUSE
             return lambda xi: _woodbury(self.factors, G, d, xi)
         kept = self._factored
         signs = None if grown or kept is None else _face_signs(R, kept[0])
@@ -809,6 +820,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
                                                      grown=relative > 0), dtype=float)
         callback = lambda *_: count.__setitem__(0, count[0] + 1)
         if moving is None:
+            relative = min(relative, KEPT_FORCING) if getattr(precondition, "kept", False) else relative
             xi, _ = spla.cg(H, rhs, rtol=relative, atol=target, maxiter=CG_LIMIT, M=M, callback=callback)
         else:
             xi, _ = spla.gmres(H, rhs, rtol=0.0, atol=target, restart=GMRES_RESTART,
