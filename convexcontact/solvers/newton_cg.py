@@ -184,8 +184,12 @@ sphere in the first steps); the Tresca dual under the answer's radii from the st
 steps (3.3e-5) where it takes 8 (docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs")."""
 REUSE = 4.0
 """Where a Newton system's preconditioner (:class:`_Preconditioner`, with balls) keeps its factors instead of a
-numeric refactorization of H + Gᵀ D⁻¹ G, each K-sized on a body that is its own approximation (a plate 20 : 20 : 1:
-9 refactorizations, 35 of the 53 s of its Tresca solve at 7.9·10⁴ DOFs). Two cases, each with a bound:
+numeric refactorization of H + Gᵀ D⁻¹ G, where that is K-sized: a body that is its own approximation, H = K on its
+DOFs (a plate 20 : 20 : 1: 9 refactorizations, 35 of the 53 s of its Tresca solve at 7.9·10⁴ DOFs; one costs 15–30
+solves with its factors, as many products with W). Not on a slab with coarse functions: its factorization costs a
+few products (2-D strip at 10⁵ DOFs: 0.053 s against 0.016 s for a solve with K), and keeping the factors there cost
+more products than it saved (the 2-D family at 2·10⁴ DOFs, Tresca: 7–45 % more; the pair 99 → 150). Two cases, each
+with a bound:
 
 - the same face as the system factored (free variables, spheres, tangent bases) and D within a spread of REUSE
   (max over min of d/d_kept): the kept system's exact inverse then has its eigenvalues against this one's within
@@ -543,6 +547,7 @@ class _Preconditioner:
         self._grows = False  # whether the factors are of this Newton step's first face (see system)
         self.kept = False  # whether the last system's are those of the face it grew from (see KEPT_FORCING)
         self._factorize = approximation.factorize
+        self._keeps = approximation.slab in (None, self.H.shape[0])  # H is K on DOFs, no coarse functions: see REUSE
         if not self.exact:
             self.factors = self._factorize(_stored_sum(sp.csr_matrix(self.H),
                                                        self.G.T @ sp.diags(1.0 / self.shift) @ self.G))
@@ -562,11 +567,11 @@ class _Preconditioner:
             return lambda xi: R.T @ _woodbury(self.factors, self.G, self.shift, R @ xi)
         d = R.multiply(R).T @ self.shift + curvature  # a tangent coordinate's δ: its ball's, weighted by its basis
         G = sp.csr_matrix(R.T @ self.G)
-        self.kept = grown and self._grows
+        self.kept = grown and self._grows and self._keeps
         if self.kept:  # H + Gᵀ D⁻¹ G of the face it grew from bounds this one's: see REUSE
             return lambda xi: _woodbury(self.factors, G, d, xi)
         kept = self._factored
-        signs = None if grown or kept is None else _face_signs(R, kept[0])
+        signs = None if grown or kept is None or not self._keeps else _face_signs(R, kept[0])
         if signs is not None and _ratio_spread(d, kept[2]) <= REUSE:
             self._grows = False
             return lambda xi: signs * _woodbury(self.factors, kept[1], kept[2], signs * xi)
