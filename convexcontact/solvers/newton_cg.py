@@ -426,7 +426,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             if y is None:
                 break
             newton, more = _step(P, affine, sets, _project(newton, sets), y, c, target, products,
-                                 cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face)
+                                 cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face, grown=True)
             iterations += more
             faces[0] += 1
         return newton, iterations, reach
@@ -752,13 +752,14 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
 
 
 def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, damping=0.0,
-          relative=0.0, proximal=0.0, face=None):
+          relative=0.0, proximal=0.0, face=None, grown=False):
     """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v and the CG
     (GMRES, where radii move) iterations it took, CG stopping at ``target`` or ``relative`` × its first residual
     (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃) and the system has at most DIRECT_LIMIT unknowns, a dense
     Cholesky (LU where that fails or radii move) instead, or the factor kept in ``face`` (:func:`_direct`).
     ``damping`` μ adds μ/c to the system's diagonal (:func:`_damped`, DAMPING), ``proximal`` (0 or one number per
-    variable) its own number to each variable's (:func:`_inert`)."""
+    variable) its own number to each variable's (:func:`_inert`); ``grown``: the face is a grown one of the step's
+    (:func:`_grown`), whose preconditioner may be the step's factors (REUSE, KEPT_FORCING)."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
@@ -822,7 +823,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
             (size, size), matvec=precondition.system(R, np.concatenate([np.zeros(free.size), curvature]) + shift,
-                                                     grown=relative > 0), dtype=float)
+                                                     grown=grown), dtype=float)
         callback = lambda *_: count.__setitem__(0, count[0] + 1)
         if moving is None:
             relative = min(relative, KEPT_FORCING) if getattr(precondition, "kept", False) else relative
