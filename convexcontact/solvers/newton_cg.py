@@ -577,7 +577,7 @@ class _Preconditioner:
             return lambda xi: signs * _woodbury(self.factors, kept[1], kept[2], signs * xi)
         contact = G.T @ sp.diags(1.0 / d) @ G
         if self.factors is None:
-            self.factors = self._factorize(_stored_sum(sp.csr_matrix(self.H), _with_pattern(contact, self._pattern)))
+            self.factors = self._factorize(_on_pattern(sp.csr_matrix(self.H), _with_pattern(contact, self._pattern)))
             self._pattern = None
         else:
             self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
@@ -627,6 +627,27 @@ def _with_pattern(A: sp.spmatrix, pattern: sp.spmatrix) -> sp.csr_matrix:
     pattern = sp.coo_matrix(pattern)
     return _stored_sum(sp.csr_matrix(A), sp.coo_matrix((np.zeros(pattern.nnz), (pattern.row, pattern.col)),
                                                        shape=pattern.shape))
+
+
+def _on_pattern(H: sp.csr_matrix, A: sp.spmatrix) -> sp.csr_matrix:
+    """H + A on H's own pattern, sharing H's index arrays, where every entry A stores lies in it (a body's contact
+    block within K's node blocks: the plate 20 : 20 : 1, its own approximation); else :func:`_stored_sum`. Only A's
+    rows are searched. The sum's own indices were a third of the K-sized copy alive while PARDISO factorizes it, the
+    contact solve's peak on the plate (7.9·10⁴ DOFs: 815 MB against a linear solve's 399)."""
+    A = sp.coo_matrix(A)
+    if not H.has_canonical_format:
+        return _stored_sum(H, A)
+    rows = np.unique(A.row)
+    starts, counts = H.indptr[rows], np.diff(H.indptr)[rows]
+    where = np.repeat(starts - (np.cumsum(counts) - counts), counts) + np.arange(counts.sum())  # those rows' entries
+    keys = np.repeat(rows.astype(np.int64), counts) * H.shape[1] + H.indices[where]  # increasing: rows, then columns
+    wanted = A.row.astype(np.int64) * H.shape[1] + A.col
+    found = np.minimum(np.searchsorted(keys, wanted), max(keys.size - 1, 0))
+    if A.nnz and (keys.size == 0 or (keys[found] != wanted).any()):
+        return _stored_sum(H, A)
+    data = H.data.copy()
+    np.add.at(data, where[found], A.data)
+    return sp.csr_matrix((data, H.indices, H.indptr), shape=H.shape)
 
 
 def _stored_sum(H: sp.csr_matrix, A: sp.spmatrix) -> sp.csr_matrix:
