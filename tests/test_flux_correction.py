@@ -68,7 +68,7 @@ def test_the_correction_keeps_divergence_and_prescribed_fluxes(punch, monkeypatc
         sign = np.where(mesh.f2t[0, opposite] == np.arange(mesh.nelements)[:, None], 1.0, -1.0)
         jump = np.zeros((2, mesh.nfacets, 2))
         np.add.at(jump, (slice(None), opposite), normal * sign[None, ..., None])
-        size = scale * flux.facet_lengths(mesh, np.arange(mesh.nfacets)).max()
+        size = scale * flux.facet_measures(mesh, np.arange(mesh.nfacets)).max()
         boundary = mesh.f2t[1] == -1
         assert np.abs(jump[:, ~boundary]).max() < 1e-12 * size
         assert np.abs(jump[boundary[None] & ~held]).max() < 1e-12 * size

@@ -61,7 +61,11 @@ def test_the_preconditioner_holds_a_few_times_k_while_it_is_built(shape, dim, do
     approximation = model.program.P.approximation
     sets = newton_cg._bounds(model.program, bound_form(model.program))
     shift = newton_cg.SHIFT * newton_cg._shifts(approximation, sets, 1.0)
-    peak = traced_peak(lambda: newton_cg._Preconditioner(approximation, sets.scale, sets.balls, shift))
+    n, p = sets.scale.size, sets.balls.shape[1]
+    every = newton_cg._expansion(n, np.arange(n), sets.balls[:0], np.zeros((0, p, p - 1)))  # every variable free
+    # the factorization is at the first Newton system's (the pattern ordered for all of them, its values)
+    peak = traced_peak(lambda: newton_cg._Preconditioner(approximation, sets.scale, sets.balls, shift).system(
+        every, np.zeros(n)))
     assert peak <= 4.0 * nbytes(approximation.H)
 
 

@@ -30,6 +30,9 @@ divergence constraint per cell on the two fluxes through its facets at a, solved
 flux, with one free circulation where none is known; assembling scikit-fem forms would be one Python call per patch.
 Here the cells of all patches are sorted into their chains once, and every patch is solved at once by one
 np.cumsum per row of the stress: no linear system, no loop over patches or sweeps.
+
+What does not depend on the chains (σ_h, σ̂ at the vertices, the cell norms, the facet data, the contact terms and
+:func:`bound`) is written for triangles and tetrahedra alike: :mod:`.flux3d` solves the patches of P1 tetrahedra.
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ from .estimate import ContactState, applied_traction, components, contact_facets
 class Equilibrated:
     """The equilibrated stress of one P1 solution (scaled units) and its estimates per cell (squares).
 
-    ``vertex_stress`` σ̂ at the three vertices of each cell (d, d, cells, 3; row i is the reconstructed flux of
+    ``vertex_stress`` σ̂ at the d + 1 vertices of each cell (d, d, cells, d + 1; row i is the reconstructed flux of
     component i); ``symmetric`` ‖C^{-½}(sym σ̂ − σ_h)‖²_T, ``skew`` ‖(2μ)^{-½} skew σ̂‖²_T per cell; ``defect`` the
     largest |∫_T (f + div σ̂)| over the cells, relative to the largest |∫_T f| + Σ|fluxes| (round-off and the algebraic
     error of u_h: the patch problems are compatible only for the exact discrete solution).
@@ -94,37 +97,38 @@ def triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def opposite_facets(mesh) -> np.ndarray:
-    """(cells, 3): the facet of each cell opposite its local vertex k (scikit-fem numbers a triangle's facets
-    (v0 v1), (v1 v2), (v0 v2): opposite v2, v0, v1; checked, and found by search where a mesh numbers otherwise)."""
-    t, facets, edges = mesh.t, mesh.facets, mesh.t2f
-    out = edges[[1, 2, 0]]  # (k, cells)
-    if ((facets[0][out] == t) | (facets[1][out] == t)).any():
-        for l in range(3):
-            e = edges[l]
-            for k in range(3):
-                away = (facets[0][e] != t[k]) & (facets[1][e] != t[k])
-                out[k, away] = e[away]
+    """(cells, d + 1): the facet of each cell opposite its local vertex k (the one of its facets without that
+    vertex; found by search, whatever order a mesh numbers a cell's facets in; triangles and tetrahedra)."""
+    t, facets, cell_facets = mesh.t, mesh.facets, mesh.t2f
+    out = np.empty_like(cell_facets)
+    for facet in cell_facets:
+        ends = facets[:, facet]
+        for k, vertex in enumerate(t):
+            away = (ends != vertex).all(axis=0)
+            out[k, away] = facet[away]
     return out.T
 
 
 def elastic_stress(fem: FEModel, u_components: np.ndarray, gradients: np.ndarray) -> np.ndarray:
-    """σ(u_h) per cell (cells, 2, 2; a view of a (2, 2, cells) array) of the P1 displacement ``u_components``
-    (d, vertices); ``gradients`` ∇λ_k (x, k, cells) of :func:`triangles`."""
+    """σ(u_h) per cell (cells, d, d; a view of a (d, d, cells) array) of the P1 displacement ``u_components``
+    (d, vertices); ``gradients`` ∇λ_k (x, k, cells) (:func:`triangles`, :func:`.flux3d.tetrahedra`)."""
     lam, mu = fem.lame
+    d = u_components.shape[0]
     nodal = np.take(u_components, fem.mesh.t, axis=1)  # (a, k, cells)
-    grad_u = np.empty((2, 2, nodal.shape[2]))  # (a, x, cells): Σ_k u_a(p_k) ∂_x λ_k, no (a, x, k, cells) temporary
-    for a in range(2):
-        for x in range(2):
+    grad_u = np.empty((d, d, nodal.shape[2]))  # (a, x, cells): Σ_k u_a(p_k) ∂_x λ_k, no (a, x, k, cells) temporary
+    for a in range(d):
+        for x in range(d):
             np.multiply(nodal[a, 0], gradients[x, 0], out=grad_u[a, x])
-            grad_u[a, x] += nodal[a, 1] * gradients[x, 1]
-            grad_u[a, x] += nodal[a, 2] * gradients[x, 2]
-    trace = lam * (grad_u[0, 0] + grad_u[1, 1])
+            for k in range(1, d + 1):
+                grad_u[a, x] += nodal[a, k] * gradients[x, k]
+    trace = lam * sum(grad_u[a, a] for a in range(d))
     stress = np.empty_like(grad_u)
-    for a in range(2):
+    for a in range(d):
         np.multiply(2 * mu, grad_u[a, a], out=stress[a, a])
         stress[a, a] += trace
-    np.multiply(mu, grad_u[0, 1] + grad_u[1, 0], out=stress[0, 1])
-    stress[1, 0] = stress[0, 1]
+        for b in range(a + 1, d):
+            np.multiply(mu, grad_u[a, b] + grad_u[b, a], out=stress[a, b])
+            stress[b, a] = stress[a, b]
     return stress.transpose(2, 0, 1)
 
 
@@ -359,78 +363,98 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     return Equilibrated(vertex_stress, symmetric, skew, defect)
 
 
-def vertex_values(flux: np.ndarray, xy: np.ndarray, area: np.ndarray) -> np.ndarray:
+def vertex_values(flux: np.ndarray, xy: np.ndarray, volume: np.ndarray) -> np.ndarray:
     """σ̂ row i at the vertices m of each cell (i, x, cells, m; a view of an (i, x, m, cells) array) from the outward
-    fluxes F_k through the facets opposite k (i, k, cells): Σ_k F_k (p_m − p_k) / 2|T|."""
-    out = np.empty((2, 2, *xy.shape[1:]))
-    for cells in blocks(area.size):
-        half = 0.5 / area[cells]
-        for i in range(2):
+    fluxes F_k through the facets opposite k (i, k, cells): Σ_k F_k (p_m − p_k) / d|T| (triangles, tetrahedra)."""
+    d = xy.shape[0]
+    out = np.empty((d, d, *xy.shape[1:]))
+    for cells in blocks(volume.size):
+        scale = 1.0 / (d * volume[cells])
+        for i in range(d):
             fluxes = flux[i, :, cells]
             total = fluxes.sum(axis=0)
-            for x in range(2):
+            for x in range(d):
                 corners = xy[x, :, cells]
                 np.multiply(corners, total, out=out[i, x, :, cells])
                 out[i, x, :, cells] -= (fluxes * corners).sum(axis=0)
-                out[i, x, :, cells] *= half
+                out[i, x, :, cells] *= scale
     return out.transpose(0, 1, 3, 2)
 
 
-def cell_norms(vertex_stress, sigma_h, lam, mu, area):
+def cell_norms(vertex_stress, sigma_h, lam, mu, volume):
     """‖C^{-½}(sym σ̂ − σ_h)‖²_T and ‖(2μ)^{-½} skew σ̂‖²_T per cell, exact for σ̂ linear per cell: ∫_T q(τ) = |T|
-    (Σ_m q(τ_m) + q(Σ_m τ_m)) / 12 for a quadratic form q of a linear τ (τ_m its values at the vertices)."""
+    (Σ_m q(τ_m) + q(Σ_m τ_m)) / (d + 1)(d + 2) for a quadratic form q of a linear τ (τ_m its values at the d + 1
+    vertices)."""
     at = vertex_stress.transpose(0, 1, 3, 2)  # (i, x, m, cells)
-    out = np.empty((2, area.size))
-    for cells in blocks(area.size):
-        out[:, cells] = block_norms(at[..., cells], sigma_h[cells], lam[cells], mu[cells], area[cells])
+    out = np.empty((2, volume.size))
+    for cells in blocks(volume.size):
+        out[:, cells] = block_norms(at[..., cells], sigma_h[cells], lam[cells], mu[cells], volume[cells])
     return out[0], out[1]
 
 
-def block_norms(at, sigma_h, lam, mu, area):
-    a, d = at[0, 0] - sigma_h[:, 0, 0], at[1, 1] - sigma_h[:, 1, 1]
-    b = 0.5 * (at[0, 1] + at[1, 0]) - sigma_h[:, 0, 1]
-    w = 0.5 * (at[0, 1] - at[1, 0])
-    trace_weight = lam / (2 * mu + 2 * lam)
+def block_norms(at, sigma_h, lam, mu, volume):
+    d = at.shape[0]
+    error = at - sigma_h.transpose(1, 2, 0)[:, :, None]  # σ̂ − σ_h at the vertices (i, x, m, cells)
+    trace_weight = lam / (2 * mu + d * lam)
 
-    def compliance(a, d, b):  # 2μ C⁻¹τ : τ = |τ|² − λ/(2μ + 2λ) (tr τ)² for σ = 2με + λ tr ε I in 2-D
-        return a * a + d * d + 2 * b * b - trace_weight * (a + d) ** 2
+    def compliance(e):  # 2μ C⁻¹τ : τ = |τ|² − λ/(2μ + dλ) (tr τ)² for τ = sym e, σ = 2με + λ tr ε I
+        symmetric = e + e.swapaxes(0, 1)
+        return 0.25 * (symmetric * symmetric).sum(axis=(0, 1)) - trace_weight * np.trace(e) ** 2
 
-    symmetric = compliance(a, d, b).sum(axis=0) + compliance(a.sum(axis=0), d.sum(axis=0), b.sum(axis=0))
-    return area * symmetric / (24 * mu), area * ((w * w).sum(axis=0) + w.sum(axis=0) ** 2) / (12 * mu)
+    def asymmetry(e):  # |skew e|² (σ_h is symmetric: skew e = skew σ̂)
+        skew = e - e.swapaxes(0, 1)
+        return 0.25 * (skew * skew).sum(axis=(0, 1))
+
+    total = error.sum(axis=2)
+    weight = volume / ((d + 1) * (d + 2) * 2 * mu)
+    return (weight * (compliance(error).sum(axis=0) + compliance(total)),
+            weight * (asymmetry(error).sum(axis=0) + asymmetry(total)))
 
 
 def lumped_traction(fem: FEModel, state: ContactState, facets: np.ndarray) -> np.ndarray:
     """t_a = F_a / w_a (vertices, d) at the nodes of the contact ``facets``, F the nodal contact forces (a pair's on
-    both sides) and w_a = Σ |E| / 2 over a's contact facets on its side."""
+    both sides) and w_a = Σ |E| / d over a's contact facets on its side."""
     mesh = fem.mesh
+    d = fem.dim
     forces = contact_forces(fem, state)  # P1: the scalar DOFs are the vertices
-    weights = np.bincount(mesh.facets[:, facets].ravel(), np.tile(0.5 * facet_lengths(mesh, facets), 2),
+    weights = np.bincount(mesh.facets[:, facets].ravel(), np.tile(facet_measures(mesh, facets) / d, d),
                           minlength=mesh.nvertices)
     return np.divide(forces, weights[:, None], out=np.zeros_like(forces), where=weights[:, None] > 0)
 
 
 def facet_moments(fem: FEModel, lumped: np.ndarray, on: np.ndarray) -> np.ndarray:
-    """∫_E ψ_a g_i (2 vertices of E in ``mesh.facets`` order, d, nfacets) on the boundary facets: g the applied
-    traction (constant on each straight facet) and, on the contact facets ``on``, the lumped contact traction
-    t_a = F_a / w_a near each node a (``lumped`` (vertices, d)): the moment |E| t_a / 2, whose sum over a's facets is
+    """∫_E ψ_a g_i (d vertices of E in ``mesh.facets`` order, d, nfacets) on the boundary facets: g the applied
+    traction (constant on each flat facet) and, on the contact facets ``on``, the lumped contact traction
+    t_a = F_a / w_a near each node a (``lumped`` (vertices, d)): the moment |E| t_a / d, whose sum over a's facets is
     the nodal force F_a."""
     mesh = fem.mesh
-    out = np.zeros((2, 2, mesh.nfacets))
+    d = fem.dim
+    out = np.zeros((d, d, mesh.nfacets))
     facets = mesh.boundary_facets()
-    edge = np.diff(mesh.p[:, mesh.facets[:, facets]], axis=1)[:, 0]  # (x, facets)
-    length = np.linalg.norm(edge, axis=0)
-    normal = np.stack([edge[1], -edge[0]]) / length
+    normal = facet_normals(mesh, facets)  # |E| times the unit normal
+    measure = np.linalg.norm(normal, axis=0)
+    normal /= measure
     inward = mesh.p[:, mesh.t[:, mesh.f2t[0, facets]]].mean(axis=1) - mesh.p[:, mesh.facets[0, facets]]
     normal *= np.where((normal * inward).sum(axis=0) > 0, -1.0, 1.0)
-    # one point per straight facet is all applied_traction reads of a basis (a scikit-fem FacetBasis costs more)
+    # one point per flat facet is all applied_traction reads of a basis (a scikit-fem FacetBasis costs more)
     points = SimpleNamespace(find=facets, normals=normal[:, :, None], dx=np.empty((facets.size, 1)))
-    out[:, :, facets] = 0.5 * length * applied_traction(fem, points)[None, :, :, 0]
-    out[:, :, on] = 0.5 * facet_lengths(mesh, on)[None, None] * lumped[mesh.facets[:, on]].transpose(0, 2, 1)
+    out[:, :, facets] = measure / d * applied_traction(fem, points)[None, :, :, 0]
+    out[:, :, on] = (facet_measures(mesh, on) / d)[None, None] * lumped[mesh.facets[:, on]].transpose(0, 2, 1)
     return out
 
 
-def facet_lengths(mesh, facets: np.ndarray) -> np.ndarray:
-    return np.linalg.norm(np.diff(mesh.p[:, mesh.facets[:, facets]], axis=1)[:, 0], axis=0)
+def facet_normals(mesh, facets: np.ndarray) -> np.ndarray:
+    """A normal of each facet (x, facets), of length the facet's measure (length, area), either orientation."""
+    ends = mesh.p[:, mesh.facets[:, facets]]  # (x, vertex, facets)
+    if mesh.p.shape[0] == 2:
+        edge = ends[:, 1] - ends[:, 0]
+        return np.stack([edge[1], -edge[0]])
+    return 0.5 * np.cross(ends[:, 1] - ends[:, 0], ends[:, 2] - ends[:, 0], axis=0)
+
+
+def facet_measures(mesh, facets: np.ndarray) -> np.ndarray:
+    """Length (2-D) or area (3-D) of each facet."""
+    return np.linalg.norm(facet_normals(mesh, facets), axis=0)
 
 
 KORN = np.sqrt(2.0)
@@ -443,7 +467,7 @@ TERMS = ("equilibrated", "asymmetry", "complementarity", "friction", "penetratio
 
 @dataclass(frozen=True)
 class FluxEstimate:
-    """The equilibrated-flux estimate of one 2-D P1 solution, scaled energy units.
+    """The equilibrated-flux estimate of one P1 solution (triangles, tetrahedra), scaled energy units.
 
     ``eta`` the bound (a + (a² + 4b)^½) / 2, a = η_sym + (C_K² − 1)^½ η_skew, b the contact terms (‖e‖²_E ≤ a ‖e‖_E
     + b); ``indicators`` per cell (η_sym,T² + (C_K² − 1) η_skew,T² + the contact terms at T, scaled to sum to η²);
@@ -467,11 +491,12 @@ class FluxEstimate:
 def contact_terms(fem: FEModel, state: ContactState, lumped: np.ndarray) -> dict[str, np.ndarray]:
     """The complementarity, friction and penetration terms per contact facet, with the traction σ̂ n = t̂ (the mean of
     the lumped nodal tractions over the facet): ∫_E p̂ (g − u_N,h) (kept where positive), ∫_E |t̂_T| |v_T| + t̂_T · v_T
-    and 2μ |E|⁻¹ ‖(u_N,h − g)_+‖²_E (trapezoidal rule on the facet's two nodes)."""
+    and 2μ |E|⁻¹ ‖(u_N,h − g)_+‖²_E (the vertex rule on the facet's d nodes: exact for the linear opening)."""
     mesh, contact = fem.mesh, fem.contact
     facets = contact.facets
-    ends = mesh.facets[:, facets]  # (2, facets) vertices
-    length = facet_lengths(mesh, facets)
+    ends = mesh.facets[:, facets]  # (d, facets) vertices
+    measure = facet_measures(mesh, facets)
+    d = fem.dim
     node = np.full(mesh.nvertices, -1)
     node[contact.dofs[:, 0] // fem.dim] = np.arange(contact.dofs.shape[0])
     traction = lumped[ends].mean(axis=0)  # (facets, d)
@@ -480,15 +505,15 @@ def contact_terms(fem: FEModel, state: ContactState, lumped: np.ndarray) -> dict
     pressure = -(traction * normal).sum(axis=1)
     out = {name: np.zeros(facets.size) for name in TERMS[2:]}
     if state.constrained:
-        opening = (state.gap - state.normal_displacement)[node[ends]]  # (2, facets)
-        out["complementarity"] = np.maximum(pressure * length * opening.mean(axis=0), 0.0)
-        out["penetration"] = 2.0 * fem.lame[1][mesh.f2t[0, facets]] * 0.5 * (np.maximum(-opening, 0.0) ** 2).sum(axis=0)
+        opening = (state.gap - state.normal_displacement)[node[ends]]  # (d, facets)
+        out["complementarity"] = np.maximum(pressure * measure * opening.mean(axis=0), 0.0)
+        out["penetration"] = 2.0 * fem.lame[1][mesh.f2t[0, facets]] / d * (np.maximum(-opening, 0.0) ** 2).sum(axis=0)
     if state.slip is not None:
         tangential = traction + pressure[:, None] * normal
-        slip = state.slip[node[ends]]  # (2, facets, d)
+        slip = state.slip[node[ends]]  # (d, facets, d)
         slip = slip - (slip * normal).sum(axis=2)[..., None] * normal
-        out["friction"] = 0.5 * length * (np.linalg.norm(tangential, axis=1) * np.linalg.norm(slip, axis=2)
-                                          + (tangential * slip).sum(axis=2)).sum(axis=0)
+        out["friction"] = measure / d * (np.linalg.norm(tangential, axis=1) * np.linalg.norm(slip, axis=2)
+                                         + (tangential * slip).sum(axis=2)).sum(axis=0)
     return out
 
 
@@ -496,6 +521,12 @@ def flux_estimate(fem: FEModel, u: np.ndarray, state: ContactState) -> FluxEstim
     """The equilibrated-flux estimate of the full (scaled) P1 displacement ``u`` under the contact ``state``; for a
     pair of bodies (mortar or node to segment) each body's traction on its contact side is the datum, and the
     complementarity and friction terms are the slave side's (relative gap and slip)."""
+    return bound(fem, u, state, equilibrate)
+
+
+def bound(fem: FEModel, u: np.ndarray, state: ContactState, equilibrate) -> FluxEstimate:
+    """:class:`FluxEstimate` of ``u`` with the stress ``equilibrate(fem, u_components, facet_moments, held)``
+    reconstructs (:func:`equilibrate` on triangles, :func:`.flux3d.equilibrate` on tetrahedra)."""
     mesh = fem.mesh
     on = contact_facets(fem)
     lumped = lumped_traction(fem, state, on)

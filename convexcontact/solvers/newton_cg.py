@@ -41,7 +41,7 @@ GPCG, SIAM J. Optim. 1, 1991, takes its Newton-like steps); Newton's steps are i
 3-variable SPD box programs (tests/test_global_convergence.py; Ben Gharbia & Gilbert, Math. Program. 134, 2012, for
 P-matrices), and did on a tall 3-D Tresca block and the two-body duals applied matrix-free (docs/performance.md).
 ``info["steps"]`` counts the steps of each kind, ``info["descent"]`` holds (kind, f's change, κ) of each,
-``info["grown"]`` the faces grown.
+``info["grown"]`` the faces grown, ``info["factorizations"]`` those of the preconditioner's H + Gᵀ D⁻¹ G (REUSE).
 
 An operator P may carry ``approximation`` with sparse ``G``, ``H`` (SPD) and ``factorize`` such that
 P ≈ G H⁻¹ Gᵀ (a Delassus operator of a thin slab of the body and coarse functions beyond it): each Newton
@@ -193,6 +193,32 @@ Only from a stall: from the start, step lengths capped at 0.1 / (ε max P̃) sta
 solve after 3 steps at 8e-5 and the proximal term after 4 at 1e-1 (the large c_j is what puts such a ball on its
 sphere in the first steps); the Tresca dual under the answer's radii from the stick start, capped, failed after 100
 steps (3.3e-5) where it takes 8 (docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs")."""
+REUSE = 4.0
+"""Where a Newton system's preconditioner (:class:`_Preconditioner`, with balls) keeps its factors instead of a
+numeric refactorization of H + Gᵀ D⁻¹ G, where that is K-sized: a body that is its own approximation, H = K on its
+DOFs (a plate 20 : 20 : 1: 9 refactorizations, 35 of the 53 s of its Tresca solve at 7.9·10⁴ DOFs; one costs 15–30
+solves with its factors, as many products with W). Not on a slab with coarse functions: its factorization costs a
+few products (2-D strip at 10⁵ DOFs: 0.053 s against 0.016 s for a solve with K), and keeping the factors there cost
+more products than it saved (the 2-D family at 2·10⁴ DOFs, Tresca: 7–45 % more; the pair 99 → 150). Two cases, each
+with a bound:
+
+- the same face as the system factored (free variables, spheres, tangent bases) and D within a spread of REUSE
+  (max over min of d/d_kept): the kept system's exact inverse then has its eigenvalues against this one's within
+  [min d/d_kept, max d/d_kept] (the two differ by a diagonal), so CG's condition number is at most REUSE;
+- a grown face (:func:`_grown`) of a step whose first system was factored: its variables held more only remove terms
+  (a bound's 1/δ) or shrink them (a ball's two δ⁻¹ e eᵀ to one b bᵀ/(bᵀδb + curvature), smaller by Cauchy–Schwarz),
+  so the factors of H + G₀ᵀ D₀⁻¹ G₀ with this face's G and D are the exact inverse of D + G H′⁻¹ Gᵀ with H′ ⪰ H
+  (Woodbury): SPD, its eigenvalues against the system's ≥ 1, those above 1 at most the rank of the terms removed."""
+KEPT_FORCING = 0.01
+"""CG on a grown face preconditioned by the factors of the face it grew from (REUSE) stops at KEPT_FORCING × its first
+residual, not GROWN_FORCING: the exact inverse went well past GROWN_FORCING in its one or two iterations, and at
+GROWN_FORCING the first step's point on the free strips 100 / 400 : 1 (10⁴ DOFs) was 10 times farther from the answer
+and they took 3 Newton steps instead of 2 (0.01: 2 steps, 32–33 products; 0.001: 2, 35–37; the step's own target:
+2, 41–44; the plate 20 : 20 : 1 at 2·10⁴ DOFs 5 steps and 59 / 65 / 92 products; the exact inverse 25 on the strips,
+43 on the plate, with 6 and 9 factorizations against 2)."""
+ROTATION = 0.3
+"""Largest change of a tangent basis's entries (~ its angle) for which a Newton system is the same face as the one
+factored (REUSE)."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
@@ -340,6 +366,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         approximation = getattr(program.P, "approximation", None)
         cache["precondition"] = approximation and _Preconditioner(approximation, sets.scale, sets.balls,
                                                                   SHIFT * _shifts(approximation, sets, curvature))
+    factorized = getattr(cache["precondition"], "factorizations", 0)  # before this solve (info["factorizations"])
     v = np.zeros(program.n_variables) if start is None else (start - sets.shift) / sets.scale
     if start is not None and sets.coupling is None:  # the last answer may be outside this program's sets (a Picard
         v = _project(v, sets)  # step's smaller radii), and the convergence argument needs v₀ in them
@@ -421,7 +448,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
                 break
             at = _project(newton, sets)
             newton, more = _step(P, affine, sets, at, y, c, target, products,
-                                 cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face)
+                                 cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face, grown=True)
             iterations += more
             faces[0] += 1
         return newton, iterations
@@ -506,7 +533,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         descent.append((kind, change, cauchy))
     x = sets.shift + sets.scale * v
     info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history,
-            "steps": kinds, "descent": descent, "grown": faces[0]}
+            "steps": kinds, "descent": descent, "grown": faces[0],
+            "factorizations": getattr(cache["precondition"], "factorizations", 0) - factorized}
     if sets.coupling is not None:  # the program of the radii reached: x is its answer
         b = program.b.copy()
         b[form.ball_radius_rows] = info["radii"] = sets.radii(v)
@@ -530,9 +558,10 @@ def _damped(damping: float, far: bool, residual: float) -> float:
 class _Preconditioner:
     """For each Newton system D + Rᵀ P̃ R (R: the step's free variables and tangent coordinates; D: the curvature
     there, + δ) from P ≈ G H⁻¹ Gᵀ (in v: G̃ = diag(scale) G). With balls (friction), the exact inverse of
-    D + Rᵀ P̃_approx R by Woodbury, D⁻¹(ξ − Gᵣ (H + Gᵣᵀ D⁻¹ Gᵣ)⁻¹ Gᵣᵀ D⁻¹ ξ) with Gᵣ = Rᵀ G̃: one numeric
-    refactorization per Newton step, on a pattern ordered once. With bounds alone, the restriction to R of
-    (P̃_approx + δI)⁻¹, the same formula with every variable free: one factorization per session.
+    D + Rᵀ P̃_approx R by Woodbury, D⁻¹(ξ − Gᵣ (H + Gᵣᵀ D⁻¹ Gᵣ)⁻¹ Gᵣᵀ D⁻¹ ξ) with Gᵣ = Rᵀ G̃: factorized at the first
+    system on a pattern that holds every later one, then a numeric refactorization where the factors kept cannot
+    serve (REUSE). With bounds alone, the restriction to R of (P̃_approx + δI)⁻¹, the same formula with every
+    variable free: one factorization per session.
     Measured on whole faces (contact solve, the other choice in brackets): 3-D Tresca 10.4 s (restriction first,
     exact after a step of more than 8 Krylov iterations: 12.8 s; the restriction alone left 24–36 iterations a
     step), 2-D Tresca 7.0 s (8.0 s); Signorini 3.6 s (3.9 s) in 2-D and 3.6 s (4.5 s) in 3-D, whose held variables
@@ -542,22 +571,66 @@ class _Preconditioner:
         self.G, self.H = sp.csr_matrix(sp.diags(scale) @ approximation.G), approximation.H
         self.shift = np.broadcast_to(np.asarray(shift, dtype=float), scale.shape)  # δ, one or per variable
         self.exact = balls.size > 0
-        contact = self.G.T @ sp.diags(1.0 / self.shift) @ self.G  # on G's columns only: small beside H
-        if self.exact:  # every later R D⁻¹ Rᵀ is on E: order the pattern they all fit
-            n, p = scale.size, balls.shape[1]
-            pairs = (np.repeat(balls, p, axis=1).ravel(), np.tile(balls, (1, p)).ravel())
-            E = sp.eye(n) + sp.csr_matrix((np.ones(pairs[0].size), pairs), shape=(n, n))
-            contact = _with_pattern(contact, abs(self.G).T @ E @ abs(self.G))
-        self.factors = approximation.factorize(_stored_sum(sp.csr_matrix(self.H), contact))
+        self.factorizations = 0  # of H + Gᵀ D⁻¹ G, the first included
+        self._factored = None  # (R, G, d) of the system the factors are of (see system)
+        self._grows = False  # whether the factors are of this Newton step's first face (see system)
+        self.kept = False  # whether the last system's are those of the face it grew from (see KEPT_FORCING)
+        self._factorize = approximation.factorize
+        self._keeps = approximation.slab in (None, self.H.shape[0])  # H is K on DOFs, no coarse functions: see REUSE
+        if not self.exact:
+            self.factors = self._factorize(_stored_sum(sp.csr_matrix(self.H),
+                                                       self.G.T @ sp.diags(1.0 / self.shift) @ self.G))
+            return
+        # every R D⁻¹ Rᵀ is on E: the pattern they all fit, factorized at the first system with its values (one
+        # numeric factorization fewer than ordering it here with D = δ: the first system then refactorized at once)
+        n, p = scale.size, balls.shape[1]
+        pairs = (np.repeat(balls, p, axis=1).ravel(), np.tile(balls, (1, p)).ravel())
+        E = sp.eye(n) + sp.csr_matrix((np.ones(pairs[0].size), pairs), shape=(n, n))
+        self._pattern = abs(self.G).T @ E @ abs(self.G)  # on G's columns only: small beside H
+        self.factors = None
 
-    def system(self, R: sp.csr_matrix, curvature: np.ndarray):
-        """ξ ↦ the preconditioner of D + Rᵀ P̃ R, D = δ + ``curvature``."""
+    def system(self, R: sp.csr_matrix, curvature: np.ndarray, grown: bool = False):
+        """ξ ↦ the preconditioner of D + Rᵀ P̃ R, D = δ + ``curvature``; ``grown``: R's face is a grown face of the
+        step's last system (:func:`_grown`). Refactorizes only where the factors kept cannot serve (REUSE)."""
         if not self.exact:
             return lambda xi: R.T @ _woodbury(self.factors, self.G, self.shift, R @ xi)
         d = R.multiply(R).T @ self.shift + curvature  # a tangent coordinate's δ: its ball's, weighted by its basis
         G = sp.csr_matrix(R.T @ self.G)
-        self.factors.refactorize(self.H, G.T @ sp.diags(1.0 / d) @ G)  # summed in place: no K-sized sum
+        self.kept = grown and self._grows and self._keeps
+        if self.kept:  # H + Gᵀ D⁻¹ G of the face it grew from bounds this one's: see REUSE
+            return lambda xi: _woodbury(self.factors, G, d, xi)
+        kept = self._factored
+        signs = None if grown or kept is None or not self._keeps else _face_signs(R, kept[0])
+        if signs is not None and _ratio_spread(d, kept[2]) <= REUSE:
+            self._grows = False
+            return lambda xi: signs * _woodbury(self.factors, kept[1], kept[2], signs * xi)
+        contact = G.T @ sp.diags(1.0 / d) @ G
+        if self.factors is None:
+            self.factors = self._factorize(_on_pattern(sp.csr_matrix(self.H), _with_pattern(contact, self._pattern)))
+            self._pattern = None
+        else:
+            self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
+        self.factorizations += 1
+        self._factored, self._grows = (R, G, d), True
         return lambda xi: _woodbury(self.factors, G, d, xi)
+
+
+def _face_signs(R: sp.csr_matrix, other: sp.csr_matrix) -> np.ndarray | None:
+    """Signs s of R's columns such that R diag(s) is ``other``'s face: the same free variables and spheres, each
+    tangent basis turned by at most ROTATION (a basis may come out of :func:`tangent_bases` reversed); None where
+    there are none."""
+    if not (R.shape == other.shape and R.nnz == other.nnz and np.array_equal(R.indptr, other.indptr)
+            and np.array_equal(R.indices, other.indices)):
+        return None
+    signs = np.where(np.asarray(R.multiply(other).sum(axis=0)).ravel() < 0, -1.0, 1.0)
+    return signs if np.abs(R.data * signs[R.indices] - other.data).max(initial=0.0) <= ROTATION else None
+
+
+def _ratio_spread(d: np.ndarray, kept: np.ndarray) -> float:
+    """max(d / kept) / min(d / kept): the condition number of the kept system's inverse times this one's, where the
+    two differ only in D (see REUSE)."""
+    ratio = d / kept
+    return float(ratio.max(initial=1.0) / max(ratio.min(initial=1.0), 1e-300))
 
 
 def _shifts(approximation, sets: _Bounds, curvature: float) -> np.ndarray:
@@ -583,6 +656,27 @@ def _with_pattern(A: sp.spmatrix, pattern: sp.spmatrix) -> sp.csr_matrix:
     pattern = sp.coo_matrix(pattern)
     return _stored_sum(sp.csr_matrix(A), sp.coo_matrix((np.zeros(pattern.nnz), (pattern.row, pattern.col)),
                                                        shape=pattern.shape))
+
+
+def _on_pattern(H: sp.csr_matrix, A: sp.spmatrix) -> sp.csr_matrix:
+    """H + A on H's own pattern, sharing H's index arrays, where every entry A stores lies in it (a body's contact
+    block within K's node blocks: the plate 20 : 20 : 1, its own approximation); else :func:`_stored_sum`. Only A's
+    rows are searched. The sum's own indices were a third of the K-sized copy alive while PARDISO factorizes it, the
+    contact solve's peak on the plate (7.9·10⁴ DOFs: 815 MB against a linear solve's 399)."""
+    A = sp.coo_matrix(A)
+    if not H.has_canonical_format:
+        return _stored_sum(H, A)
+    rows = np.unique(A.row)
+    starts, counts = H.indptr[rows], np.diff(H.indptr)[rows]
+    where = np.repeat(starts - (np.cumsum(counts) - counts), counts) + np.arange(counts.sum())  # those rows' entries
+    keys = np.repeat(rows.astype(np.int64), counts) * H.shape[1] + H.indices[where]  # increasing: rows, then columns
+    wanted = A.row.astype(np.int64) * H.shape[1] + A.col
+    found = np.minimum(np.searchsorted(keys, wanted), max(keys.size - 1, 0))
+    if A.nnz and (keys.size == 0 or (keys[found] != wanted).any()):
+        return _stored_sum(H, A)
+    data = H.data.copy()
+    np.add.at(data, where[found], A.data)
+    return sp.csr_matrix((data, H.indices, H.indptr), shape=H.shape)
 
 
 def _stored_sum(H: sp.csr_matrix, A: sp.spmatrix) -> sp.csr_matrix:
@@ -710,13 +804,14 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
 
 
 def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, damping=0.0,
-          relative=0.0, proximal=0.0, face=None):
+          relative=0.0, proximal=0.0, face=None, grown=False):
     """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v and the CG
     (GMRES, where radii move) iterations it took, CG stopping at ``target`` or ``relative`` × its first residual
     (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃) and the system has at most DIRECT_LIMIT unknowns, a dense
     Cholesky (LU where that fails or radii move) instead, or the factor kept in ``face`` (:func:`_direct`).
     ``damping`` μ adds μ/c to the system's diagonal (:func:`_damped`, DAMPING), ``proximal`` (0 or one number per
-    variable) its own number to each variable's (:func:`_inert`)."""
+    variable) its own number to each variable's (:func:`_inert`); ``grown``: the face is a grown one of the step's
+    (:func:`_grown`), whose preconditioner may be the step's factors (REUSE, KEPT_FORCING)."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
@@ -779,9 +874,11 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     if size and not direct:
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
-            (size, size), matvec=precondition.system(R, np.concatenate([np.zeros(free.size), curvature]) + shift), dtype=float)
+            (size, size), matvec=precondition.system(R, np.concatenate([np.zeros(free.size), curvature]) + shift,
+                                                     grown=grown), dtype=float)
         callback = lambda *_: count.__setitem__(0, count[0] + 1)
         if moving is None:
+            relative = min(relative, KEPT_FORCING) if getattr(precondition, "kept", False) else relative
             xi, _ = spla.cg(H, rhs, rtol=relative, atol=target, maxiter=CG_LIMIT, M=M, callback=callback)
         else:
             xi, _ = spla.gmres(H, rhs, rtol=0.0, atol=target, restart=GMRES_RESTART,

@@ -1,0 +1,158 @@
+"""newton-cg's preconditioner keeps its factors where they bound the Newton system (REUSE), and the coarse grids are
+coarsened by the slope of the grids tried (issue 25: the thin bodies' fixed costs)."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import convexcontact as cc
+from convexcontact.fem import coarse
+from convexcontact.scene.description import Tresca
+from convexcontact.scene.library import whole_face
+from convexcontact.solvers import newton_cg
+from convexcontact.studies.benchmarks.bench import law_of
+from convexcontact.studies.benchmarks.shapes import shape_scene
+
+
+@pytest.fixture(scope="module")
+def face():
+    """A 3-D Tresca whole face (discs: two tangential rows a node), its sets and its approximation's dense G̃ H⁻¹ G̃ᵀ."""
+    program = cc.prepare(whole_face(3, 25, 6e2, Tresca(slip_bound=0.002)), "dual-matrix-free").program
+    sets = newton_cg._bounds(program, newton_cg.bound_form_of(program))
+    approximation = program.P.approximation
+    G = (sp.diags(sets.scale) @ approximation.G).toarray()
+    return program, sets, G @ np.linalg.solve(approximation.H.toarray(), G.T)
+
+
+def preconditioner(face, shift=1e-3):
+    program, sets, _ = face
+    return newton_cg._Preconditioner(program.P.approximation, sets.scale, sets.balls, shift)
+
+
+def system_of(face, R: sp.csr_matrix, d: np.ndarray) -> np.ndarray:
+    """D + Rᵀ P̃_approx R, dense."""
+    return R.T @ (face[2] @ R.toarray()) + np.diag(d)
+
+
+def inverse_of(apply, size: int) -> np.ndarray:
+    return np.column_stack([apply(e) for e in np.eye(size)])
+
+
+def generalized_eigenvalues(apply, A: np.ndarray) -> np.ndarray:
+    """The eigenvalues of M A, M the preconditioner ``apply`` (symmetric positive definite: checked)."""
+    M = inverse_of(apply, A.shape[0])
+    np.testing.assert_allclose(M, M.T, atol=1e-9 * np.abs(M).max())
+    L = np.linalg.cholesky(0.5 * (M + M.T))
+    return np.linalg.eigvalsh(L.T @ A @ L)
+
+
+def a_face(sets, n: int, rng, spheres: np.ndarray, held: np.ndarray):
+    """R of a face whose ``spheres`` (balls) are on their sphere with random tangent bases, ``held`` variables held."""
+    held = held.copy()
+    held[sets.balls[spheres].ravel()] = True
+    bases = newton_cg.tangent_bases(rng.standard_normal((spheres.size, sets.balls.shape[1])))
+    return newton_cg._expansion(n, np.flatnonzero(~held), sets.balls[spheres], bases), held
+
+
+def test_the_same_face_keeps_its_factors_and_its_condition_stays_within_the_spread_of_d(face):
+    """A system differing from the one factored only in D (spread ≤ REUSE), one tangent basis reversed: no
+    factorization, and the kept inverse's eigenvalues against it within [min d/d₀, max d/d₀] (closed form: the two
+    systems differ by a diagonal). A spread above REUSE refactorizes: then the exact inverse."""
+    program, sets, _ = face
+    rng = np.random.default_rng(4)
+    n = program.n_variables
+    spheres = np.flatnonzero(rng.random(sets.balls.shape[0]) < 0.5)
+    R, held = a_face(sets, n, rng, spheres, rng.random(n) < 0.2)
+    free = (~held).sum()
+    curvature = np.concatenate([np.zeros(free), rng.uniform(0, 1, R.shape[1] - free)])
+    kept = preconditioner(face)
+    kept.system(R, curvature)
+    assert kept.factorizations == 1
+    reversed_basis = R.toarray()
+    reversed_basis[:, free] *= -1  # the first sphere's basis, as tangent_bases may return it
+    R2 = sp.csr_matrix(reversed_basis)
+    d = (1e-3 + curvature) * rng.uniform(0.6, 0.6 * newton_cg.REUSE, curvature.size)
+    ratio = d / (1e-3 + curvature)
+    eigenvalues = generalized_eigenvalues(kept.system(R2, d - 1e-3), system_of(face, R2, d))
+    assert kept.factorizations == 1
+    assert ratio.min() * (1 - 1e-8) <= eigenvalues.min() and eigenvalues.max() <= ratio.max() * (1 + 1e-8)
+    spread = (1e-3 + curvature) * np.where(np.arange(curvature.size) % 2, 1.0, 2 * newton_cg.REUSE)
+    apply = kept.system(R2, spread - 1e-3)
+    assert kept.factorizations == 2
+    np.testing.assert_allclose(generalized_eigenvalues(apply, system_of(face, R2, spread)), 1.0, atol=1e-8)
+
+
+def test_a_grown_face_keeps_its_step_s_factors_which_bound_it_from_below(face):
+    """A grown face (bounds held more, balls put on their sphere; the rest as it was) from the factors of the face it
+    grew from: SPD, its eigenvalues against the grown face's system ≥ 1, and at most as many above 1 as variables
+    were held more (rank of the terms removed): the closed form of REUSE's second case."""
+    program, sets, _ = face
+    rng = np.random.default_rng(5)
+    n = program.n_variables
+    kept = preconditioner(face)
+    first_held = np.zeros(n, dtype=bool)
+    first_held[sets.bounds[rng.random(sets.bounds.size) < 0.2]] = True
+    R0, _ = a_face(sets, n, rng, np.array([], dtype=int), first_held)
+    kept.system(R0, np.zeros(R0.shape[1]))
+    more = np.flatnonzero(rng.random(sets.balls.shape[0]) < 0.3)
+    held = first_held.copy()
+    held[sets.bounds[rng.random(sets.bounds.size) < 0.1]] = True
+    R, held = a_face(sets, n, rng, more, held)
+    free = (~held).sum()
+    curvature = np.concatenate([np.zeros(free), rng.uniform(0, 1, R.shape[1] - free)])
+    eigenvalues = generalized_eigenvalues(kept.system(R, curvature, grown=True), system_of(face, R, 1e-3 + curvature))
+    assert kept.factorizations == 1 and kept.kept
+    assert eigenvalues.min() >= 1 - 1e-8
+    assert (eigenvalues > 1 + 1e-8).sum() <= (held & ~first_held).sum()
+
+
+def test_the_plate_takes_the_same_newton_steps_with_two_factorizations(monkeypatch):
+    """The plate 20 : 20 : 1 (its own approximation: each factorization K-sized), Tresca: the kept factors leave the
+    Newton steps as they were (a factorization every system, REUSE = 0 and no grown face kept) for 2 factorizations
+    against 6 here (9 at 7.9·10⁴ DOFs), and the answer certified."""
+    model = cc.prepare(shape_scene("plate-free-20", law_of("tresca"), 3e3, dim=3), "dual-matrix-free")
+    kept = newton_cg.solve(model.program)
+    monkeypatch.setattr(newton_cg, "REUSE", 0.0)
+    monkeypatch.setattr(newton_cg._Preconditioner, "_grows", property(lambda self: False, lambda self, value: None),
+                        raising=False)
+    every = newton_cg.solve(model.program)
+    assert kept.status == every.status == "solved" and kept.iterations == every.iterations
+    assert kept.info["factorizations"] == 2 and every.info["factorizations"] == kept.iterations + every.info["grown"]
+    assert model.result(kept, {}, model.slip_bound).certificate.worst < 1e-10
+
+
+@pytest.mark.parametrize("exponent, dim", [(1.0, 2), (1.0, 3), (2.0, 2), (3.0, 3), (1.5, 3)])
+def test_coarser_grids_reach_the_dense_limit_in_a_few_tries(exponent, dim):
+    """Functions going as spacing^−e (a strip's grids: e ≈ 1 in 2-D or 3-D; a block's: e = dim): at most 3 tries
+    from 4 × DENSE_COLUMNS, the last within [FILL, 1] × DENSE_COLUMNS (where e = dim, the first: the former rule)."""
+    def functions(spacing):
+        return 4 * coarse.DENSE_COLUMNS * spacing**-exponent
+
+    tried = [(1.0, functions(1.0))]
+    while tried[-1][1] > coarse.DENSE_COLUMNS:
+        spacing = coarse.coarser(tried, dim)
+        tried.append((spacing, functions(spacing)))
+    assert len(tried) <= 4 and coarse.FILL * coarse.DENSE_COLUMNS * (1 - 1e-9) <= tried[-1][1] <= coarse.DENSE_COLUMNS
+
+
+@pytest.mark.parametrize("inside", [True, False])
+def test_the_first_factorization_s_matrix_is_h_plus_the_contact_block_on_h_s_own_indices(inside):
+    """H + A with A's entries within H's pattern (duplicates and explicit zeros included): H's index arrays shared,
+    the values the sum's; an entry outside it: every entry either stores (the stored sum)."""
+    rng = np.random.default_rng(6)
+    H = sp.random(40, 40, density=0.2, random_state=rng, format="csr") + sp.eye(40, format="csr")
+    H.sum_duplicates()
+    stored = sp.coo_matrix(H)
+    pick = rng.choice(stored.nnz, 30)
+    rows, columns = stored.row[pick], stored.col[pick]
+    values = rng.standard_normal(30)
+    values[0] = 0.0
+    if not inside:
+        outside = np.argwhere(H.toarray() == 0)[0]
+        rows, columns = np.append(rows, outside[0]), np.append(columns, outside[1])
+        values = np.append(values, 0.0)
+    A = sp.coo_matrix((values, (rows, columns)), shape=H.shape)
+    total = newton_cg._on_pattern(H, A)
+    np.testing.assert_allclose(total.toarray(), H.toarray() + A.toarray(), rtol=0, atol=1e-15)
+    assert np.shares_memory(total.indices, H.indices) == inside
+    assert total.nnz == H.nnz + (not inside)
