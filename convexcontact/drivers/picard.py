@@ -52,10 +52,15 @@ NOISE = 10.0
 the bound it was given) is the inner solver's noise: the map has converged as far as it can."""
 ALTERNATIVES = ("clarabel", "osqp")
 """Solvers tried, at their defaults, after the user's one fails on both formulations."""
-START_TOL = 1e-2
+START_TOL = 1e-8
 """Natural residual of the frictionless solve that only gives Newton's Coulomb solve on the matrix-free dual its
-start: on a 2-D strip of 4001 nodes (10⁶ DOFs) the Newton solve took 141 products with W from it, 137 from the
-frictionless answer at 1e-4 and 250 from newton-cg's own start (the whole solve 17.0, 18.2 and 27.8 s)."""
+start: on a 2-D strip of 4001 nodes (10⁶ DOFs) the Newton solve took 141 products with W from it at 1e-2, 137 from the
+frictionless answer at 1e-4 and 250 from newton-cg's own start (the whole solve 17.0, 18.2 and 27.8 s). Not looser:
+newton-cg's residual is relative to max(‖v‖, ‖c q‖), and on a strip 400 : 1 clamped at its ends ‖c q‖ is 10³ ‖v‖
+(LOAD_SCALE), so at 1e-2 the start was no answer (1,400–2,000 of 4,400 nodes open where the answer has none; the tol
+also floors the CG of the empty face's first point, FIRST_FORCING): Newton on the Coulomb problem stalled there and the
+Picard map ran (5·10⁴ DOFs 7 Picard steps, 16–40 s; 10⁵ a failed inner solve, then the primal map, 179 s). At 1e-8:
+3 Newton steps, 2.6 and 4.0 s (docs/performance.md, "The clamped strip 400 : 1's Coulomb row")."""
 
 
 def pressure_map(model: Model):

@@ -126,6 +126,17 @@ decided. Matrix-free (Newton steps / products with P, before → now): tall 2-D 
 5 / 118 (23 faces grown), at 10⁵ failed after 100 → 5 / 97; the two-body pair at 3·10⁴ DOFs 30 / 412 → 4 / 150, at
 10⁵ 47 / 1147 → 7 / 444; the dense W of the tall block 95 → 4 (docs/performance.md). Not for bounds alone: an opening
 zone grows as a front, a few nodes a solve (clamped strip 400 : 1, Signorini: 385 products against 54)."""
+GROW_MOVING = 3
+"""Times the face may grow where radii move (:func:`coupled`), and only after Newton's point was refused (its natural
+residual not below the step's): a node that leaves its interval at Newton's point made its projection raise the
+residual, and each step went half way to that same point (clamped strip 400 : 1, 4·10⁴ DOFs: 7 Newton steps, the
+residual halved 5 times, an answer the certificate refused, 7.6e-6). Grown at every step, as with fixed radii, the
+faces cost more than the steps they saved where P is a matrix (each is an LU of its own: strip 20 : 1 free, 2·10⁴
+DOFs, 5 → 13 systems) and on the clamped plate (3-D, 2·10⁴ DOFs: 33 → 75 products, 5 steps both). Refused points
+only (steps / products / faces grown, 2·10⁴ DOFs unless said; docs/performance.md, "The clamped strip 400 : 1's
+Coulomb row"): GROW_MOVING = 1: tall block stalled after 16 steps, strip 400 : 1 at 5·10⁴ 6 / 208 / 5; 2: tall 12 /
+134 / 22; 3: block 13 → 9 / 38 / 12, tall (stalled after 18 before) 2 / 13 / 4, clamped plate 5 / 51 / 3, strip
+400 : 1 at 5·10⁴ 3 / 67 / 2; 10 (GROW): block 6 / 23 / 7, tall 1 / 10 / 4, clamped plate 5 / 75 / 10."""
 GROWN_FORCING = 0.1
 """CG on a grown face stops at GROWN_FORCING × its first residual (or the step's own target, if larger): the point
 is a trial, and the face it finds is what counts. Solved to the step's target as the first face is, the grown faces
@@ -304,8 +315,8 @@ def coupled(program: ConicProgram, coupling: sp.spmatrix, start: np.ndarray, tol
             max_iter: int = 30, verbose: bool = False, cache: dict | None = None) -> ConicSolution:
     """Newton's method from ``start`` on the program whose ball radii move with x: ‖v_k‖ ≤ (coupling x)_k,
     a quasi-variational inequality (no f is minimized: the Newton system is not symmetric, GMRES solves it,
-    and a step is taken where it lowers the natural residual, towards Newton's point or else the projected
-    gradient's). ``coupling`` (balls × variables) may not involve the balls' own variables. The answer is that
+    and a step is taken where it lowers the natural residual: Newton's point, else the point on the face grown by the
+    sets it leaves (GROW_MOVING), else a point towards Newton's or the projected gradient's). ``coupling`` (balls × variables) may not involve the balls' own variables. The answer is that
     of the program whose radius rows hold the radii it reached (also ``info["radii"]``); "failed" (solver
     status "stalled") where no step lowers the residual: without a convexity argument Newton's method is local,
     so start near the answer (a fixed point of x ↦ the program's answer with radii coupling x)."""
@@ -416,25 +427,39 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     def newton_point(v, y, target, damping):
         """Newton's point from v on the face y holds, the CG iterations it took and how far the first solve went
         (‖point − v‖∞, see FAR); with balls (friction) and fixed radii the face grown by the sets that point leaves
-        until it leaves none (at most GROW times; see GROW), each solve started from the last point, projected."""
+        (:func:`grown_point`)."""
         face = {}  # the dense Cholesky factor of this step's first system, for its grown faces (_direct)
         newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix, damping,
                                    proximal=proximal, face=face)
         reach = np.abs(newton - v).max(initial=0.0)
-        for _ in range(GROW if sets.coupling is None and sets.balls.size else 0):
-            y = _grown(y, newton, sets)
-            if y is None:
-                break
-            newton, more = _step(P, affine, sets, _project(newton, sets), y, c, target, products,
-                                 cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face, grown=True)
+        if sets.coupling is None:
+            newton, more = grown_point(v, y, newton, target, damping, face)
             iterations += more
-            faces[0] += 1
         return newton, iterations, reach
 
-    def backtrack(v, g, towards, residual):
-        """Without an f (moving balls), the first of 1, ½, …, 1/16 of the way to ``towards`` (projected)
-        whose natural residual is below ``residual``; ``v`` itself where none is."""
-        for alpha in 0.5 ** np.arange(5):
+    def grown_point(v, y, newton, target, damping, face=None, limit=None):
+        """Newton's point on the face y holds grown by the sets ``newton`` leaves until it leaves none (at most
+        ``limit`` times, GROW by default; see GROW), each solve started from the last point, projected; the CG
+        iterations it took."""
+        iterations, at = 0, v
+        for _ in range((GROW if limit is None else limit) if sets.balls.size else 0):
+            y = _grown(y, newton, sets, sets.radii(at))
+            if y is None:
+                break
+            at = _project(newton, sets)
+            # not the step's kept factors where radii move: REUSE's bound is for CG's symmetric systems, and GMRES
+            # on the clamped plate's Coulomb problem (2·10⁴ DOFs) took over 4 min CPU with them, 13 s without
+            newton, more = _step(P, affine, sets, at, y, c, target, products,
+                                 cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face,
+                                 grown=sets.coupling is None)
+            iterations += more
+            faces[0] += 1
+        return newton, iterations
+
+    def backtrack(v, g, towards, residual, lengths=(1.0, 0.5, 0.25, 0.125, 0.0625)):
+        """Without an f (moving balls), the first of ``lengths`` (1, ½, …, 1/16) of the way to ``towards``
+        (projected) whose natural residual is below ``residual``; ``v`` itself where none is."""
+        for alpha in lengths:
             w = _project(v + alpha * (towards - v), sets)
             gw = gradient(w)
             if natural(w, gw)[0] < residual:
@@ -475,13 +500,20 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             break
         empty = steps == 0 and start is None and sets.coupling is None and matrix is None  # see FIRST_FORCING
         target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
-        newton, iterations, reach = newton_point(v, np.zeros_like(y) if empty else y,
-                                                 max(target, 0.1 * tol * answer(v, size) / np.max(c)), damping)
+        target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
+        newton, iterations, reach = newton_point(v, np.zeros_like(y) if empty else y, target, damping)
         cg_total += iterations
         best = min(best, residual)
         damping = _damped(damping, reach > FAR * size, residual)
         if sets.coupling is not None:
-            v, g, moved = backtrack(v, g, newton, residual)
+            v, g, moved = backtrack(v, g, newton, residual, (1.0,))
+            if not moved:  # Newton's point refused: first on the face grown by the sets it leaves (see GROW)
+                grown, more = grown_point(v, y, newton, target, damping, limit=min(GROW, GROW_MOVING))
+                cg_total += more
+                if grown is not newton:
+                    v, g, moved = backtrack(v, g, grown, residual)
+            if not moved:
+                v, g, moved = backtrack(v, g, newton, residual, (0.5, 0.25, 0.125, 0.0625))
             if not moved:  # a projected-gradient segment, as for a fixed f: Newton stalled on a punch with F = 2
                 v, g, moved = backtrack(v, g, _project(v - c * g, sets), residual)
             if not moved and inert is not None:  # the inert sets' rounding may be what stalls it: see INERT
@@ -711,12 +743,14 @@ def _inert(c, tol: float):
     return (np.where(inert, np.min(c), c), np.where(inert, floor, 0.0)) if inert.any() else None
 
 
-def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds) -> np.ndarray | None:
-    """y (v − c∇f, whose outside sets :func:`_step` holds) with the sets it leaves free and Newton's point leaves
-    added, at Newton's point (so held on that side, a ball on its sphere through it); None where there are none."""
+def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds, radius: np.ndarray) -> np.ndarray | None:
+    """y (v − c∇f, whose outside sets :func:`_step` holds under the radii ``radius``, those at v) with the sets it
+    leaves free and Newton's point leaves added, at Newton's point (so held on that side, a ball on its sphere
+    through it; where radii move, a ball Newton's point leaves under the radii it reaches); None where there are
+    none."""
     bounds = sets.bounds[(y[sets.bounds] >= 0) & (newton[sets.bounds] < 0)]
-    balls = sets.balls[(np.linalg.norm(y[sets.balls], axis=1) <= sets.radius)
-                       & (np.linalg.norm(newton[sets.balls], axis=1) > sets.radius)]
+    balls = sets.balls[(np.linalg.norm(y[sets.balls], axis=1) <= radius)
+                       & (np.linalg.norm(newton[sets.balls], axis=1) > sets.radii(newton))]
     if not (bounds.size or balls.size):
         return None
     grown = y.copy()
