@@ -144,7 +144,8 @@ f is least, but where radii move there is no f, and along that step the natural 
 W is far from diagonal: on the 2-D block at 10⁶ DOFs (dense W, 1416 unknowns) from the frictionless start (natural
 residual 2.2e-2, every node slipping) it was 0.66, 0.33, …, 4.2e-2 at 1, ½, …, 1/16, below 2.2e-2 only from ~1/32, so
 Newton stalled after 0 steps (the Picard map answered, Clarabel on 10 Tresca programs). To 1/128: 6 short gradient
-steps, then Newton's: solved after 16 steps (docs/performance.md, "The pair's dense Newton systems")."""
+steps, then Newton's: solved after 16 steps (docs/performance.md, "The pair's dense Newton systems on the
+Coulomb problem, and the block at 10⁶ DOFs's stall")."""
 GROWN_FORCING = 0.1
 """CG on a grown face stops at GROWN_FORCING × its first residual (or the step's own target, if larger): the point
 is a trial, and the face it finds is what counts. Solved to the step's target as the first face is, the grown faces
