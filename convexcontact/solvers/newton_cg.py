@@ -137,6 +137,15 @@ only (steps / products / faces grown, 2·10⁴ DOFs unless said; docs/performanc
 Coulomb row"): GROW_MOVING = 1: tall block stalled after 16 steps, strip 400 : 1 at 5·10⁴ 6 / 208 / 5; 2: tall 12 /
 134 / 22; 3: block 13 → 9 / 38 / 12, tall (stalled after 18 before) 2 / 13 / 4, clamped plate 5 / 51 / 3, strip
 400 : 1 at 5·10⁴ 3 / 67 / 2; 10 (GROW): block 6 / 23 / 7, tall 1 / 10 / 4, clamped plate 5 / 75 / 10."""
+GRADIENT_LENGTHS = 0.5 ** np.arange(8)
+"""Where radii move and Newton's points were refused, the fractions of the projected gradient's step tried (the first
+whose natural residual is below the step's is taken). The step lengths c (0.1 / P̃_jj) are those of a segment on which
+f is least, but where radii move there is no f, and along that step the natural residual rises as ~α c‖P̃‖ where
+W is far from diagonal: on the 2-D block at 10⁶ DOFs (dense W, 1416 unknowns) from the frictionless start (natural
+residual 2.2e-2, every node slipping) it was 0.66, 0.33, …, 4.2e-2 at 1, ½, …, 1/16, below 2.2e-2 only from ~1/32, so
+Newton stalled after 0 steps (the Picard map answered, Clarabel on 10 Tresca programs). To 1/128: 6 short gradient
+steps, then Newton's: solved after 16 steps (docs/performance.md, "The pair's dense Newton systems on the
+Coulomb problem, and the block at 10⁶ DOFs's stall")."""
 GROWN_FORCING = 0.1
 """CG on a grown face stops at GROWN_FORCING × its first residual (or the step's own target, if larger): the point
 is a trial, and the face it finds is what counts. Solved to the step's target as the first face is, the grown faces
@@ -515,7 +524,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             if not moved:
                 v, g, moved = backtrack(v, g, newton, residual, (0.5, 0.25, 0.125, 0.0625))
             if not moved:  # a projected-gradient segment, as for a fixed f: Newton stalled on a punch with F = 2
-                v, g, moved = backtrack(v, g, _project(v - c * g, sets), residual)
+                v, g, moved = backtrack(v, g, _project(v - c * g, sets), residual, GRADIENT_LENGTHS)
             if not moved and inert is not None:  # the inert sets' rounding may be what stalls it: see INERT
                 (metric, proximal), inert = inert, None
                 continue
