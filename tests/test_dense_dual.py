@@ -149,3 +149,16 @@ def test_a_zero_column_stored_by_dense_csc_is_still_costless():
     by_values = free_variables(sp.csc_matrix(W), np.zeros(3), A, np.zeros(3, bool))
     assert by_values.tolist() == [False, True, False]
     assert free_variables(dense_csc(W), np.zeros(3), A, np.zeros(3, bool)).tolist() == by_values.tolist()
+
+
+def test_the_dense_newton_systems_run_on_one_blas_thread(pair, monkeypatch):
+    """Each dense Newton system is gathered and factored with BLAS on DENSE_THREADS thread(s), the process's own
+    setting restored after it: the pair's systems (a few hundred unknowns) paid a second thread's start at every call
+    (docs/performance.md, "The dense Newton systems on one BLAS thread")."""
+    blas = lambda: {pool["num_threads"] for pool in newton_cg._blas().info() if pool["user_api"] == "blas"}
+    outside, inside = blas(), []
+    direct = newton_cg._direct
+    monkeypatch.setattr(newton_cg, "_direct", lambda *args: inside.append(blas()) or direct(*args))
+    solution = newton_cg.solve(pair.program)
+    assert solution.status == "solved" and inside and all(threads == {newton_cg.DENSE_THREADS} for threads in inside)
+    assert blas() == outside

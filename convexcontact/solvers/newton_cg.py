@@ -61,6 +61,7 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+import threadpoolctl
 
 from ..conic import ConicProgram, ConicSolution
 from .cone_polish import BoundForm, bound_form, tangent_bases, unit_rows
@@ -879,7 +880,8 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     direct = size and matrix is not None and size <= DIRECT_LIMIT
     if direct:
         system = functools.partial(_system, matrix, Z, R, free.size, curvature, shift)
-        xi = _direct(system, free, rhs, moving is None, face if k * t == 0 else None)
+        with _blas().limit(limits=DENSE_THREADS, user_api="blas"):
+            xi = _direct(system, free, rhs, moving is None, face if k * t == 0 else None)
         direct = xi is not None
         if direct:
             new = new + Z @ (start + xi)
@@ -897,6 +899,20 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
                                maxiter=CG_LIMIT // GMRES_RESTART, M=M, callback=callback, callback_type="pr_norm")
         new = new + Z @ (start + xi)
     return new, count[0]
+
+
+DENSE_THREADS = 1
+"""BLAS threads for a dense Newton system (:func:`_direct`: its gather and its factorization, a few hundred to
+DIRECT_LIMIT unknowns): too small for a second thread to pay its start. The 2-D pair at 10⁵ DOFs, quiet, the Newton
+solve on OpenBLAS's default 2 threads against 1 (the whole process): Tresca 0.69–0.74 s against 0.21–0.28 s, Coulomb
+0.75–0.83 s against 0.48–0.49 s; loaded, one 530 × 530 LU 0.11 s against 5 ms. The rest (S's Cholesky, W) keeps
+every thread (docs/performance.md, "The dense Newton systems on one BLAS thread")."""
+
+
+@functools.cache
+def _blas() -> threadpoolctl.ThreadpoolController:
+    """The process's thread pools (scanned once: threadpoolctl reads the loaded libraries)."""
+    return threadpoolctl.ThreadpoolController()
 
 
 def _direct(system, free, rhs, symmetric: bool, face: dict | None):
