@@ -158,10 +158,19 @@ def stress_divergence(fem: FEModel, space: dict, cells: fe.CellBasis, u_componen
     return np.einsum("akej,jkep->aep", sigma, shape_gradients)
 
 
+def scaled_body_force(fem: FEModel) -> np.ndarray:
+    """The body force per unit volume in scaled units, one entry per dimension (a scene's default (0, 0) is zero in
+    3-D too)."""
+    force = np.zeros(fem.dim)
+    if any(fem.scene.body_force):
+        force[:] = np.asarray(fem.scene.body_force, dtype=float) * fem.scaling.length / fem.scaling.pressure
+    return force
+
+
 def interior(fem: FEModel, space: dict, u_components: np.ndarray) -> np.ndarray:
     """h_T² ‖f + div σ‖²_T / 2μ_T per cell (f the body force)."""
     out = np.zeros(fem.mesh.nelements)
-    body_force = np.asarray(fem.scene.body_force, dtype=float) * fem.scaling.length / fem.scaling.pressure
+    body_force = scaled_body_force(fem)
     if space["elem"].maxdeg == 1 and not body_force.any():  # P1 without body force: nothing to integrate
         return out
     for chunk in chunks(np.arange(fem.mesh.nelements)):

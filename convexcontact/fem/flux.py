@@ -44,7 +44,15 @@ import numpy as np
 
 from . import flux_correction
 from .assembly import FEModel
-from .estimate import ContactState, applied_traction, components, contact_facets, contact_forces, held_components
+from .estimate import (
+    ContactState,
+    applied_traction,
+    components,
+    contact_facets,
+    contact_forces,
+    held_components,
+    scaled_body_force,
+)
 
 
 @dataclass(frozen=True)
@@ -336,7 +344,7 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     xy, det, gradients = triangles(mesh)
     area = 0.5 * np.abs(det)
     sigma_h = elastic_stress(fem, u_components, gradients)
-    body_force = np.asarray(fem.scene.body_force, dtype=float) * fem.scaling.length / fem.scaling.pressure
+    body_force = scaled_body_force(fem)
     opposite = opposite_facets(mesh)
     chains = patch_chains(mesh, xy, det, opposite)
     weights = circulation_weights(chains, xy, det)
@@ -353,14 +361,19 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     last = boundary_fluxes(mesh, facet_moments, held, chains.last_facet, chains.vertex)
     x = np.stack([row_fluxes(chains, weights, rhs[i], target[i], (first[0][i], first[1][i]), (last[0][i], last[1][i]))
                   for i in range(2)])  # the outward flux of σ̂ row i through the facet opposite k (i, k, cells)
-    flux = x.transpose(0, 2, 1)  # (i, c, k)
-    residual = flux.sum(axis=2) + area * body_force[:, None]  # ∫_T (div σ̂ + f)
-    scale = np.abs(area[None] * body_force[:, None]).max() + np.abs(flux).max()
-    defect = float(np.abs(residual).max() / scale) if scale > 0 else 0.0
+    defect = equilibrium_defect(x, area, body_force)
     vertex_stress = vertex_values(x, xy, area)
     vertex_stress = flux_correction.corrected(vertex_stress, sigma_h, gradients, area, fem.lame, mesh, opposite, held, KORN)
     symmetric, skew = cell_norms(vertex_stress, sigma_h, lam, mu, area)
     return Equilibrated(vertex_stress, symmetric, skew, defect)
+
+
+def equilibrium_defect(flux: np.ndarray, volume: np.ndarray, body_force: np.ndarray) -> float:
+    """The largest |∫_T (div σ̂ + f)| over the cells, relative to the largest |∫_T f| + the largest flux, from the
+    outward fluxes (i, k, cells) through the facets opposite k (:attr:`Equilibrated.defect`)."""
+    residual = flux.sum(axis=1) + volume * body_force[:, None]
+    scale = np.abs(volume[None] * body_force[:, None]).max() + np.abs(flux).max()
+    return float(np.abs(residual).max() / scale) if scale > 0 else 0.0
 
 
 def vertex_values(flux: np.ndarray, xy: np.ndarray, volume: np.ndarray) -> np.ndarray:

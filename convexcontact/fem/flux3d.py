@@ -33,8 +33,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from .assembly import FEModel
-from .estimate import ContactState
-from .flux import Equilibrated, FluxEstimate, bound, cell_norms, elastic_stress, opposite_facets, vertex_values
+from .estimate import ContactState, scaled_body_force
+from .flux import (
+    Equilibrated,
+    FluxEstimate,
+    bound,
+    cell_norms,
+    elastic_stress,
+    equilibrium_defect,
+    opposite_facets,
+    vertex_values,
+)
+from .local_delassus import group_ranks
 
 CHUNK = 1024
 """Patches per stacked solve: its dense systems (rows × patches × n² doubles, n ≈ 60 on a uniform mesh) stay near
@@ -110,12 +120,7 @@ SLOTS = np.array([[(k + 1 + s) % 4 for s in range(3)] for k in range(4)])  # (k,
 
 def ranks(keys: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
     """The rank of each entry among the entries of equal key (keys in [0, count)), and the count per key."""
-    order = np.argsort(keys, kind="stable")
-    sizes = np.bincount(keys, minlength=count)
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    out = np.empty(keys.size, dtype=np.int64)
-    out[order] = np.arange(keys.size) - starts[keys[order]]
-    return out, sizes
+    return group_ranks(keys), np.bincount(keys, minlength=count)
 
 
 def patches(mesh, opposite: np.ndarray) -> Patches:
@@ -273,9 +278,7 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     xyz, det, gradients = tetrahedra(mesh)
     volume = np.abs(det) / 6.0
     sigma_h = elastic_stress(fem, u_components, gradients)
-    body_force = np.zeros(3)  # a scene's zero body force may be the default (0, 0)
-    if any(fem.scene.body_force):
-        body_force[:] = np.asarray(fem.scene.body_force, dtype=float) * fem.scaling.length / fem.scaling.pressure
+    body_force = scaled_body_force(fem)
     opposite = opposite_facets(mesh)
     layout = patches(mesh, opposite)
     target = -volume * np.einsum("cix,xkc->ikc", sigma_h, gradients)  # (i, k, cells)
@@ -290,9 +293,6 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     for k in range(4):
         for s in range(3):
             flux[:, SLOTS[k, s]] += layout.sign[k, s] * solution[:, base[k, s]]
-    residual = flux.sum(axis=1) + volume * body_force[:, None]  # ∫_T (div σ̂ + f)
-    scale = np.abs(volume[None] * body_force[:, None]).max() + np.abs(flux).max()
-    defect = float(np.abs(residual).max() / scale) if scale > 0 else 0.0
     vertex_stress = vertex_values(flux, xyz, volume)
     symmetric, skew = cell_norms(vertex_stress, sigma_h, lam, mu, volume)
-    return Equilibrated(vertex_stress, symmetric, skew, defect)
+    return Equilibrated(vertex_stress, symmetric, skew, equilibrium_defect(flux, volume, body_force))

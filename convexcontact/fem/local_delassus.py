@@ -90,7 +90,7 @@ def supports(B: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
     numbers: dict = {}
     support = np.array([numbers.setdefault(B.indices[B.indptr[j]:B.indptr[j + 1]].tobytes(), len(numbers))
                         for j in range(B.shape[0])], dtype=int)
-    return support, _ranks(support)
+    return support, group_ranks(support)
 
 
 def colouring(conflict: sp.csr_matrix) -> np.ndarray:
@@ -113,7 +113,7 @@ def colouring(conflict: sp.csr_matrix) -> np.ndarray:
     return colours
 
 
-def _ranks(groups: np.ndarray) -> np.ndarray:
+def group_ranks(groups: np.ndarray) -> np.ndarray:
     """Each item's rank among the items of its group, in their order."""
     order = np.argsort(groups, kind="stable")
     starts = np.searchsorted(groups[order], groups[order])  # each item's group's first place in the order
