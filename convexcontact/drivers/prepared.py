@@ -18,10 +18,10 @@ from .. import solvers
 from ..conic import ConicProgram, ConicSolution, Recovery
 from ..fem.assembly import FEModel, assemble
 from ..fem.coarse import body_far_functions
-from ..fem.factorization import Condensation, Delassus, Factorization, condense, factorize
+from ..fem.factorization import Condensation, Delassus, Factorization, condense, dual_factors, factorize
 from ..fem.friction import FrictionPoints, friction_points
 from ..formulations import FORMULATIONS, contact_weights
-from ..formulations.dual import stick_guess
+from ..formulations.dual import contact_rows, stick_guess
 from ..results.certificate import certify
 from ..results.result import ContactResult, contact_nodes, not_unique
 from ..scene.description import (
@@ -386,13 +386,15 @@ def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, 
         formulation, reason = choose_formulation(fem, law, unknowns)
         if formulation != "primal":
             try:
-                condensation = condensation or condensed(fem, timings, formulation == MATRIX_FREE)
+                condensation = condensation or condensed(fem, timings, formulation == MATRIX_FREE,
+                                                         contact_rows(fem.contact, C, friction))
             except SceneError as error:
                 if error.field != "dirichlet":
                     raise
                 formulation, reason = "primal", "K is singular (the contact holds a rigid motion): nothing to condense"
     elif formulation != "primal":
-        condensation = condensation or condensed(fem, timings, formulation == MATRIX_FREE)
+        condensation = condensation or condensed(fem, timings, formulation == MATRIX_FREE,
+                                                 contact_rows(fem.contact, C, friction))
     options = {"factorization": condensation if isinstance(condensation, Reused) else Reused(condensation, fem.K),
                "matrix_free": formulation == MATRIX_FREE} if formulation != "primal" else {}
     if formulation == MATRIX_FREE:
@@ -458,11 +460,12 @@ def _leading(kept: sp.csr_matrix, B: sp.spmatrix) -> bool:
     return B.shape[1] == kept.shape[1] and m <= kept.shape[0] and (kept[:m] != B).nnz == 0
 
 
-def condensed(fem: FEModel, timings: dict, matrix_free: bool = False):
+def condensed(fem: FEModel, timings: dict, matrix_free: bool = False, rows: sp.spmatrix | None = None):
     """K condensed onto the contact DOFs (one sparse factorization; see :func:`~convexcontact.fem.factorization.condense`),
-    or only factorized for the matrix-free dual."""
+    or, given the dual's ``rows`` B, what :func:`~convexcontact.fem.factorization.dual_factors` forms W from; or only
+    factorized for the matrix-free dual."""
     columns = contact_columns(fem)
     with timed(timings, "condensation"):
         if 0 < columns.size < fem.n_free and not matrix_free:
-            return condense(fem.K, columns, dim=fem.dim)
+            return condense(fem.K, columns, dim=fem.dim) if rows is None else dual_factors(fem.K, columns, rows, fem.dim)
         return factorize(fem.K, dim=fem.dim)  # nothing to condense from or onto: W from K's factors

@@ -2,7 +2,8 @@
 
 :func:`factorize` gives K⁻¹ b and W = B K⁻¹ Bᵀ, dense or as an operator. :func:`condense` gives the dense Schur
 complement S of K onto the contact DOFs C (|C| ≪ n) with the condensed load and the
-lift back to all free DOFs; W = B_C S⁻¹ B_Cᵀ then costs no sparse solve at all.
+lift back to all free DOFs; W = B_C S⁻¹ B_Cᵀ then costs no sparse solve at all. :func:`saddle` gives W itself from
+one factorization of K with B's rows appended, where |C| is large (:data:`SADDLE_COLUMNS`).
 
 Backends: ``"pardiso"`` (MKL PARDISO, SPD mode, through pypardiso's ``mkl_rt``; imported
 only when used) and ``"superlu"`` (scipy). ``"auto"`` takes PARDISO when it loads.
@@ -97,9 +98,9 @@ def _superlu(K: sp.spmatrix, dim: int):
     return solve
 
 
-def _pardiso_factors(K: sp.spmatrix, schur: np.ndarray | None = None):
+def _pardiso_factors(K: sp.spmatrix, schur: np.ndarray | None = None, mtype: int = 2):
     try:
-        return _pardiso().Pardiso(K, schur)
+        return _pardiso().Pardiso(K, schur, mtype)
     except RuntimeError as error:
         if getattr(error, "singular", False):
             raise singular_stiffness("PARDISO found a zero pivot") from None
@@ -442,3 +443,77 @@ def condense(K: sp.spmatrix, C: np.ndarray, backend: str = "auto", dim: int = 2)
     if C.size == 0 or C.size == K.shape[0] or C[0] < 0 or C[-1] >= K.shape[0]:
         raise ValueError(f"C must be a nonempty proper subset of the {K.shape[0]} DOFs")
     return _Schur(K, C) if backend == "pardiso" else _Interior(K, C, dim)
+
+
+SADDLE_COLUMNS = 2000
+"""Contact DOFs |C| from which the dense dual's W comes from :func:`saddle` (where PARDISO loads), not from
+:func:`condense`: the condensation's dense S (|C|²), its Cholesky (|C|³/3) and the triangular solve and product that
+form W from it (|C|² m + |C| m²) cost 0.6 s of the 2-D pair's 2 s contact phase at 10⁵ DOFs (|C| = 2566, m = 1434),
+and 2.4× the linear solve's memory (docs/performance.md, "W from K's factors with B's rows appended"). Below, they
+cost little, and a condensation serves the answer's derivatives as well (drivers/linearized.py)."""
+
+
+class Saddle(Factorization):
+    """K factored with the contact rows B appended, A = [K Bᵀ; B 0], by PARDISO (symmetric indefinite, B's rows
+    ordered last, K's block pivoted as K alone): A's Schur complement onto B's rows is −W, formed by the sparse
+    factorization itself. Its forward, diagonal and backward phases with B's part set to zero solve with K.
+
+    Attributes
+    ----------
+    B : the rows factored; :meth:`schur` of other rows factors A again with them.
+    """
+
+    backend = "pardiso"
+
+    def __init__(self, K: sp.spmatrix, B: sp.spmatrix):
+        self._K, self.timings = sp.csr_matrix(K), {}
+        self._factor(B)
+        _check_definite(self._K, self.solve)
+
+    def _factor(self, B: sp.spmatrix) -> None:
+        start = time.perf_counter()
+        self.B, self._factors = sp.csr_matrix(B), None  # the former factors freed first
+        n, m = self._K.shape[0], self.B.shape[0]
+        zeros = sp.csr_matrix((np.zeros(m), np.arange(m), np.arange(m + 1)), shape=(m, m))  # stored: PARDISO's rule
+        A = sp.bmat([[sp.triu(self._K), self.B.T], [None, zeros]], format="csr")
+        self._factors = _pardiso_factors(A, schur=np.arange(n, n + m), mtype=_pardiso().SADDLE)
+        W, self._factors.S = self._factors.S, None
+        W *= -0.5
+        W += W.T  # symmetrized in place: −(S + Sᵀ) / 2
+        self._W = W
+        self.timings["factorization"] = time.perf_counter() - start
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        b = np.asarray(b, dtype=float)
+        n = self._K.shape[0]
+        y = self._factors.diagonal(self._factors.forward(np.concatenate([b, np.zeros((self.B.shape[0],) + b.shape[1:])])))
+        y[n:] = 0.0
+        return self._factors.backward(y)[:n]
+
+    def schur(self, B: sp.spmatrix) -> np.ndarray:
+        B = sp.csr_matrix(B)
+        if B.shape != self.B.shape or (B != self.B).nnz:
+            self._factor(B)
+        return self._W
+
+
+def saddle(K: sp.spmatrix, B: sp.spmatrix) -> Saddle:
+    """K's factorization with B's rows appended (:class:`Saddle`): W = B K⁻¹ Bᵀ with no dense Schur complement of
+    K. Needs PARDISO.
+
+    Raises
+    ------
+    SceneError
+        field "dirichlet" if K is (numerically) singular.
+    """
+    if _pardiso() is None:
+        raise ImportError("saddle needs pypardiso (pip install pypardiso); condense(K, C) serves without it")
+    return Saddle(K, B)
+
+
+def dual_factors(K: sp.spmatrix, C: np.ndarray, B: sp.spmatrix, dim: int = 2) -> Factorization:
+    """What the dense dual forms W = B K⁻¹ Bᵀ from: :func:`saddle` where B touches :data:`SADDLE_COLUMNS` DOFs or
+    more (``C``) and PARDISO loads, else :func:`condense` onto ``C``."""
+    if np.unique(C).size >= SADDLE_COLUMNS and _pardiso() is not None:
+        return saddle(K, B)
+    return condense(K, C, dim=dim)

@@ -1,4 +1,5 @@
-"""MKL PARDISO for SPD matrices through ctypes on the ``mkl_rt`` that pypardiso loads.
+"""MKL PARDISO for SPD matrices (and symmetric saddle-point matrices with an SPD leading block) through ctypes on
+the ``mkl_rt`` that pypardiso loads.
 
 pypardiso's ``PyPardisoSolver`` does not expose PARDISO's Schur complement (iparm[35]),
 and it copies the matrix and rebuilds 1-based indices at every solve; so only its
@@ -57,11 +58,11 @@ def _library() -> ctypes.CDLL:
 
 
 def _call(handle: tuple, phase: int, b: np.ndarray, x: np.ndarray, nrhs: int) -> int:
-    pt, iparm, n, data, ia, ja, perm = handle
+    pt, iparm, n, data, ia, ja, perm, mtype = handle
     error = _i32(0)
     _library().pardiso(
         pt.ctypes.data_as(_ptr(ctypes.c_int64)), ctypes.byref(_i32(1)), ctypes.byref(_i32(1)),
-        ctypes.byref(_i32(2)), ctypes.byref(_i32(phase)), ctypes.byref(_i32(n)),
+        ctypes.byref(_i32(mtype)), ctypes.byref(_i32(phase)), ctypes.byref(_i32(n)),
         data.ctypes.data_as(_ptr(ctypes.c_double)), ia.ctypes.data_as(_ptr(_i32)), ja.ctypes.data_as(_ptr(_i32)),
         perm.ctypes.data_as(_ptr(_i32)), ctypes.byref(_i32(nrhs)), iparm.ctypes.data_as(_ptr(_i32)),
         ctypes.byref(_i32(0)), b.ctypes.data_as(_ptr(ctypes.c_double)), x.ctypes.data_as(_ptr(ctypes.c_double)),
@@ -84,38 +85,54 @@ def _release(handle: tuple) -> None:
     _call(handle, -1, empty, empty, 1)
 
 
+SADDLE = -2
+"""PARDISO's matrix type for a symmetric indefinite matrix (real SPD: 2)."""
+
+PERTURBATION = 20
+"""iparm[9] for :data:`SADDLE`: only pivots under 10⁻²⁰ ‖A‖ are perturbed. PARDISO's default, 10⁻⁸, would perturb
+those of a stiff but regular K; a singular K keeps its rounding-sized pivot, which the caller's definiteness check
+sees (factorization._check_definite). The Schur block's own factorization, which PARDISO also makes, perturbs
+one pivot per null direction of a singular W (more dual rows than DOFs they touch): harmless, its factors are not
+used."""
+
+
 class Pardiso:
-    """PARDISO factors (mtype 2: real SPD, upper triangle, 0-based) of K.
+    """PARDISO factors (upper triangle, 0-based) of K: real SPD (mtype 2), or symmetric indefinite (``mtype`` =
+    :data:`SADDLE`) for a saddle-point matrix whose block outside ``schur`` is SPD: that block is factored without
+    scaling, matching or perturbation beyond :data:`PERTURBATION`, as K alone would be.
 
     Parameters
     ----------
-    K : sparse symmetric positive definite matrix.
+    K : sparse symmetric matrix, positive definite (mtype 2) or with an SPD leading block (:data:`SADDLE`); with
+        :data:`SADDLE` every diagonal entry must be stored, zeros included.
     schur : indices C. If given, PARDISO orders C last, returns the dense Schur
         complement of K onto C as :attr:`S` and keeps the interior factors
-        (iparm[35] = 2) for the forward and backward phases 331 and 333.
+        (iparm[35] = 2) for the forward, diagonal and backward phases 331, 332 and 333.
 
     Raises
     ------
     PardisoError
-        ``singular`` for a zero pivot.
+        ``singular`` for a zero pivot (a perturbed one with :data:`SADDLE`).
     """
 
-    def __init__(self, K: sp.spmatrix, schur: np.ndarray | None = None):
+    def __init__(self, K: sp.spmatrix, schur: np.ndarray | None = None, mtype: int = 2):
         U = sp.triu(K, format="csr")
         U.sort_indices()
         n = K.shape[0]
         pt, iparm, perm = np.zeros(64, np.int64), np.zeros(64, np.int32), np.zeros(n, np.int32)
-        _library().pardisoinit(pt.ctypes.data_as(_ptr(ctypes.c_int64)), ctypes.byref(_i32(2)),
+        _library().pardisoinit(pt.ctypes.data_as(_ptr(ctypes.c_int64)), ctypes.byref(_i32(mtype)),
                                iparm.ctypes.data_as(_ptr(_i32)))
         iparm[7] = 0  # pardisoinit asks for 2 refinement steps per solve: 3× the cost, 100× for partial solves
         iparm[34] = 1  # 0-based ia/ja
+        if mtype == SADDLE:
+            iparm[9], iparm[10], iparm[12] = PERTURBATION, 0, 0
         if schur is not None:
             perm[schur] = 1
             iparm[35] = 2
         self.n = n
         # PARDISO keeps pointers to these arrays, and the finalizer frees its memory (phase -1).
         self._handle = (pt, iparm, n, np.ascontiguousarray(U.data, dtype=float), U.indptr.astype(np.int32),
-                        U.indices.astype(np.int32), perm)
+                        U.indices.astype(np.int32), perm, mtype)
         weakref.finalize(self, _release, self._handle)
         self._cache: dict = {}  # a term's position -> (its pattern's fingerprint, its places): see refactorize
         S = np.zeros((len(schur), len(schur))) if schur is not None else np.zeros(1)
@@ -198,7 +215,7 @@ class Pardiso:
         row = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), np.diff(K.indptr[rows.start:rows.stop + 1]))
         upper = self._upper(K, rows)
         wanted = row[upper] * self.n + K.indices[start:stop][upper]
-        _, _, n, _, indptr, indices, _ = self._handle
+        _, _, n, _, indptr, indices, _, _ = self._handle
         first, last = indptr[rows.start], indptr[rows.stop]
         keys = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), np.diff(indptr[rows.start:rows.stop + 1]))
         keys = keys * n + indices[first:last]
@@ -214,6 +231,11 @@ class Pardiso:
     def forward(self, b: np.ndarray) -> np.ndarray:
         """With ``schur``, phase 331: y_I = L_II⁻¹ b_I and y_C = b_C − K_CI K_II⁻¹ b_I (the condensed load)."""
         return self._phase(331, b)
+
+    def diagonal(self, y: np.ndarray) -> np.ndarray:
+        """With ``schur`` and :data:`SADDLE`, phase 332: the diagonal of the LDLᵀ factors applied between
+        :meth:`forward` and :meth:`backward`."""
+        return self._phase(332, y)
 
     def backward(self, y: np.ndarray) -> np.ndarray:
         """With ``schur``, phase 333: x_C = y_C and x_I = L_IIᵀ⁻¹(y_I − L_CIᵀ y_C); from y = forward(f)

@@ -58,7 +58,7 @@ def dual(
     count = friction.count if friction is not None else 0
     tangential = count * friction.dim if friction is not None else 0  # λ_T unknowns
     extra = count if epsilon is not None else 0
-    B = sp.vstack([C @ contact.N] + ([-friction.R] if friction is not None else [])).tocsr()
+    B = contact_rows(contact, C, friction)
     c = np.concatenate([C @ contact.normal_offset - contact.weighted_gap(C)] + ([-friction.offset] if count else []))
     Kf = factorization.solve(f)
     size = m + tangential + extra
@@ -121,6 +121,11 @@ def dual(
         return {"b": updated}
 
     return program, recover, bound_update
+
+
+def contact_rows(contact: ContactTrace, C: sp.spmatrix, friction: FrictionPoints | None) -> sp.csr_matrix:
+    """B: the dual's rows over the free DOFs, the weighted normal rows C N, then the friction rows −R."""
+    return sp.vstack([C @ contact.N] + ([-friction.R] if friction is not None else [])).tocsr()
 
 
 def dense_csc(W: np.ndarray) -> sp.csc_matrix:
