@@ -26,10 +26,10 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
 
 Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
 way; after a point far from v its systems are damped (FAR, DAMPING: a face with a near-singular system), and a solve
-from no start with P an operator or bounds alone takes the empty face's first (FIRST_FORCING), which (a) or (b) judges
-as any other. With fixed radii it is Newton's point on a face grown until the point is feasible (GROW): the face the
-natural map holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends,
-and a step solves at most GROW + 1 Newton systems.
+from no start with P an operator takes the empty face's first (FIRST_FORCING), which (a) or (b) judges as any other.
+With fixed radii it is Newton's point on a face grown until the point is feasible (GROW): the face the natural map
+holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends, and a step
+solves at most GROW + 1 Newton systems.
 
 All points lie in {f ≤ f(v₀)}, so between two steps (a) the steps (b) with ‖p(v) − v‖_{C⁻¹} > ε number at most
 (f(v₀) − f*) / (σ ε²): the method stops for any tol > 0 after a bounded number of steps, and without a tol the
@@ -116,13 +116,13 @@ d_j's round-off → 3 / 30; 10⁵ 12–14 → 2 / 20). Solved to FORCING (0.1 ×
 ‖c q‖ = 10³ ‖v‖) the empty face's point carried the same long-wave error and the path was as long (17 steps at
 5·10⁴), and FIRST_FORCING on every step 21 (docs/performance.md, "The clamped strip's Newton path"). The point is a
 trial that the step rules judge ("Convergence"): where the answer's face is not empty it costs one step's systems
-(the pairs of the bench's family at 2·10⁴ DOFs, 2-D and 3-D: 6 → 7 steps). Where P is a matrix only for bounds alone
-(Signorini): the pair's dense Tresca dual at 3·10⁴ DOFs grew 23 faces against 12 so, while the dense Signorini duals
-of the 2-D family at 2·10⁴ DOFs took 1–2 Newton steps against 1–24 (clamped strip 100 : 1: 24, its face read at v
-swung as the matrix-free path's did). The empty face's grown faces stop at GROWN_FORCING alone, not at the step's
-target: that target is relative to ‖c q‖, 10³ ‖v‖ on the clamped strip 400 : 1, where it stopped them after 0–1 CG
-iterations and the grown point missed the opening zone's last node (5·10⁵ DOFs, Signorini: 3 Newton steps / 54
-products → 2 / 42; docs/performance.md, "Signorini on the clamped strip: the opening zone in one step")."""
+(the pairs of the bench's family at 2·10⁴ DOFs, 2-D and 3-D: 6 → 7 steps). Not where P is a matrix: its systems are
+solved directly, and the pair's dense Tresca dual at 3·10⁴ DOFs grew 23 faces against 12 so; its dense Signorini dual
+at 10⁵ DOFs 11 against 2 (CPU 0.15 → 0.26 s), though the clamped strip 100 : 1's at 2·10⁴ then took 2 Newton steps
+against 9. The empty face's grown faces stop at GROWN_FORCING alone, not at the step's target: that target is
+relative to ‖c q‖, 10³ ‖v‖ on the clamped strip 400 : 1, where it stopped them after 0–1 CG iterations and the grown
+point missed the opening zone's last node (5·10⁵ DOFs, Signorini: 3 Newton steps / 54 products → 2 / 42;
+docs/performance.md, "Signorini on the clamped strip: the opening zone in one step")."""
 GROW = 10
 """Times Newton's face may grow per step where radii are fixed: the sets its point leaves are held too and the
 point solved for again, until it leaves none (a feasible point; :func:`_grown`). Tresca's slip zone was otherwise
@@ -134,8 +134,9 @@ decided. Matrix-free (Newton steps / products with P, before → now): tall 2-D 
 an opening zone grows as a front, a few nodes a Newton point (the clamped strip 400 : 1, matrix-free, from the empty
 face: 5 / 6 / 6 Newton steps at 10⁵ / 2·10⁵ / 5·10⁵ DOFs, 7 at 10⁶, each a step with its residual and segment), and a
 grown face is one CG solve of 1–2 iterations (the bounds' preconditioner is one factorization per session): 2 / 2 / 2
-steps, 56 / 81 / 76 → 37 / 40 / 42 products. Before the empty face first, grown faces on that strip's swinging path
-cost more than they saved (385 products against 54)."""
+steps, 56 / 81 / 76 → 37 / 40 / 42 products. Dense W (the 2-D family at 2·10⁴ DOFs, Newton steps): the pair 10 → 2,
+the punch 4 → 1, clamped strips 20 / 100 : 1 5 / 24 → 3 / 9, at 10⁵ the pair 5 → 3, no more CPU. Before the empty
+face first, grown faces on that strip's swinging path cost more than they saved (385 products against 54)."""
 GROW_MOVING = 3
 """Times the face may grow where radii move (:func:`coupled`), and only after Newton's point was refused (its natural
 residual not below the step's): a node that leaves its interval at Newton's point made its projection raise the
@@ -517,7 +518,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             break
         if steps == max_iter:
             break
-        empty = steps == 0 and start is None and sets.coupling is None and (matrix is None or not sets.balls.size)
+        empty = steps == 0 and start is None and sets.coupling is None and matrix is None  # see FIRST_FORCING
         target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
         target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
         newton, iterations, reach = newton_point(v, np.zeros_like(y) if empty else y, target, damping, empty)
