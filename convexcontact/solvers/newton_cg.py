@@ -27,9 +27,9 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
 Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
 way; after a point far from v its systems are damped (FAR, DAMPING: a face with a near-singular system), and a solve
 from no start with P an operator takes the empty face's first (FIRST_FORCING), which (a) or (b) judges as any other.
-With balls (friction) it is Newton's point on a face grown until the point is feasible (GROW): the face the natural
-map holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends,
-and a step solves at most GROW + 1 Newton systems.
+With fixed radii it is Newton's point on a face grown until the point is feasible (GROW): the face the natural map
+holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends, and a step
+solves at most GROW + 1 Newton systems.
 
 All points lie in {f ≤ f(v₀)}, so between two steps (a) the steps (b) with ‖p(v) − v‖_{C⁻¹} > ε number at most
 (f(v₀) − f*) / (σ ε²): the method stops for any tol > 0 after a bounded number of steps, and without a tol the
@@ -117,16 +117,26 @@ d_j's round-off → 3 / 30; 10⁵ 12–14 → 2 / 20). Solved to FORCING (0.1 ×
 5·10⁴), and FIRST_FORCING on every step 21 (docs/performance.md, "The clamped strip's Newton path"). The point is a
 trial that the step rules judge ("Convergence"): where the answer's face is not empty it costs one step's systems
 (the pairs of the bench's family at 2·10⁴ DOFs, 2-D and 3-D: 6 → 7 steps). Not where P is a matrix: its systems are
-solved directly, and the pair's dense Tresca dual at 3·10⁴ DOFs grew 23 faces against 12 so."""
+solved directly, and the pair's dense Tresca dual at 3·10⁴ DOFs grew 23 faces against 12 so; its dense Signorini dual
+at 10⁵ DOFs 11 against 2 (CPU 0.15 → 0.26 s), though the clamped strip 100 : 1's at 2·10⁴ then took 2 Newton steps
+against 9. The empty face's grown faces stop at GROWN_FORCING alone, not at the step's target: that target is
+relative to ‖c q‖, 10³ ‖v‖ on the clamped strip 400 : 1, where it stopped them after 0–1 CG iterations and the grown
+point missed the opening zone's last node (5·10⁵ DOFs, Signorini: 3 Newton steps / 54 products → 2 / 42;
+docs/performance.md, "Signorini on the clamped strip: the opening zone in one step")."""
 GROW = 10
-"""Times Newton's face may grow per step where the program has balls: the sets its point leaves are held too and the
+"""Times Newton's face may grow per step where radii are fixed: the sets its point leaves are held too and the
 point solved for again, until it leaves none (a feasible point; :func:`_grown`). Tresca's slip zone was otherwise
 found a few nodes a step: Newton's point on too small a face overshoots the intervals of the nodes about to slip, its
 projection raises f, and the least f on the segment to it stops short of their bounds, where the next step's face is
 decided. Matrix-free (Newton steps / products with P, before → now): tall 2-D block 1 : 4 at 2·10⁴ DOFs 75 / 720 →
 5 / 118 (23 faces grown), at 10⁵ failed after 100 → 5 / 97; the two-body pair at 3·10⁴ DOFs 30 / 412 → 4 / 150, at
-10⁵ 47 / 1147 → 7 / 444; the dense W of the tall block 95 → 4 (docs/performance.md). Not for bounds alone: an opening
-zone grows as a front, a few nodes a solve (clamped strip 400 : 1, Signorini: 385 products against 54)."""
+10⁵ 47 / 1147 → 7 / 444; the dense W of the tall block 95 → 4 (docs/performance.md). Bounds alone (Signorini) too:
+an opening zone grows as a front, a few nodes a Newton point (the clamped strip 400 : 1, matrix-free, from the empty
+face: 5 / 6 / 6 Newton steps at 10⁵ / 2·10⁵ / 5·10⁵ DOFs, 7 at 10⁶, each a step with its residual and segment), and a
+grown face is one CG solve of 1–2 iterations (the bounds' preconditioner is one factorization per session): 2 / 2 / 2
+steps, 56 / 81 / 76 → 37 / 40 / 42 products. Dense W (the 2-D family at 2·10⁴ DOFs, Newton steps): the pair 10 → 2,
+the punch 4 → 1, clamped strips 20 / 100 : 1 5 / 24 → 3 / 9, at 10⁵ the pair 5 → 3, no more CPU. Before the empty
+face first, grown faces on that strip's swinging path cost more than they saved (385 products against 54)."""
 GROW_MOVING = 3
 """Times the face may grow where radii move (:func:`coupled`), and only after Newton's point was refused (its natural
 residual not below the step's): a node that leaves its interval at Newton's point made its projection raise the
@@ -434,16 +444,16 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         p = _project(v - c * g, sets)
         return least_on_segment(v, g, p, move(v, g, p)[2])
 
-    def newton_point(v, y, target, damping):
+    def newton_point(v, y, target, damping, empty=False):
         """Newton's point from v on the face y holds, the CG iterations it took and how far the first solve went
-        (‖point − v‖∞, see FAR); with balls (friction) and fixed radii the face grown by the sets that point leaves
-        (:func:`grown_point`)."""
+        (‖point − v‖∞, see FAR); with fixed radii the face grown by the sets that point leaves (:func:`grown_point`),
+        whose solves stop at GROWN_FORCING alone where y is the ``empty`` face (see FIRST_FORCING)."""
         face = {}  # the dense Cholesky factor of this step's first system, for its grown faces (_direct)
         newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix, damping,
                                    proximal=proximal, face=face)
         reach = np.abs(newton - v).max(initial=0.0)
         if sets.coupling is None:
-            newton, more = grown_point(v, y, newton, target, damping, face)
+            newton, more = grown_point(v, y, newton, 0.0 if empty else target, damping, face)
             iterations += more
         return newton, iterations, reach
 
@@ -452,7 +462,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         ``limit`` times, GROW by default; see GROW), each solve started from the last point, projected; the CG
         iterations it took."""
         iterations, at = 0, v
-        for _ in range((GROW if limit is None else limit) if sets.balls.size else 0):
+        for _ in range(GROW if limit is None else limit):
             y = _grown(y, newton, sets, sets.radii(at))
             if y is None:
                 break
@@ -511,7 +521,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         empty = steps == 0 and start is None and sets.coupling is None and matrix is None  # see FIRST_FORCING
         target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
         target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
-        newton, iterations, reach = newton_point(v, np.zeros_like(y) if empty else y, target, damping)
+        newton, iterations, reach = newton_point(v, np.zeros_like(y) if empty else y, target, damping, empty)
         cg_total += iterations
         best = min(best, residual)
         damping = _damped(damping, reach > FAR * size, residual)
