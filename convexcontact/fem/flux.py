@@ -360,6 +360,22 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     sigma_h = elastic_stress(fem, u_components, gradients)
     body_force = scaled_body_force(fem)
     opposite = opposite_facets(mesh)
+    x = rt0_fluxes(mesh, xy, det, gradients, sigma_h, body_force, opposite, facet_moments, held)
+    defect = equilibrium_defect(x, area, body_force)
+    vertex_stress = vertex_values(x, xy, area)
+    # freed before the correction allocates its own, as the chains were (rt0_fluxes): the memory the estimate
+    # holds at once is what the system maps in afresh, page by page, on every call (docs/estimate.md)
+    del x, xy, det
+    vertex_stress = flux_correction.corrected(vertex_stress, sigma_h, gradients, area, fem.lame, mesh, opposite, held, KORN)
+    symmetric, skew = cell_norms(vertex_stress, sigma_h, lam, mu, area)
+    return Equilibrated(vertex_stress, symmetric, skew, defect)
+
+
+def rt0_fluxes(mesh, xy, det, gradients, sigma_h, body_force, opposite, facet_moments, held) -> np.ndarray:
+    """The outward fluxes of σ̂ row i through the facet opposite k of each cell (i, k, cells): the patch problems
+    of :func:`equilibrate` in chain order (:func:`patch_chains`, :func:`row_fluxes`), the two rows side by side.
+    ``xy``, ``det``, ``gradients``: :func:`triangles`; ``sigma_h`` (cells, 2, 2); the rest :func:`equilibrate`'s."""
+    area = 0.5 * np.abs(det)
     chains = patch_chains(mesh, xy, det, opposite)
     weights = circulation_weights(chains, xy, det)
     # w_a's outward flux through the facet opposite k is −|T| σ_h,i · ∇λ_k at both vertices a of the facet
@@ -373,14 +389,9 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     rhs = -target - (area / 3.0) * body_force[:, None, None]
     first = boundary_fluxes(mesh, facet_moments, held, chains.first_facet, chains.vertex)
     last = boundary_fluxes(mesh, facet_moments, held, chains.last_facet, chains.vertex)
-    # the outward flux of σ̂ row i through the facet opposite k (i, k, cells); the two rows side by side
-    x = np.stack(flux_correction.parallel(lambda i: row_fluxes(chains, weights, rhs[i], target[i], (first[0][i], first[1][i]),
-                                                               (last[0][i], last[1][i])), range(2)))
-    defect = equilibrium_defect(x, area, body_force)
-    vertex_stress = vertex_values(x, xy, area)
-    vertex_stress = flux_correction.corrected(vertex_stress, sigma_h, gradients, area, fem.lame, mesh, opposite, held, KORN)
-    symmetric, skew = cell_norms(vertex_stress, sigma_h, lam, mu, area)
-    return Equilibrated(vertex_stress, symmetric, skew, defect)
+    return np.stack(flux_correction.parallel(
+        lambda i: row_fluxes(chains, weights, rhs[i], target[i], (first[0][i], first[1][i]), (last[0][i], last[1][i])),
+        range(2)))
 
 
 def equilibrium_defect(flux: np.ndarray, volume: np.ndarray, body_force: np.ndarray) -> float:
