@@ -126,15 +126,18 @@ class StreamOperator:
     def __init__(self, mesh, opposite, gradients, weight, lame, korn, dtype):
         self.nfacets, self.nvertices = mesh.nfacets, mesh.nvertices
         # (3, cells) in the platform's index type: bincount and take would convert int32 on every call
-        self.facets, self.vertices = opposite.T.astype(np.intp), mesh.t.astype(np.intp)
+        self.facets = np.ascontiguousarray(opposite.T, dtype=np.intp)
+        self.vertices = np.ascontiguousarray(mesh.t, dtype=np.intp)
         self.curls = curls(gradients, slice(None), dtype)
         lam, mu = lame
         kappa, w, gamma = lam / (2 * mu + 2 * lam), weight / (2 * mu), korn**2 - 1  # w = |T|/3 · 1/2μ
         # |T|/3 · Q per cell: diagonal (1 − κ), trace coupling −κ, shear (1 + γ)/2, skew coupling (1 − γ)/2
         normal, trace, shear, skew = w * (1 - kappa), -w * kappa, 0.5 * w * (1 + gamma), 0.5 * w * (1 - gamma)
         # (rows, x, 1, cells): the weight of X_ij itself and of X_ji' in (Q X)_ij
-        self.own = np.stack([[normal, shear], [shear, normal]])[:, :, None].astype(dtype)
-        self.cross = np.stack([[trace, skew], [skew, trace]])[:, :, None].astype(dtype)
+        self.own, self.cross = np.empty((2, 2, 2, 1, w.size), dtype)
+        for (i, j), own, cross in (((0, 0), normal, trace), ((0, 1), shear, skew), ((1, 0), shear, skew),
+                                   ((1, 1), normal, trace)):
+            self.own[i, j, 0], self.cross[i, j, 0] = own, cross
         # the cells' loads, allocated once (a fresh array of this size costs its page faults again on every
         # product) in float64, which bincount sums without a converted copy
         self.loads = np.empty((2, 2, *gradients.shape[1:]))  # (bubbles or hats, rows, k, cells)
