@@ -578,8 +578,11 @@ def bound(fem: FEModel, u: np.ndarray, state: ContactState, equilibrate) -> Flux
     held = np.zeros((fem.dim, mesh.nfacets), dtype=bool)
     boundary = mesh.boundary_facets()
     held[:, boundary] = held_components(fem, boundary)
-    stress = equilibrate(fem, components(fem, u), facet_moments(fem, lumped, on), held)
-    per_facet = contact_terms(fem, state, lumped)
+    moments = facet_moments(fem, lumped, on)
+    # the contact terms and ‖u_h‖²_E on a second thread while this one reconstructs the stress
+    stress, (per_facet, energy) = flux_correction.parallel(lambda task: task(), [
+        lambda: equilibrate(fem, components(fem, u), moments, held),
+        lambda: (contact_terms(fem, state, lumped), float(u @ (fem.K_full @ u)))])
     cells = mesh.f2t[0, fem.contact.facets]
     parts = {"equilibrated": stress.symmetric, "asymmetry": (KORN**2 - 1) * stress.skew}
     for name, values in per_facet.items():
@@ -592,5 +595,5 @@ def bound(fem: FEModel, u: np.ndarray, state: ContactState, equilibrate) -> Flux
     # scaled to sum to η² (the VTU's and the residual estimate's convention): one factor for every cell, which
     # Dörfler marking does not see
     indicators = local * (eta**2 / total) if total > 0 else local
-    return FluxEstimate(indicators, {name: float(parts[name].sum()) for name in TERMS},
-                        float(u @ (fem.K_full @ u)), float(eta), stress.defect)
+    return FluxEstimate(indicators, {name: float(parts[name].sum()) for name in TERMS}, energy, float(eta),
+                        stress.defect)
