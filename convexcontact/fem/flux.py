@@ -391,7 +391,7 @@ def rt0_fluxes(mesh, xy, det, gradients, sigma_h, body_force, opposite, facet_mo
     last = boundary_fluxes(mesh, facet_moments, held, chains.last_facet, chains.vertex)
     return np.stack(flux_correction.parallel(
         lambda i: row_fluxes(chains, weights, rhs[i], target[i], (first[0][i], first[1][i]), (last[0][i], last[1][i])),
-        range(2)))
+        range(2), det.size))
 
 
 def equilibrium_defect(flux: np.ndarray, volume: np.ndarray, body_force: np.ndarray) -> float:
@@ -582,7 +582,7 @@ def bound(fem: FEModel, u: np.ndarray, state: ContactState, equilibrate) -> Flux
     # the contact terms and ‖u_h‖²_E on a second thread while this one reconstructs the stress
     stress, (per_facet, energy) = flux_correction.parallel(lambda task: task(), [
         lambda: equilibrate(fem, components(fem, u), moments, held),
-        lambda: (contact_terms(fem, state, lumped), float(u @ (fem.K_full @ u)))])
+        lambda: (contact_terms(fem, state, lumped), float(u @ (fem.K_full @ u)))], mesh.nelements)
     cells = mesh.f2t[0, fem.contact.facets]
     parts = {"equilibrated": stress.symmetric, "asymmetry": (KORN**2 - 1) * stress.skew}
     for name, values in per_facet.items():

@@ -52,6 +52,10 @@ THREADS = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 
 its kernels (ufuncs, take, bincount, cumsum), so blocks of cells, and the two rows of the stress, run side by side.
 The work is split the same way whatever the count (each block, each row, computed alone): η does not depend on it."""
 
+SERIAL_BELOW = 16_384
+"""Cells below which :func:`parallel` stays on the calling thread: on small meshes the hand-off to a thread costs
+more than the work it shares (hertz_punch(nx=40), 3,200 cells, under load: 14 ms serial, 28 ms on two threads)."""
+
 _worker = threading.local()
 
 
@@ -62,13 +66,13 @@ def executor(workers: int) -> ThreadPoolExecutor:
                               initializer=lambda: setattr(_worker, "inside", True))
 
 
-def parallel(work, items) -> list:
+def parallel(work, items, cells: int) -> list:
     """[work(item) for item in items], the items in :data:`THREADS` contiguous runs, the first run on the calling
-    thread, the others on :func:`executor`'s; serially with one thread, or when called from a worker (no nested
-    waits on the pool)."""
+    thread, the others on :func:`executor`'s; serially with one thread, on meshes of fewer than
+    :data:`SERIAL_BELOW` ``cells``, or when called from a worker (no nested waits on the pool)."""
     items = list(items)
     threads = min(THREADS, len(items))
-    if threads <= 1 or getattr(_worker, "inside", False):
+    if threads <= 1 or cells < SERIAL_BELOW or getattr(_worker, "inside", False):
         return [work(item) for item in items]
     runs = np.array_split(np.arange(len(items)), threads)
     pool = executor(threads - 1)
@@ -89,7 +93,7 @@ def blocks(count: int, size: int | None = None):
 def for_blocks(count: int, work, size: int | None = None) -> None:
     """work(cells) for each slice of :func:`blocks` (``size`` None: :data:`BLOCK`), shared out by :func:`parallel`;
     each block writes its own cells of the outputs."""
-    parallel(work, blocks(count, size))
+    parallel(work, blocks(count, size), count)
 
 
 def admissible_stream_functions(mesh, held: np.ndarray) -> np.ndarray:
@@ -179,7 +183,7 @@ class StreamOperator:
             at, part = kinds[kind]
             out[i, part] = np.bincount(at.ravel(), self.loads[kind, i].ravel(), out[i, part].size)
 
-        parallel(add, [(0, 0), (0, 1), (1, 0), (1, 1)])
+        parallel(add, [(0, 0), (0, 1), (1, 0), (1, 1)], self.loads.shape[-1])
         return out
 
     def gradient(self, misfit) -> np.ndarray:
