@@ -357,10 +357,9 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     lam, mu = fem.lame
     xy, det, gradients = triangles(mesh)
     area = 0.5 * np.abs(det)
-    sigma_h = elastic_stress(fem, u_components, gradients)
     body_force = scaled_body_force(fem)
     opposite = opposite_facets(mesh)
-    x = rt0_fluxes(mesh, xy, det, gradients, sigma_h, body_force, opposite, facet_moments, held)
+    sigma_h, x = rt0_fluxes(fem, u_components, xy, det, gradients, body_force, opposite, facet_moments, held)
     defect = equilibrium_defect(x, area, body_force)
     vertex_stress = vertex_values(x, xy, area)
     # freed before the correction allocates its own, as the chains were (rt0_fluxes): the memory the estimate
@@ -371,25 +370,35 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     return Equilibrated(vertex_stress, symmetric, skew, defect)
 
 
-def rt0_fluxes(mesh, xy, det, gradients, sigma_h, body_force, opposite, facet_moments, held) -> np.ndarray:
-    """The outward fluxes of σ̂ row i through the facet opposite k of each cell (i, k, cells): the patch problems
-    of :func:`equilibrate` in chain order (:func:`patch_chains`, :func:`row_fluxes`), the two rows side by side.
-    ``xy``, ``det``, ``gradients``: :func:`triangles`; ``sigma_h`` (cells, 2, 2); the rest :func:`equilibrate`'s."""
+def rt0_fluxes(fem, u_components, xy, det, gradients, body_force, opposite, facet_moments, held):
+    """σ_h (cells, 2, 2) and the outward fluxes of σ̂ row i through the facet opposite k of each cell (i, k, cells):
+    the patch problems of :func:`equilibrate` in chain order (:func:`patch_chains`, :func:`row_fluxes`). The chain
+    order on this thread while σ_h and the patch data are computed on another (they do not depend on it), then the
+    two rows side by side. ``xy``, ``det``, ``gradients``: :func:`triangles`; the rest :func:`equilibrate`'s."""
+    mesh = fem.mesh
     area = 0.5 * np.abs(det)
-    chains = patch_chains(mesh, xy, det, opposite)
-    weights = circulation_weights(chains, xy, det)
-    # w_a's outward flux through the facet opposite k is −|T| σ_h,i · ∇λ_k at both vertices a of the facet
-    target = np.empty((2, *gradients.shape[1:]))  # (i, k, cells)
-    for i, row in enumerate(sigma_h.transpose(1, 2, 0)):
-        np.multiply(row[0], gradients[0], out=target[i])
-        target[i] += row[1] * gradients[1]
-    target *= -area
-    # the divergence constraint at corner k: the outward fluxes through its facets opposite k+1 and k+2 sum to
-    # ∫_T Π_0(ψ_a f − ∇ψ_a · σ_h) = w's (−target_k) less |T| f / 3
-    rhs = -target - (area / 3.0) * body_force[:, None, None]
+
+    def chain_order():
+        chains = patch_chains(mesh, xy, det, opposite)
+        return chains, circulation_weights(chains, xy, det)
+
+    def patch_data():
+        sigma_h = elastic_stress(fem, u_components, gradients)
+        # w_a's outward flux through the facet opposite k is −|T| σ_h,i · ∇λ_k at both vertices a of the facet
+        target = np.empty((2, *gradients.shape[1:]))  # (i, k, cells)
+        for i, row in enumerate(sigma_h.transpose(1, 2, 0)):
+            np.multiply(row[0], gradients[0], out=target[i])
+            target[i] += row[1] * gradients[1]
+        target *= -area
+        # the divergence constraint at corner k: the outward fluxes through its facets opposite k+1 and k+2 sum to
+        # ∫_T Π_0(ψ_a f − ∇ψ_a · σ_h) = w's (−target_k) less |T| f / 3
+        return sigma_h, target, -target - (area / 3.0) * body_force[:, None, None]
+
+    (chains, weights), (sigma_h, target, rhs) = flux_correction.parallel(lambda task: task(), [chain_order, patch_data],
+                                                                          det.size)
     first = boundary_fluxes(mesh, facet_moments, held, chains.first_facet, chains.vertex)
     last = boundary_fluxes(mesh, facet_moments, held, chains.last_facet, chains.vertex)
-    return np.stack(flux_correction.parallel(
+    return sigma_h, np.stack(flux_correction.parallel(
         lambda i: row_fluxes(chains, weights, rhs[i], target[i], (first[0][i], first[1][i]), (last[0][i], last[1][i])),
         range(2), det.size))
 
