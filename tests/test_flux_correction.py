@@ -4,6 +4,7 @@ constraint of σ̂ (that is the guarantee), lowers J, and sharpens the bound (do
 from __future__ import annotations
 
 import dataclasses
+import threading
 
 import numpy as np
 import pytest
@@ -159,3 +160,31 @@ def test_zero_data_give_a_zero_bound(punch):
     state = contact_state(punch)
     state = dataclasses.replace(state, forces=np.zeros_like(state.forces))
     assert 0.0 <= flux.flux_estimate(punch.fem, np.zeros_like(punch.displacement), state).eta < 1e-12
+
+
+def test_one_two_or_three_threads_give_the_same_bound_bit_for_bit(punch, monkeypatch):
+    """The cell-wise blocks, the sums onto facets and vertices and the two rows' chain sums shared out between
+    threads (:data:`flux_correction.THREADS`) give η and every indicator exactly as one thread does, with blocks of
+    7 cells (runs of blocks split at uneven counts); the work does run on the pool's threads when there are two
+    (the punch's small mesh shared out: ``SERIAL_BELOW`` 0), and not on a mesh below ``SERIAL_BELOW``."""
+    fem = punch.fem
+    u, state = punch.displacement / fem.scaling.displacement, contact_state(punch)
+    monkeypatch.setattr(flux, "BLOCK", 7)
+    monkeypatch.setattr(flux_correction, "BLOCK", 7)
+    monkeypatch.setattr(flux_correction, "SERIAL_BELOW", 0)
+    estimates, names = {}, {}
+    for threads in (1, 2, 3):
+        monkeypatch.setattr(flux_correction, "THREADS", threads)
+        estimates[threads] = flux.flux_estimate(fem, u, state)
+        names[threads] = set()
+        flux_correction.for_blocks(fem.mesh.nelements,
+                                   lambda cells, seen=names[threads]: seen.add(threading.current_thread().name))
+    for threads in (2, 3):
+        assert estimates[threads].eta == estimates[1].eta
+        np.testing.assert_array_equal(estimates[threads].indicators, estimates[1].indicators)
+    assert names[1] == {threading.current_thread().name}
+    assert len(names[2]) == 2 and len(names[3]) >= 2  # a worker idle again may take the next run
+    monkeypatch.setattr(flux_correction, "SERIAL_BELOW", fem.mesh.nelements + 1)  # a mesh below it: one thread
+    small = set()
+    flux_correction.for_blocks(fem.mesh.nelements, lambda cells: small.add(threading.current_thread().name))
+    assert small == names[1]

@@ -81,8 +81,9 @@ BLOCK = 16_384
 temporaries then stay in the processor's caches (2× faster at 10⁶ cells than whole arrays)."""
 
 
-def blocks(count: int):
-    return flux_correction.blocks(count, BLOCK)
+def for_blocks(count: int, work) -> None:
+    """work(cells) for the blocks of :data:`BLOCK` cells, shared out between threads (:func:`.flux_correction.parallel`)."""
+    flux_correction.for_blocks(count, work, BLOCK)
 
 
 def triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -106,14 +107,24 @@ def triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def opposite_facets(mesh) -> np.ndarray:
     """(cells, d + 1): the facet of each cell opposite its local vertex k (the one of its facets without that
-    vertex; found by search, whatever order a mesh numbers a cell's facets in; triangles and tetrahedra)."""
+    vertex; found whatever order a mesh numbers a cell's facets in; triangles and tetrahedra).
+
+    The vertex a facet misses is the cell's vertex sum less the facet's (integers: exact), then located among the
+    cell's vertices by d comparisons (a search of each facet's ends for each vertex cost 3× more: 30 ms at 10⁵
+    cells)."""
     t, facets, cell_facets = mesh.t, mesh.facets, mesh.t2f
+    cells = t.shape[1]
+    total = t.sum(axis=0, dtype=np.int64)
     out = np.empty_like(cell_facets)
+    flat = out.reshape(-1)
     for facet in cell_facets:
-        ends = facets[:, facet]
-        for k, vertex in enumerate(t):
-            away = (ends != vertex).all(axis=0)
-            out[k, away] = facet[away]
+        missing = total.copy()
+        for ends in facets:
+            missing -= np.take(ends, facet)
+        slot = np.arange(cells)  # the flat index k · cells + c of (k, c), k the missing vertex's local number
+        for k in range(1, t.shape[0]):
+            slot[t[k] == missing] += k * cells
+        flat[slot] = facet
     return out.T
 
 
@@ -291,7 +302,8 @@ def circulation_weights(chains: Chains, xy: np.ndarray, det: np.ndarray) -> Circ
     z_behind), g_ahead = e_k · c_{k+1} / 4|T|, g_behind = e_k · c_{k+2} / 4|T|, per corner."""
     ahead, behind = [1, 2, 0], [2, 0, 1]
     g_ahead, g_behind, curvature = np.empty((3, *xy.shape[1:]))
-    for cells in blocks(det.size):
+
+    def block(cells):
         corners = xy[..., cells]
         centred = corners - corners.mean(axis=1, keepdims=True)
         edge = corners[:, ahead] - corners[:, behind]
@@ -299,6 +311,8 @@ def circulation_weights(chains: Chains, xy: np.ndarray, det: np.ndarray) -> Circ
         g_ahead[:, cells] = (edge * centred[:, ahead]).sum(axis=0) * quarter
         g_behind[:, cells] = (edge * centred[:, behind]).sum(axis=0) * quarter
         curvature[:, cells] = (edge**2).sum(axis=0) * quarter
+
+    for_blocks(det.size, block)
     positive = det > 0
     return Circulation(np.add.reduceat(curvature.ravel()[chains.order], chains.starts),
                        np.where(positive, g_ahead, -g_behind).ravel()[chains.order],
@@ -343,29 +357,50 @@ def equilibrate(fem: FEModel, u_components: np.ndarray, facet_moments: np.ndarra
     lam, mu = fem.lame
     xy, det, gradients = triangles(mesh)
     area = 0.5 * np.abs(det)
-    sigma_h = elastic_stress(fem, u_components, gradients)
     body_force = scaled_body_force(fem)
     opposite = opposite_facets(mesh)
-    chains = patch_chains(mesh, xy, det, opposite)
-    weights = circulation_weights(chains, xy, det)
-    # w_a's outward flux through the facet opposite k is −|T| σ_h,i · ∇λ_k at both vertices a of the facet
-    target = np.empty((2, *gradients.shape[1:]))  # (i, k, cells)
-    for i, row in enumerate(sigma_h.transpose(1, 2, 0)):
-        np.multiply(row[0], gradients[0], out=target[i])
-        target[i] += row[1] * gradients[1]
-    target *= -area
-    # the divergence constraint at corner k: the outward fluxes through its facets opposite k+1 and k+2 sum to
-    # ∫_T Π_0(ψ_a f − ∇ψ_a · σ_h) = w's (−target_k) less |T| f / 3
-    rhs = -target - (area / 3.0) * body_force[:, None, None]
-    first = boundary_fluxes(mesh, facet_moments, held, chains.first_facet, chains.vertex)
-    last = boundary_fluxes(mesh, facet_moments, held, chains.last_facet, chains.vertex)
-    x = np.stack([row_fluxes(chains, weights, rhs[i], target[i], (first[0][i], first[1][i]), (last[0][i], last[1][i]))
-                  for i in range(2)])  # the outward flux of σ̂ row i through the facet opposite k (i, k, cells)
+    sigma_h, x = rt0_fluxes(fem, u_components, xy, det, gradients, body_force, opposite, facet_moments, held)
     defect = equilibrium_defect(x, area, body_force)
     vertex_stress = vertex_values(x, xy, area)
+    # freed before the correction allocates its own, as the chains were (rt0_fluxes): the memory the estimate
+    # holds at once is what the system maps in afresh, page by page, on every call (docs/estimate.md)
+    del x, xy, det
     vertex_stress = flux_correction.corrected(vertex_stress, sigma_h, gradients, area, fem.lame, mesh, opposite, held, KORN)
     symmetric, skew = cell_norms(vertex_stress, sigma_h, lam, mu, area)
     return Equilibrated(vertex_stress, symmetric, skew, defect)
+
+
+def rt0_fluxes(fem, u_components, xy, det, gradients, body_force, opposite, facet_moments, held):
+    """σ_h (cells, 2, 2) and the outward fluxes of σ̂ row i through the facet opposite k of each cell (i, k, cells):
+    the patch problems of :func:`equilibrate` in chain order (:func:`patch_chains`, :func:`row_fluxes`). The chain
+    order on this thread while σ_h and the patch data are computed on another (they do not depend on it), then the
+    two rows side by side. ``xy``, ``det``, ``gradients``: :func:`triangles`; the rest :func:`equilibrate`'s."""
+    mesh = fem.mesh
+    area = 0.5 * np.abs(det)
+
+    def chain_order():
+        chains = patch_chains(mesh, xy, det, opposite)
+        return chains, circulation_weights(chains, xy, det)
+
+    def patch_data():
+        sigma_h = elastic_stress(fem, u_components, gradients)
+        # w_a's outward flux through the facet opposite k is −|T| σ_h,i · ∇λ_k at both vertices a of the facet
+        target = np.empty((2, *gradients.shape[1:]))  # (i, k, cells)
+        for i, row in enumerate(sigma_h.transpose(1, 2, 0)):
+            np.multiply(row[0], gradients[0], out=target[i])
+            target[i] += row[1] * gradients[1]
+        target *= -area
+        # the divergence constraint at corner k: the outward fluxes through its facets opposite k+1 and k+2 sum to
+        # ∫_T Π_0(ψ_a f − ∇ψ_a · σ_h) = w's (−target_k) less |T| f / 3
+        return sigma_h, target, -target - (area / 3.0) * body_force[:, None, None]
+
+    (chains, weights), (sigma_h, target, rhs) = flux_correction.parallel(lambda task: task(), [chain_order, patch_data],
+                                                                          det.size)
+    first = boundary_fluxes(mesh, facet_moments, held, chains.first_facet, chains.vertex)
+    last = boundary_fluxes(mesh, facet_moments, held, chains.last_facet, chains.vertex)
+    return sigma_h, np.stack(flux_correction.parallel(
+        lambda i: row_fluxes(chains, weights, rhs[i], target[i], (first[0][i], first[1][i]), (last[0][i], last[1][i])),
+        range(2), det.size))
 
 
 def equilibrium_defect(flux: np.ndarray, volume: np.ndarray, body_force: np.ndarray) -> float:
@@ -381,7 +416,8 @@ def vertex_values(flux: np.ndarray, xy: np.ndarray, volume: np.ndarray) -> np.nd
     fluxes F_k through the facets opposite k (i, k, cells): Σ_k F_k (p_m − p_k) / d|T| (triangles, tetrahedra)."""
     d = xy.shape[0]
     out = np.empty((d, d, *xy.shape[1:]))
-    for cells in blocks(volume.size):
+
+    def block(cells):
         scale = 1.0 / (d * volume[cells])
         for i in range(d):
             fluxes = flux[i, :, cells]
@@ -391,6 +427,8 @@ def vertex_values(flux: np.ndarray, xy: np.ndarray, volume: np.ndarray) -> np.nd
                 np.multiply(corners, total, out=out[i, x, :, cells])
                 out[i, x, :, cells] -= (fluxes * corners).sum(axis=0)
                 out[i, x, :, cells] *= scale
+
+    for_blocks(volume.size, block)
     return out.transpose(0, 1, 3, 2)
 
 
@@ -400,8 +438,11 @@ def cell_norms(vertex_stress, sigma_h, lam, mu, volume):
     vertices)."""
     at = vertex_stress.transpose(0, 1, 3, 2)  # (i, x, m, cells)
     out = np.empty((2, volume.size))
-    for cells in blocks(volume.size):
+
+    def block(cells):
         out[:, cells] = block_norms(at[..., cells], sigma_h[cells], lam[cells], mu[cells], volume[cells])
+
+    for_blocks(volume.size, block)
     return out[0], out[1]
 
 
@@ -546,8 +587,11 @@ def bound(fem: FEModel, u: np.ndarray, state: ContactState, equilibrate) -> Flux
     held = np.zeros((fem.dim, mesh.nfacets), dtype=bool)
     boundary = mesh.boundary_facets()
     held[:, boundary] = held_components(fem, boundary)
-    stress = equilibrate(fem, components(fem, u), facet_moments(fem, lumped, on), held)
-    per_facet = contact_terms(fem, state, lumped)
+    moments = facet_moments(fem, lumped, on)
+    # the contact terms and ‖u_h‖²_E on a second thread while this one reconstructs the stress
+    stress, (per_facet, energy) = flux_correction.parallel(lambda task: task(), [
+        lambda: equilibrate(fem, components(fem, u), moments, held),
+        lambda: (contact_terms(fem, state, lumped), float(u @ (fem.K_full @ u)))], mesh.nelements)
     cells = mesh.f2t[0, fem.contact.facets]
     parts = {"equilibrated": stress.symmetric, "asymmetry": (KORN**2 - 1) * stress.skew}
     for name, values in per_facet.items():
@@ -560,5 +604,5 @@ def bound(fem: FEModel, u: np.ndarray, state: ContactState, equilibrate) -> Flux
     # scaled to sum to η² (the VTU's and the residual estimate's convention): one factor for every cell, which
     # Dörfler marking does not see
     indicators = local * (eta**2 / total) if total > 0 else local
-    return FluxEstimate(indicators, {name: float(parts[name].sum()) for name in TERMS},
-                        float(u @ (fem.K_full @ u)), float(eta), stress.defect)
+    return FluxEstimate(indicators, {name: float(parts[name].sum()) for name in TERMS}, energy, float(eta),
+                        stress.defect)

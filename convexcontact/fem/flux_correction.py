@@ -25,6 +25,11 @@ by hand and applied matrix-free (assembling the P2 matrix, with scikit-fem or by
 
 from __future__ import annotations
 
+import functools
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 ITERATIONS = 5
@@ -42,11 +47,53 @@ BLOCK = 8192
 product at 10⁵ cells: 10.8 ms of CPU, against 11.6 with 4,096, 12.6 with 16,384 and 17.1 with 2,048)."""
 
 
+THREADS = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+"""Threads of the cell-wise arithmetic (the cores this process may run on): numpy releases the interpreter's lock in
+its kernels (ufuncs, take, bincount, cumsum), so blocks of cells, and the two rows of the stress, run side by side.
+The work is split the same way whatever the count (each block, each row, computed alone): η does not depend on it."""
+
+SERIAL_BELOW = 16_384
+"""Cells below which :func:`parallel` stays on the calling thread: on small meshes the hand-off to a thread costs
+more than the work it shares (hertz_punch(nx=40), 3,200 cells, under load: 14 ms serial, 28 ms on two threads)."""
+
+_worker = threading.local()
+
+
+@functools.cache
+def executor(workers: int) -> ThreadPoolExecutor:
+    """The pool of ``workers`` threads that :func:`parallel` shares out to (made once per count)."""
+    return ThreadPoolExecutor(workers, thread_name_prefix="convexcontact-cells",
+                              initializer=lambda: setattr(_worker, "inside", True))
+
+
+def parallel(work, items, cells: int) -> list:
+    """[work(item) for item in items], the items in :data:`THREADS` contiguous runs, the first run on the calling
+    thread, the others on :func:`executor`'s; serially with one thread, on meshes of fewer than
+    :data:`SERIAL_BELOW` ``cells``, or when called from a worker (no nested waits on the pool)."""
+    items = list(items)
+    threads = min(THREADS, len(items))
+    if threads <= 1 or cells < SERIAL_BELOW or getattr(_worker, "inside", False):
+        return [work(item) for item in items]
+    runs = np.array_split(np.arange(len(items)), threads)
+    pool = executor(threads - 1)
+    futures = [pool.submit(lambda run=run: [work(items[j]) for j in run]) for run in runs[1:]]
+    out = [work(items[j]) for j in runs[0]]
+    for future in futures:
+        out.extend(future.result())
+    return out
+
+
 def blocks(count: int, size: int | None = None):
     """Slices of ``size`` cells (None: :data:`BLOCK`) covering ``count`` cells."""
     size = BLOCK if size is None else size
     for start in range(0, count, size):
         yield slice(start, start + size)
+
+
+def for_blocks(count: int, work, size: int | None = None) -> None:
+    """work(cells) for each slice of :func:`blocks` (``size`` None: :data:`BLOCK`), shared out by :func:`parallel`;
+    each block writes its own cells of the outputs."""
+    parallel(work, blocks(count, size), count)
 
 
 def admissible_stream_functions(mesh, held: np.ndarray) -> np.ndarray:
@@ -75,26 +122,28 @@ class StreamOperator:
     """J's Hessian (half of it) for the coefficients x (rows, facets + vertices) of φ, matrix-free, in the floating
     type ``dtype``.
 
-    The cell-wise arithmetic runs in blocks of :data:`BLOCK` cells, the gathers of the cells' coefficients and the
-    sums back onto the facets and vertices over whole arrays. Arrays are laid out (…, 3, cells): the small axes
-    first, every operation over long contiguous rows. ``gradients`` ∇λ_k (x, 3, cells); ``weight`` |T| / 3 (the
-    midpoint rule); ``lame`` (λ, μ) per cell."""
+    The gathers of the cells' coefficients and the cell-wise arithmetic run in blocks of :data:`BLOCK` cells (shared
+    out between :data:`THREADS` threads), the sums back onto the facets and vertices over whole arrays, one per row
+    and kind. Arrays are laid out (…, 3, cells): the small axes first, every operation over long contiguous rows.
+    ``gradients`` ∇λ_k (x, 3, cells); ``weight`` |T| / 3 (the midpoint rule); ``lame`` (λ, μ) per cell."""
 
     def __init__(self, mesh, opposite, gradients, weight, lame, korn, dtype):
         self.nfacets, self.nvertices = mesh.nfacets, mesh.nvertices
         # (3, cells) in the platform's index type: bincount and take would convert int32 on every call
-        self.facets, self.vertices = opposite.T.astype(np.intp), mesh.t.astype(np.intp)
+        self.facets = np.ascontiguousarray(opposite.T, dtype=np.intp)
+        self.vertices = np.ascontiguousarray(mesh.t, dtype=np.intp)
         self.curls = curls(gradients, slice(None), dtype)
         lam, mu = lame
         kappa, w, gamma = lam / (2 * mu + 2 * lam), weight / (2 * mu), korn**2 - 1  # w = |T|/3 · 1/2μ
         # |T|/3 · Q per cell: diagonal (1 − κ), trace coupling −κ, shear (1 + γ)/2, skew coupling (1 − γ)/2
         normal, trace, shear, skew = w * (1 - kappa), -w * kappa, 0.5 * w * (1 + gamma), 0.5 * w * (1 - gamma)
         # (rows, x, 1, cells): the weight of X_ij itself and of X_ji' in (Q X)_ij
-        self.own = np.stack([[normal, shear], [shear, normal]])[:, :, None].astype(dtype)
-        self.cross = np.stack([[trace, skew], [skew, trace]])[:, :, None].astype(dtype)
-        # work arrays allocated once (fresh arrays of this size cost their page faults again on every product):
-        # the cells' coefficients, and their loads in float64, which bincount sums without a converted copy
-        self.bubbles, self.hats = np.empty((2, *gradients.shape[1:]), dtype), np.empty((2, *gradients.shape[1:]), dtype)
+        self.own, self.cross = np.empty((2, 2, 2, 1, w.size), dtype)
+        for (i, j), own, cross in (((0, 0), normal, trace), ((0, 1), shear, skew), ((1, 0), shear, skew),
+                                   ((1, 1), normal, trace)):
+            self.own[i, j, 0], self.cross[i, j, 0] = own, cross
+        # the cells' loads, allocated once (a fresh array of this size costs its page faults again on every
+        # product) in float64, which bincount sums without a converted copy
         self.loads = np.empty((2, 2, *gradients.shape[1:]))  # (bubbles or hats, rows, k, cells)
 
     def weighted_form(self, X: np.ndarray, cells) -> np.ndarray:
@@ -105,49 +154,60 @@ class StreamOperator:
         out += X[::-1, ::-1] * self.cross[..., cells]
         return out
 
-    def adjoint(self, W: np.ndarray, cells) -> tuple[np.ndarray, np.ndarray]:
+    def adjoint(self, W: np.ndarray, cells) -> None:
         """The transpose of :func:`midpoint_values` on a block: W (rows, x, 3, block) → the loads of each cell's
-        bubbles and hats (rows, k, block)."""
+        bubbles and hats (rows, k, block), into ``loads``."""
         curls = self.curls[..., cells]
         along = (W * curls).sum(axis=1)  # curl λ_k · W_k (rows, k, block)
-        bubbles = 2.0 * along.sum(axis=1, keepdims=True) - 4.0 * along
-        hats = (W.sum(axis=2, keepdims=True) * curls).sum(axis=1)
+        self.loads[0][..., cells] = 2.0 * along.sum(axis=1, keepdims=True) - 4.0 * along
+        self.loads[1][..., cells] = (W.sum(axis=2, keepdims=True) * curls).sum(axis=1)
+
+    def gather(self, x: np.ndarray, cells) -> tuple[np.ndarray, np.ndarray]:
+        """The coefficients of x of the ``cells``' bubbles and hats (rows, k, block), in x's floating type."""
+        facets, vertices = self.facets[:, cells], self.vertices[:, cells]
+        bubbles, hats = np.empty((2, *facets.shape), x.dtype), np.empty((2, *facets.shape), x.dtype)
+        for i in range(2):  # mode "clip": numpy buffers a take into ``out=`` that checks its indices (6× slower)
+            on_facets, on_vertices = x[i, :self.nfacets], x[i, self.nfacets:]
+            for k in range(3):
+                np.take(on_facets, facets[k], out=bubbles[i, k], mode="clip")
+                np.take(on_vertices, vertices[k], out=hats[i, k], mode="clip")
         return bubbles, hats
 
-    def gather(self, x: np.ndarray, bubbles: np.ndarray, hats: np.ndarray) -> None:
-        """Each cell's coefficients of x into ``bubbles`` and ``hats`` (rows, k, cells)."""
-        for i in range(2):  # mode "clip": numpy buffers a take into ``out=`` that checks its indices (6× slower)
-            np.take(x[i, :self.nfacets], self.facets, out=bubbles[i], mode="clip")
-            np.take(x[i, self.nfacets:], self.vertices, out=hats[i], mode="clip")
+    def scatter(self, dtype, out=None) -> np.ndarray:
+        """The cells' ``loads`` summed onto the facets and vertices (rows, facets + vertices; into ``out`` if given)."""
+        out = np.empty((2, self.nfacets + self.nvertices), dtype) if out is None else out
+        kinds = ((self.facets, slice(None, self.nfacets)), (self.vertices, slice(self.nfacets, None)))
 
-    def scatter(self, dtype) -> np.ndarray:
-        """The cells' ``loads`` summed onto the facets and vertices (rows, facets + vertices)."""
-        out = np.empty((2, self.nfacets + self.nvertices), dtype)
-        for i in range(2):
-            out[i, :self.nfacets] = np.bincount(self.facets.ravel(), self.loads[0, i].ravel(), self.nfacets)
-            out[i, self.nfacets:] = np.bincount(self.vertices.ravel(), self.loads[1, i].ravel(), self.nvertices)
+        def add(kind_row):
+            kind, i = kind_row
+            at, part = kinds[kind]
+            out[i, part] = np.bincount(at.ravel(), self.loads[kind, i].ravel(), out[i, part].size)
+
+        parallel(add, [(0, 0), (0, 1), (1, 0), (1, 1)], self.loads.shape[-1])
         return out
 
     def gradient(self, misfit) -> np.ndarray:
         """J's gradient at τ = 0 (half of it), ``misfit(cells)`` σ̂ − σ_h at the midpoints of a block of cells."""
-        for cells in blocks(self.loads.shape[-1]):
-            self.loads[0][..., cells], self.loads[1][..., cells] = self.adjoint(self.weighted_form(misfit(cells), cells),
-                                                                                cells)
+        for_blocks(self.loads.shape[-1], lambda cells: self.adjoint(self.weighted_form(misfit(cells), cells), cells))
         return self.scatter(self.curls.dtype)
 
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        self.gather(x, self.bubbles, self.hats)
-        for cells in blocks(self.loads.shape[-1]):
-            tau = midpoint_values(self.bubbles[..., cells], self.hats[..., cells], self.curls[..., cells])
-            self.loads[0][..., cells], self.loads[1][..., cells] = self.adjoint(self.weighted_form(tau, cells), cells)
-        return self.scatter(x.dtype)
+    def __call__(self, x: np.ndarray, out=None) -> np.ndarray:
+        def block(cells):
+            tau = midpoint_values(*self.gather(x, cells), self.curls[..., cells])
+            self.adjoint(self.weighted_form(tau, cells), cells)
+
+        for_blocks(self.loads.shape[-1], block)
+        return self.scatter(x.dtype, out)
 
     def diagonal(self) -> np.ndarray:
         """The operator's diagonal (float64): a bubble's τ is ±2 curl λ_k at the three midpoints of each of its
         cells, a hat's curl λ_a."""
-        hats = self.loads[1]
-        np.multiply(3.0, (self.own * self.curls**2).sum(axis=1), out=hats)  # Q_ii (curl λ_a), thrice
-        self.loads[0] = (4.0 / 3.0) * hats.sum(axis=1, keepdims=True)  # Q_ii (curl λ_k) over the three k
+        def block(cells):
+            hats = self.loads[1][..., cells]
+            np.multiply(3.0, (self.own[..., cells] * self.curls[..., cells] ** 2).sum(axis=1), out=hats)  # Q_ii, thrice
+            self.loads[0][..., cells] = (4.0 / 3.0) * hats.sum(axis=1, keepdims=True)  # Q_ii (curl λ_k), three k
+
+        for_blocks(self.loads.shape[-1], block)
         return self.scatter(float)
 
 
@@ -165,17 +225,18 @@ def conjugate_gradients(operator, load, diagonal, admissible, iterations: int) -
     residual = -load
     z = inverse * residual
     direction, x = z.copy(), np.zeros_like(load)
+    product, scaled = np.empty_like(load), np.empty_like(load)  # reused by every step
     rz = np.einsum("ij,ij", residual, z)
     for step in range(iterations):
-        product = operator(direction)
+        operator(direction, out=product)
         curvature = np.einsum("ij,ij", direction, product)
         if not (rz > 0 and curvature > 0):
             break
         alpha = rz / curvature
-        x += alpha * direction
+        x += np.multiply(alpha, direction, out=scaled)
         if step + 1 == iterations:
             break
-        residual -= alpha * product
+        residual -= np.multiply(alpha, product, out=scaled)
         np.multiply(inverse, residual, out=z)
         rz, previous = np.einsum("ij,ij", residual, z), rz
         direction *= rz / previous
@@ -217,15 +278,15 @@ def curls(gradients: np.ndarray, cells, dtype=float) -> np.ndarray:
 def with_curl(vertex_stress, x, gradients, operator: StreamOperator, out=None) -> np.ndarray:
     """σ̂ + curl φ at the vertices of each cell (rows, x, cells, 3; a view of ``out`` (rows, x, 3, cells), None: a new
     array, or ``vertex_stress``'s own to overwrite it) for the float64 coefficients x (rows, facets + vertices) of φ;
-    ``gradients`` ∇λ_k (x, k, cells), ``operator`` gives the cells' facets and vertices and its float64 work arrays
-    (overwritten)."""
+    ``gradients`` ∇λ_k (x, k, cells), ``operator`` gives the cells' facets and vertices."""
     at = vertex_stress.transpose(0, 1, 3, 2)  # (rows, x, m, cells)
     out = np.empty_like(at) if out is None else out
-    bubbles, hats = operator.loads
-    operator.gather(x, bubbles, hats)
-    for cells in blocks(out.shape[-1]):
-        tau = midpoint_values(bubbles[..., cells], hats[..., cells], curls(gradients, cells))
+
+    def block(cells):
+        tau = midpoint_values(*operator.gather(x, cells), curls(gradients, cells))
         tau *= -2.0  # a linear field's vertex values from its midpoints: V_k = Σ M − 2 M_k
         tau -= 0.5 * tau.sum(axis=2, keepdims=True)
         np.add(at[..., cells], tau, out=out[..., cells])
+
+    for_blocks(out.shape[-1], block)
     return out.transpose(0, 1, 3, 2)
