@@ -62,7 +62,10 @@ factorization of K and its products. Measured on the 2-D pair (`bench --scenario
 peak memory, dense / matrix-free; Signorini, Tresca, Coulomb): 1.0·10⁵ DOFs, 2,566 columns: 4.21 / 4.87, 9.12 / 11.4,
 6.33 / 15.1 (memory 2.6–3.1× / 1.7–1.8×); 2.8·10⁵ DOFs, 7,084 columns: 9.49 / 7.53, 27.5 / 14.6, 18.5 / 14.5 (memory
 5.0–6.3× / 1.8–1.9×); 6.0·10⁵ DOFs, 14,916 columns, Tresca: 83.6 (memory 12×) / 24.2 (1.9×). The 2-D punch at 10⁶
-DOFs condenses onto 2,002 columns and keeps its dense W."""
+DOFs condenses onto 2,002 columns and keeps its dense W. Measured with the condensation onto C; W from K's factors
+with B's rows appended (factorization.Saddle, from SADDLE_COLUMNS on) costs m², not |C|²: the pair at 2.8·10⁵ DOFs
+dense 4.35 against matrix-free 21.5 (Tresca, CPU, memory 2.53× / 1.72×), at 6·10⁵ 8.34 (memory 4.3×); a rule on m
+is left for a family-wide measurement (docs/performance.md, "W from K's factors with B's rows appended")."""
 
 MATRIX_FREE = "dual-matrix-free"
 """The dual with W as an operator (one solve with K's factors per product) and newton-cg."""
