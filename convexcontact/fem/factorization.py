@@ -5,7 +5,7 @@ complement S of K onto the contact DOFs C (|C| ≪ n) with the condensed load an
 lift back to all free DOFs; W = B_C S⁻¹ B_Cᵀ then costs no sparse solve at all. :func:`saddle` gives W itself from
 one factorization of K with B's rows appended, where |C| is large (:data:`SADDLE_COLUMNS`).
 
-Backends: ``"pardiso"`` (MKL PARDISO, SPD mode, through pypardiso's ``mkl_rt``; imported
+Backends: ``"pardiso"`` (MKL PARDISO, SPD mode; symmetric indefinite for :func:`saddle`; through pypardiso's ``mkl_rt``; imported
 only when used) and ``"superlu"`` (scipy). ``"auto"`` takes PARDISO when it loads.
 Measurements behind the choices: docs/factorizations.md.
 """
