@@ -168,11 +168,11 @@ def test_a_coulomb_solve_whose_inner_solves_all_fail_is_reported(newton):
     assert result.extra["picard"]["attempts"][0]["outcome"] == "failed (inner solve max_iter)"
 
 
-def test_matrix_free_newton_starts_where_every_point_sticks():
-    """On the matrix-free dual Newton's Coulomb solve starts from the frictionless answer, solved only to
+def test_newton_on_a_dense_w_starts_where_every_point_sticks():
+    """On the dual with W a matrix Newton's Coulomb solve starts from the frictionless answer, solved only to
     START_TOL, every point sticking: its first natural residual is that of this guess, recomputed here."""
-    model = cc.prepare(whole_face(2, 61, 2e3, Coulomb(friction=0.3)), "dual-matrix-free")
-    result = model.solve()
+    model = cc.prepare(whole_face(2, 61, 2e3, Coulomb(friction=0.3)), "dual")
+    result = model.solve("newton-cg")
     assert result.status == "solved" and result.extra["history"][0]["coulomb_newton"]
     frictionless, _ = model.cache[("frictionless", "newton-cg", repr([("tol", picard.START_TOL)]))]
     assert frictionless.solved and frictionless.info["natural_residual"] <= picard.START_TOL
@@ -180,4 +180,27 @@ def test_matrix_free_newton_starts_where_every_point_sticks():
     _, _, linear = picard.pressure_map(model)
     coupling = linear @ normal_multipliers(model.program, model.C, model.fem.contact)
     first = newton_cg.coupled(model.program, coupling, guess.x, max_iter=0).info["residuals"][0]
+    assert result.extra["history"][0]["newton_residuals"][0] == pytest.approx(first, rel=1e-12)
+
+
+def test_matrix_free_newton_starts_from_the_stick_answer():
+    """Where W is an operator Newton starts from the stick answer's first Newton point, the points outside their
+    Coulomb discs put on their edges (STICK_START), and no frictionless program is solved: its first natural residual
+    is that of this start, recomputed here (every ball within its radius F λ_N)."""
+    model = cc.prepare(whole_face(2, 61, 2e3, Coulomb(friction=0.3)), "dual-matrix-free")
+    result = model.solve()
+    assert result.status == "solved" and result.extra["history"][0]["coulomb_newton"]
+    assert not any(key[0] == "frictionless" for key in model.cache if isinstance(key, tuple))
+    session = newton_cg.Session(model.program)
+    stuck = session.trial(model.bound_update(np.full(model.friction.count, picard.STICK_RADIUS))["b"],
+                          picard.STICK_START)
+    coupling = picard.radius_coupling(model, picard.pressure_map(model)[2])
+    balls = newton_cg.bound_form_of(model.program).ball_vars
+    x, radii = stuck.x.copy(), np.maximum(coupling @ stuck.x, 0.0)
+    norms = np.linalg.norm(x[balls], axis=1)
+    outside = norms > radii
+    assert outside.any()  # the case this is about
+    x[balls[outside]] *= (radii[outside] / norms[outside])[:, None]
+    assert (np.linalg.norm(x[balls], axis=1) <= radii * (1 + 1e-12)).all()
+    first = newton_cg.coupled(model.program, coupling, x, max_iter=0).info["residuals"][0]
     assert result.extra["history"][0]["newton_residuals"][0] == pytest.approx(first, rel=1e-12)
