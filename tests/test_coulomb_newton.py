@@ -204,3 +204,19 @@ def test_matrix_free_newton_starts_from_the_stick_answer():
     assert (np.linalg.norm(x[balls], axis=1) <= radii * (1 + 1e-12)).all()
     first = newton_cg.coupled(model.program, coupling, x, max_iter=0).info["residuals"][0]
     assert result.extra["history"][0]["newton_residuals"][0] == pytest.approx(first, rel=1e-12)
+
+
+def test_a_stick_start_that_is_not_finite_gives_way_to_the_frictionless_one(monkeypatch):
+    """A stick start with a NaN (an overflow of its Newton point) is no start: the frictionless one serves, and the
+    answer is certified as before."""
+    trial = newton_cg.Session.trial
+
+    def overflowing(self, b, max_iter):
+        solution = trial(self, b, max_iter)
+        return dataclasses.replace(solution, x=np.full_like(solution.x, np.nan))
+
+    monkeypatch.setattr(newton_cg.Session, "trial", overflowing)
+    model = cc.prepare(whole_face(2, 61, 2e3, Coulomb(friction=0.3)), "dual-matrix-free")
+    result = model.solve()
+    assert result.status == "solved" and result.certificate.worst <= 1e-8
+    assert ("frictionless", "newton-cg", repr([("tol", picard.START_TOL)])) in model.cache

@@ -322,10 +322,13 @@ def newton_session(model: Model, attempt: Attempt, opened, linear: sp.spmatrix):
     pressures (:func:`pressure_map`)."""
     if model.formulation != "dual" or model.friction.count > model.fem.contact.m:
         return None  # more friction points than nodes (Gauss points): λ_T is not unique, W singular on it
-    if attempt.solver == "newton-cg":  # the map's own session, from the stick start (STICK_START) or every point
-        newton = opened()  # sticking under the frictionless pressure (START_TOL): 8 Newton steps on a 2-D strip of
-        if not (solvers.matrix_free(model.program) and stick_start(model, newton, linear)):  # 4001 nodes, 14 from
-            model.seed(newton, "newton-cg", {}, start={"tol": START_TOL})  # newton-cg's own start
+    if attempt.solver == "newton-cg":
+        # the map's own session, from the stick start where W is an operator (STICK_START), else from every point
+        # sticking under the frictionless pressure (START_TOL): 8 Newton steps on a 2-D strip of 4001 nodes, 14 from
+        # newton-cg's own start
+        newton = opened()
+        if not (solvers.matrix_free(model.program) and stick_start(model, newton, linear)):
+            model.seed(newton, "newton-cg", {}, start={"tol": START_TOL})
         return newton
     try:  # kept like the map's session: a load history's or a sweep's next solve starts from this answer
         newton = reused_session(model, "newton-cg", {})
@@ -343,10 +346,10 @@ def stick_start(model: Model, newton, linear: sp.spmatrix) -> bool:
     each point outside its Coulomb disc (radius F G S λ_N there) put on its edge; whether it did (not where a point is
     not finite). The session's program and preconditioner serve, and are left for Newton's solve."""
     stuck = newton.trial(model.bound_update(np.full(model.friction.count, STICK_RADIUS))["b"], STICK_START)
+    if not np.isfinite(stuck.x).all():
+        return False
     balls = bound_form_of(model.program).ball_vars
     x, radii = stuck.x.copy(), np.maximum(radius_coupling(model, linear) @ stuck.x, 0.0)
-    if not np.isfinite(x).all():
-        return False
     norms = np.linalg.norm(x[balls], axis=1)
     outside = norms > radii
     x[balls[outside]] *= (radii[outside] / norms[outside])[:, None]
