@@ -220,3 +220,16 @@ def test_a_stick_start_that_is_not_finite_gives_way_to_the_frictionless_one(monk
     result = model.solve()
     assert result.status == "solved" and result.certificate.worst <= 1e-8
     assert ("frictionless", "newton-cg", repr([("tol", picard.START_TOL)])) in model.cache
+
+
+def test_a_sweep_s_next_coulomb_solve_starts_from_the_last_answer_not_a_stick_start(monkeypatch):
+    """The models of a sweep share the map's newton-cg session (Model.with_law): the second law's Newton solve starts
+    from the first one's answer, so no stick start is made for it (one trial in all), and both are certified."""
+    trials = []
+    trial = newton_cg.Session.trial
+    monkeypatch.setattr(newton_cg.Session, "trial", lambda self, *args: trials.append(1) or trial(self, *args))
+    model = cc.prepare(whole_face(2, 61, 2e3, Coulomb(friction=0.3)), "dual-matrix-free")
+    first = model.solve()
+    second = model.with_law(Coulomb(friction=0.35)).solve()
+    assert first.status == second.status == "solved" and second.certificate.worst <= 1e-8
+    assert second.extra["history"][0]["coulomb_newton"] and len(trials) == 1

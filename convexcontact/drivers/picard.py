@@ -327,6 +327,8 @@ def newton_session(model: Model, attempt: Attempt, opened, linear: sp.spmatrix):
         # sticking under the frictionless pressure (START_TOL): 8 Newton steps on a 2-D strip of 4001 nodes, 14 from
         # newton-cg's own start
         newton = opened()
+        if newton.started:  # a sweep's or a load history's session: from its last answer
+            return newton
         if not (solvers.matrix_free(model.program) and stick_start(model, newton, linear)):
             model.seed(newton, "newton-cg", {}, start={"tol": START_TOL})
         return newton

@@ -302,6 +302,11 @@ class Session:
         if self._start is None:
             self._start = guess.x
 
+    @property
+    def started(self) -> bool:
+        """Whether the next solve has a start: a seed, or the last answer (a sweep's or a load history's)."""
+        return self._start is not None
+
     def trial(self, b: np.ndarray, max_iter: int) -> ConicSolution:
         """At most ``max_iter`` Newton steps from no start on this session's program with the bounds ``b`` (a start for
         another solve: the stick start of :func:`~convexcontact.drivers.picard.newton_session`), with this session's
