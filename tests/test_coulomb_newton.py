@@ -168,11 +168,11 @@ def test_a_coulomb_solve_whose_inner_solves_all_fail_is_reported(newton):
     assert result.extra["picard"]["attempts"][0]["outcome"] == "failed (inner solve max_iter)"
 
 
-def test_matrix_free_newton_starts_where_every_point_sticks():
-    """On the matrix-free dual Newton's Coulomb solve starts from the frictionless answer, solved only to
+def test_newton_on_a_dense_w_starts_where_every_point_sticks():
+    """On the dual with W a matrix Newton's Coulomb solve starts from the frictionless answer, solved only to
     START_TOL, every point sticking: its first natural residual is that of this guess, recomputed here."""
-    model = cc.prepare(whole_face(2, 61, 2e3, Coulomb(friction=0.3)), "dual-matrix-free")
-    result = model.solve()
+    model = cc.prepare(whole_face(2, 61, 2e3, Coulomb(friction=0.3)), "dual")
+    result = model.solve("newton-cg")
     assert result.status == "solved" and result.extra["history"][0]["coulomb_newton"]
     frictionless, _ = model.cache[("frictionless", "newton-cg", repr([("tol", picard.START_TOL)]))]
     assert frictionless.solved and frictionless.info["natural_residual"] <= picard.START_TOL
@@ -181,3 +181,55 @@ def test_matrix_free_newton_starts_where_every_point_sticks():
     coupling = linear @ normal_multipliers(model.program, model.C, model.fem.contact)
     first = newton_cg.coupled(model.program, coupling, guess.x, max_iter=0).info["residuals"][0]
     assert result.extra["history"][0]["newton_residuals"][0] == pytest.approx(first, rel=1e-12)
+
+
+def test_matrix_free_newton_starts_from_the_stick_answer():
+    """Where W is an operator Newton starts from the stick answer's first Newton point, the points outside their
+    Coulomb discs put on their edges (STICK_START), and no frictionless program is solved: its first natural residual
+    is that of this start, recomputed here (every ball within its radius F λ_N)."""
+    model = cc.prepare(whole_face(2, 61, 2e3, Coulomb(friction=0.3)), "dual-matrix-free")
+    result = model.solve()
+    assert result.status == "solved" and result.extra["history"][0]["coulomb_newton"]
+    assert not any(key[0] == "frictionless" for key in model.cache if isinstance(key, tuple))
+    session = newton_cg.Session(model.program)
+    stuck = session.trial(model.bound_update(np.full(model.friction.count, picard.STICK_RADIUS))["b"],
+                          picard.STICK_START)
+    coupling = picard.radius_coupling(model, picard.pressure_map(model)[2])
+    balls = newton_cg.bound_form_of(model.program).ball_vars
+    x, radii = stuck.x.copy(), np.maximum(coupling @ stuck.x, 0.0)
+    norms = np.linalg.norm(x[balls], axis=1)
+    outside = norms > radii
+    assert outside.any()  # the case this is about
+    x[balls[outside]] *= (radii[outside] / norms[outside])[:, None]
+    assert (np.linalg.norm(x[balls], axis=1) <= radii * (1 + 1e-12)).all()
+    first = newton_cg.coupled(model.program, coupling, x, max_iter=0).info["residuals"][0]
+    assert result.extra["history"][0]["newton_residuals"][0] == pytest.approx(first, rel=1e-12)
+
+
+def test_a_stick_start_that_is_not_finite_gives_way_to_the_frictionless_one(monkeypatch):
+    """A stick start with a NaN (an overflow of its Newton point) is no start: the frictionless one serves, and the
+    answer is certified as before."""
+    trial = newton_cg.Session.trial
+
+    def overflowing(self, b, max_iter):
+        solution = trial(self, b, max_iter)
+        return dataclasses.replace(solution, x=np.full_like(solution.x, np.nan))
+
+    monkeypatch.setattr(newton_cg.Session, "trial", overflowing)
+    model = cc.prepare(whole_face(2, 61, 2e3, Coulomb(friction=0.3)), "dual-matrix-free")
+    result = model.solve()
+    assert result.status == "solved" and result.certificate.worst <= 1e-8
+    assert ("frictionless", "newton-cg", repr([("tol", picard.START_TOL)])) in model.cache
+
+
+def test_a_sweep_s_next_coulomb_solve_starts_from_the_last_answer_not_a_stick_start(monkeypatch):
+    """The models of a sweep share the map's newton-cg session (Model.with_law): the second law's Newton solve starts
+    from the first one's answer, so no stick start is made for it (one trial in all), and both are certified."""
+    trials = []
+    trial = newton_cg.Session.trial
+    monkeypatch.setattr(newton_cg.Session, "trial", lambda self, *args: trials.append(1) or trial(self, *args))
+    model = cc.prepare(whole_face(2, 61, 2e3, Coulomb(friction=0.3)), "dual-matrix-free")
+    first = model.solve()
+    second = model.with_law(Coulomb(friction=0.35)).solve()
+    assert first.status == second.status == "solved" and second.certificate.worst <= 1e-8
+    assert second.extra["history"][0]["coulomb_newton"] and len(trials) == 1

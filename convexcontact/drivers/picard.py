@@ -27,7 +27,7 @@ import hashlib
 import itertools
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
@@ -39,6 +39,7 @@ from ..fem.mollifier import mollifier
 from ..formulations.dual import normal_multipliers
 from ..results.certificate import certify
 from ..scene.description import Coulomb, SceneError, evaluate_field
+from ..solvers.newton_cg import bound_form_of
 from .prepared import CERTIFIED, CHOSEN, LAW_DRIVERS, Model, field_at_points, formulate, timed
 
 CYCLE_PERIODS = (2, 3, 4)
@@ -60,7 +61,22 @@ newton-cg's residual is relative to max(‖v‖, ‖c q‖), and on a strip 400 
 (LOAD_SCALE), so at 1e-2 the start was no answer (1,400–2,000 of 4,400 nodes open where the answer has none; the tol
 also floors the CG of the empty face's first point, FIRST_FORCING): Newton on the Coulomb problem stalled there and the
 Picard map ran (5·10⁴ DOFs 7 Picard steps, 16–40 s; 10⁵ a failed inner solve, then the primal map, 179 s). At 1e-8:
-3 Newton steps, 2.6 and 4.0 s (docs/performance.md, "The clamped strip 400 : 1's Coulomb row")."""
+3 Newton steps, 2.6 and 4.0 s (docs/performance.md, "The clamped strip 400 : 1's Coulomb row"). Where W is a matrix
+only: where it is an operator, the stick start (STICK_START)."""
+STICK_START = 1
+"""Where W is an operator, Newton's Coulomb solve starts from the STICK_START first Newton points of its own program
+with every ball unbounded (every point sticking: the empty face's point, grown by the bounds it leaves; FIRST_FORCING,
+GROW), each point outside its Coulomb disc then put on its edge (:func:`stick_start`): no frictionless program is
+solved (with its own step lengths and preconditioner). Products with W of start + Newton, Newton steps, matrix-free,
+from the frictionless start → the stick start (docs/performance.md, "The Coulomb start on the clamped strips"):
+clamped strip 400 : 1 at 10⁵ DOFs 42 + 65, 3 → 15 + 33, 3; at 2·10⁴ 24 + 33, 4 → 8 + 16, 2; 100 : 1 28 + 31, 4 →
+10 + 21, 3; the clamped plate 20 : 20 : 1 12 + 51, 5 → 8 + 20, 3; where most points slip (3-D, forced matrix-free):
+tall block 10 + 126, 7 → 10 + 61, 5; flat block 9 + 44, 6 → 9 + 36, 5; the pair of spheres at 10⁴ 47 + 8372, 11 →
+106 + 156, 9; but the 2-D pair at 2·10⁴ 48 + 87, 6 → 46 + 117, 7. Not where W is a matrix: there the first point is
+no empty face's (FIRST_FORCING), and from the stick point the 3-D tall block at 2·10⁴ DOFs stalled after 5 Newton
+steps (the Picard map answered) where it takes 6 from the frictionless start."""
+STICK_RADIUS = np.sqrt(np.finfo(float).max)
+"""The slip bound of the stick start: one no multiplier reaches (its square still finite)."""
 
 
 def pressure_map(model: Model):
@@ -240,7 +256,7 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
 
     step = attempt.inner = attempt.inner or ProgramStep(model, opened)
     try:
-        newton = newton_session(model, attempt, opened) if attempt.newton else None
+        newton = newton_session(model, attempt, opened, linear) if attempt.newton else None
         if newton is None:
             step.open()
     except solvers.ConeNotSupported as error:  # OSQP and a 3-D cone: the user's choice is the user's error
@@ -297,17 +313,24 @@ def iterate(attempt: Attempt, s, steps: range, pressure_bound, history: list, ti
     return s
 
 
-def newton_session(model: Model, attempt: Attempt, opened):
+def newton_session(model: Model, attempt: Attempt, opened, linear: sp.spmatrix):
     """A newton-cg session for the Coulomb problem's own Newton solve (:func:`coulomb_newton`): the map's own
     session where it is one (``opened()``), else one on the model's program (whose radius rows Newton's
     coupling replaces) started from its last answer, or where the map's session would start. None where it does
     not apply: the primal, whose slip bounds are no linear map of its unknowns; a program not in bound form;
-    friction at Gauss points, where Newton stalled on the singular systems."""
+    friction at Gauss points, where Newton stalled on the singular systems. ``linear``: the slip bounds' map of the
+    pressures (:func:`pressure_map`)."""
     if model.formulation != "dual" or model.friction.count > model.fem.contact.m:
         return None  # more friction points than nodes (Gauss points): λ_T is not unique, W singular on it
-    if attempt.solver == "newton-cg":  # the map's own session, from every point sticking under the frictionless
-        newton = opened()  # pressure (START_TOL): 8 Newton steps on a 2-D strip of 4001 nodes, 14 from its own start
-        model.seed(newton, "newton-cg", {}, start={"tol": START_TOL})
+    if attempt.solver == "newton-cg":
+        # the map's own session, from the stick start where W is an operator (STICK_START), else from every point
+        # sticking under the frictionless pressure (START_TOL): 8 Newton steps on a 2-D strip of 4001 nodes, 14 from
+        # newton-cg's own start
+        newton = opened()
+        if newton.started:  # a sweep's or a load history's session: from its last answer
+            return newton
+        if not (solvers.matrix_free(model.program) and stick_start(model, newton, linear)):
+            model.seed(newton, "newton-cg", {}, start={"tol": START_TOL})
         return newton
     try:  # kept like the map's session: a load history's or a sweep's next solve starts from this answer
         newton = reused_session(model, "newton-cg", {})
@@ -320,11 +343,32 @@ def newton_session(model: Model, attempt: Attempt, opened):
     return newton
 
 
+def stick_start(model: Model, newton, linear: sp.spmatrix) -> bool:
+    """Seed ``newton`` with the stick start (STICK_START): its program's first Newton points with every ball unbounded,
+    each point outside its Coulomb disc (radius F G S λ_N there) put on its edge; whether it did (not where a point is
+    not finite). The session's program and preconditioner serve, and are left for Newton's solve."""
+    stuck = newton.trial(model.bound_update(np.full(model.friction.count, STICK_RADIUS))["b"], STICK_START)
+    if not np.isfinite(stuck.x).all():
+        return False
+    balls = bound_form_of(model.program).ball_vars
+    x, radii = stuck.x.copy(), np.maximum(radius_coupling(model, linear) @ stuck.x, 0.0)
+    norms = np.linalg.norm(x[balls], axis=1)
+    outside = norms > radii
+    x[balls[outside]] *= (radii[outside] / norms[outside])[:, None]
+    newton.seed(replace(stuck, x=x))
+    return True
+
+
+def radius_coupling(model: Model, linear: sp.spmatrix) -> sp.csr_matrix:
+    """The slip bounds s = F G S λ_N as a linear map of the dual's unknowns (newton-cg's ``coupling``)."""
+    return sp.csr_matrix(linear @ normal_multipliers(model.program, model.C, model.fem.contact))
+
+
 def coulomb_newton(model: Model, newton, linear: sp.spmatrix) -> ConicSolution:
     """The Coulomb problem's answer by Newton's method on the dual whose ball radii move with its unknowns,
     s = F G S λ_N (a quasi-variational inequality), from the session's start. Where it stalls the answer is
     "failed" and the map goes on: Newton's method is only local."""
-    return newton.coupled(linear @ normal_multipliers(model.program, model.C, model.fem.contact))
+    return newton.coupled(radius_coupling(model, linear))
 
 
 class Anderson:

@@ -312,6 +312,18 @@ class Session:
         if self._start is None:
             self._start = guess.x
 
+    @property
+    def started(self) -> bool:
+        """Whether the next solve has a start: a seed, or the last answer (a sweep's or a load history's)."""
+        return self._start is not None
+
+    def trial(self, b: np.ndarray, max_iter: int) -> ConicSolution:
+        """At most ``max_iter`` Newton steps from no start on this session's program with the bounds ``b`` (a start for
+        another solve: the stick start of :func:`~convexcontact.drivers.picard.newton_session`), with this session's
+        preconditioner; the session's program and start are left as they were."""
+        return newton_cg(self.program.updated(b=b), self._form, None, self._tol, max_iter, self._verbose, None,
+                         self._cache)
+
     def coupled(self, coupling: sp.spmatrix, max_iter: int = 30) -> ConicSolution:
         """:func:`coupled` from the last answer, with this session's preconditioner; the session's program then
         holds the radii reached, and the next solve starts from its answer. The session's max_iter bounds it too."""
