@@ -6,11 +6,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 import convexcontact as cc
 from convexcontact.drivers.rules import contact_columns
 from convexcontact.fem import factorization
-from convexcontact.fem.factorization import Saddle, condense, factorize, saddle
+from convexcontact.fem.factorization import Condensation, Saddle, condense, dual_factors, factorize, saddle
 from convexcontact.formulations.dual import contact_rows
 from convexcontact.scene.description import SceneError
 from convexcontact.scene.library import pressure_patch
@@ -106,3 +107,17 @@ def test_the_frictionless_seed_reads_the_leading_block(both):
     W = reused.schur(frictionless)
     assert reused.factorization._factors is factors
     assert_close(W, factorize(on_saddle.fem.K).schur(frictionless), 1e-11)
+
+
+def test_the_saddle_serves_where_w_is_smaller_than_s(monkeypatch):
+    """dual_factors: the saddle where B has fewer rows than the DOFs it touches (from SADDLE_COLUMNS on), the
+    condensation where as many (W as large as S: nothing gained) or fewer DOFs."""
+    n = 300
+    K = sp.diags([np.full(n - 1, -1.0), np.full(n, 2.05), np.full(n - 1, -1.0)], [-1, 0, 1], format="csr")
+    C = np.arange(100, 140)
+    fewer, as_many = (sp.csr_matrix((np.ones(k), (np.arange(k), C[:k])), shape=(k, n)) for k in (20, 40))
+    monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 40)
+    assert isinstance(dual_factors(K, C, fewer), Saddle)
+    assert isinstance(dual_factors(K, C, as_many), Condensation)
+    monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 41)
+    assert isinstance(dual_factors(K, C, fewer), Condensation)
