@@ -9,6 +9,8 @@ import pytest
 import scipy.sparse as sp
 
 import convexcontact as cc
+from convexcontact import solvers
+from convexcontact.drivers import rules
 from convexcontact.drivers.rules import contact_columns
 from convexcontact.fem import factorization
 from convexcontact.fem.factorization import Condensation, Saddle, condense, dual_factors, factorize, saddle
@@ -121,3 +123,19 @@ def test_the_saddle_serves_where_w_is_smaller_than_s(monkeypatch):
     assert isinstance(dual_factors(K, C, as_many), Condensation)
     monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 41)
     assert isinstance(dual_factors(K, C, fewer), Condensation)
+
+
+def test_auto_limits_the_saddles_rows_not_its_columns(monkeypatch):
+    """Where W comes from the saddle, MATRIX_FREE_COLUMNS bounds the dual's rows, not the DOFs they touch: a pair over
+    that many columns keeps its dense W while its rows fit, and goes matrix-free, saying why, once they do not."""
+    scene = cc.bodies_library.punch_on_foundation(0.05)
+    columns = rules.contact_columns(cc.prepare(scene, "primal").fem).size
+    monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 0)
+    monkeypatch.setattr(rules, "MATRIX_FREE_COLUMNS", columns - 1)
+    model = cc.prepare(scene)
+    rows = model.program.P.shape[0]
+    assert rows < columns - 1 and isinstance(model.condensation.factorization, Saddle)
+    assert not solvers.matrix_free(model.program)
+    monkeypatch.setattr(rules, "MATRIX_FREE_COLUMNS", rows - 1)
+    model = cc.prepare(scene)
+    assert solvers.matrix_free(model.program) and f"{rows} contact unknowns exceed {rows - 1}" in model.reason

@@ -10,6 +10,7 @@ import scipy.sparse as sp
 from .. import solvers
 from ..conic import ConicProgram
 from ..fem.assembly import FEModel
+from ..fem.factorization import saddle_applies
 from ..scene.description import Coulomb, compliance_of
 
 INCOMPRESSIBLE = 1e5
@@ -62,10 +63,12 @@ factorization of K and its products. Measured on the 2-D pair (`bench --scenario
 peak memory, dense / matrix-free; Signorini, Tresca, Coulomb): 1.0·10⁵ DOFs, 2,566 columns: 4.21 / 4.87, 9.12 / 11.4,
 6.33 / 15.1 (memory 2.6–3.1× / 1.7–1.8×); 2.8·10⁵ DOFs, 7,084 columns: 9.49 / 7.53, 27.5 / 14.6, 18.5 / 14.5 (memory
 5.0–6.3× / 1.8–1.9×); 6.0·10⁵ DOFs, 14,916 columns, Tresca: 83.6 (memory 12×) / 24.2 (1.9×). The 2-D punch at 10⁶
-DOFs condenses onto 2,002 columns and keeps its dense W. Measured with the condensation onto C; W from K's factors
-with B's rows appended (factorization.Saddle, from SADDLE_COLUMNS on) costs m², not |C|²: the pair at 2.8·10⁵ DOFs
-dense 4.35 against matrix-free 21.5 (Tresca, CPU, memory 2.53× / 1.72×), at 6·10⁵ 8.34 (memory 4.3×); a rule on m
-is left for a family-wide measurement (docs/performance.md, "W from K's factors with B's rows appended")."""
+DOFs condenses onto 2,002 columns and keeps its dense W. Where W comes from K's factors with B's rows appended
+(factorization.saddle_applies) its cost grows with the rows m, not the columns: there the limit is on m. The pair
+at 2.8·10⁵ DOFs (7,084 columns), quiet, dense / matrix-free (contact ratio, end to end, memory): Signorini, 2,269
+rows, 2.01, 1.37, 1.57× / 9.7, 4.77, 1.83× (dense since); Tresca, 4,538 rows, 4.08, 2.32, 2.54× / 16.7, 7.9, 1.69×
+(matrix-free: the dense memory over 2×); at 6·10⁵ Tresca, 10,880 rows, dense memory 4.3× (docs/performance.md, "W
+from K's factors with B's rows appended")."""
 
 MATRIX_FREE = "dual-matrix-free"
 """The dual with W as an operator (one solve with K's factors per product) and newton-cg."""
@@ -87,17 +90,20 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
         return "primal", "no contact node has a free DOF: nothing to condense onto"
     reuse = " and is reused by every Picard step" if isinstance(law, Coulomb) else ""
     closed = round(unknowns * np.count_nonzero(fem.contact.gap <= TOUCHING) / fem.contact.m)
+    saddle = saddle_applies(columns, unknowns)  # W from K's factors with its rows: no dense S onto the columns
+    # what a dense W's cost grows with (MATRIX_FREE_COLUMNS): its rows by the saddle, else the columns condensed onto
+    size, what = (unknowns, f"{unknowns} contact unknowns") if saddle else (columns, f"the {columns} DOFs to condense onto")
     too_large = (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}" if unknowns > DENSE_LIMIT else
                  f"{closed} contact unknowns at closed nodes exceed {CLOSED_LIMIT}" if closed > CLOSED_LIMIT else
-                 f"the {columns} DOFs to condense onto exceed {COLUMN_LIMIT}" if columns > COLUMN_LIMIT else
-                 f"the {columns} DOFs to condense onto exceed {MATRIX_FREE_COLUMNS}"
-                 if columns > MATRIX_FREE_COLUMNS and matrix_free_applies(fem, law) else
+                 f"the {columns} DOFs to condense onto exceed {COLUMN_LIMIT}" if columns > COLUMN_LIMIT and not saddle
+                 else f"{what} exceed {MATRIX_FREE_COLUMNS}" if size > MATRIX_FREE_COLUMNS and matrix_free_applies(fem, law)
+                 else
                  f"a 3-D body of {fem.n_free} DOFs (over {DENSE_DOFS_3D}) costs more to condense than to factorize"
                  if fem.dim == 3 and fem.n_free > DENSE_DOFS_3D else None)
     if too_large and matrix_free_applies(fem, law):
         return MATRIX_FREE, (f"{too_large}: W = B K⁻¹ Bᵀ is applied through one factorization of K{reuse}, never "
                              "formed (a dense W would cost more), and newton-cg solves the dual")
-    if too_large and (unknowns > DENSE_LIMIT or columns > COLUMN_LIMIT):
+    if too_large and (unknowns > DENSE_LIMIT or (columns > COLUMN_LIMIT and not saddle)):
         return "primal", (f"{too_large}: the dense condensed program would cost more than the sparse one (a "
                           "force-controlled obstacle or a regularized friction has no matrix-free dual)")
     if 4 * columns > fem.n_free:

@@ -517,7 +517,11 @@ def dual_factors(K: sp.spmatrix, C: np.ndarray, B: sp.spmatrix, dim: int = 2) ->
     ``C``. Where the rows are as many as the DOFs (one body with friction: every DOF of a node a row) the saddle
     gained nothing (the 2-D punch at 10⁶ DOFs, Tresca, 2002 rows: contact CPU 14.6 against 17.8 s, memory 1.15 against
     1.21×, under load; the clamped strip 20 : 1, 4.72 against 4.65), and the condensation serves the derivatives."""
-    size = np.unique(C).size
-    if size >= SADDLE_COLUMNS and B.shape[0] < size and _pardiso() is not None:
+    if saddle_applies(np.unique(C).size, B.shape[0]):
         return saddle(K, B)
     return condense(K, C, dim=dim)
+
+
+def saddle_applies(columns: int, rows: int) -> bool:
+    """Whether :func:`dual_factors` takes :func:`saddle` for ``rows`` dual rows touching ``columns`` DOFs."""
+    return columns >= SADDLE_COLUMNS and rows < columns and _pardiso() is not None
