@@ -381,20 +381,22 @@ def formulate(fem: FEModel, formulation: str, timings: dict, condensation=None, 
         check_force(fem)
         check_gap_scale(fem)
         check_law_scales(fem, law, law_fields(law, fem, friction, slip_bound), compliance)
+
+    def factored():  # K's condensation or factorization for the dual formulation chosen
+        return condensation or condensed(fem, timings, formulation == MATRIX_FREE, contact_rows(fem.contact, C, friction))
+
     if formulation == "auto":
         unknowns = fem.contact.m + (friction.R.shape[0] if friction is not None else 0)
         formulation, reason = choose_formulation(fem, law, unknowns)
         if formulation != "primal":
             try:
-                condensation = condensation or condensed(fem, timings, formulation == MATRIX_FREE,
-                                                         contact_rows(fem.contact, C, friction))
+                condensation = factored()
             except SceneError as error:
                 if error.field != "dirichlet":
                     raise
                 formulation, reason = "primal", "K is singular (the contact holds a rigid motion): nothing to condense"
     elif formulation != "primal":
-        condensation = condensation or condensed(fem, timings, formulation == MATRIX_FREE,
-                                                 contact_rows(fem.contact, C, friction))
+        condensation = factored()
     options = {"factorization": condensation if isinstance(condensation, Reused) else Reused(condensation, fem.K),
                "matrix_free": formulation == MATRIX_FREE} if formulation != "primal" else {}
     if formulation == MATRIX_FREE:
