@@ -61,7 +61,7 @@ def test_per_body_graded_functions_bound_the_pair_spectrum(pair):
     for component, dofs in enumerate(fem.basis.split_indices()):
         components[dofs] = component
     points = fem.basis.doflocs[:, fem.free]
-    joined = far_functions(points, components[fem.free], dof_cell_sizes(fem), np.zeros(K.shape[0], int), K)
+    joined = far_functions(points, components[fem.free], dof_cell_sizes(fem), np.zeros(K.shape[0], int))
     one_grid = spectrum(factorization.slab(K, B, joined), W)
     assert min(per_body.min(), clamped.min(), one_grid.min()) > 1 - 1e-9
     assert per_body.max() < 2.0

@@ -54,30 +54,34 @@ dropped them all, and its Tresca dual ran over an hour of products with W."""
 def grid_functions(points: np.ndarray, components: np.ndarray, spacing) -> sp.csr_matrix:
     """The hats of a regular grid of ``spacing`` (one number, or one per axis) over the points (dim × n), one column
     per grid node and component, at each point in its own component (``components``, n): n × grid columns, 2^dim
-    entries a row. A column is ``node · dim + component``, the nodes numbered in C order of :func:`grid_shape`."""
+    entries a row. A column is ``node · dim + component``, the nodes numbered in C order, from the points' least
+    corner."""
+    n = points.shape[1]
+    box = points.min(axis=1, keepdims=True), points.max(axis=1, keepdims=True)
+    columns, values, shape = _hats(points, components, box, spacing)
+    return sp.csr_matrix((values.ravel(), columns.ravel(), np.arange(0, (n + 1) * columns.shape[1], columns.shape[1])),
+                         shape=(n, int(shape.prod()) * points.shape[0]))
+
+
+def _hats(points: np.ndarray, components: np.ndarray, box: tuple, spacing) -> tuple:
+    """The grid of ``spacing`` over the ``box`` (its least and greatest corners, dim × 1, holding the points): each
+    point's 2^dim columns and hat values (n × 2^dim, as in :func:`grid_functions`) and the grid's nodes along each
+    axis."""
     dim, n = points.shape
-    shape = grid_shape(points, spacing)
+    low, high = box
     spacing = _per_axis(spacing, dim)
-    low = points.min(axis=1, keepdims=True)
-    cell = np.floor((points - low) / spacing).astype(np.int64)
-    local = (points - low) / spacing - cell
-    columns, values = [], []
-    for corner in itertools.product((0, 1), repeat=dim):
+    scaled = (points - low) / spacing
+    cell = np.floor(scaled).astype(np.int64)
+    local = scaled - cell
+    shape = np.floor((high - low) / spacing).astype(np.int64).ravel() + 2  # the cells of the farthest point, + 2
+    columns, values = np.empty((n, 2**dim), dtype=np.int64), np.empty((n, 2**dim))
+    for j, corner in enumerate(itertools.product((0, 1), repeat=dim)):
         weight, node = np.ones(n), np.zeros(n, dtype=np.int64)
         for axis, side in enumerate(corner):
-            weight = weight * (local[axis] if side else 1.0 - local[axis])
+            weight *= local[axis] if side else 1.0 - local[axis]
             node = node * shape[axis] + cell[axis] + side
-        columns.append(node * dim + components)
-        values.append(weight)
-    return sp.csr_matrix((np.stack(values, axis=1).ravel(), np.stack(columns, axis=1).ravel(),
-                          np.arange(0, (n + 1) * 2**dim, 2**dim)), shape=(n, int(shape.prod()) * dim))
-
-
-def grid_shape(points: np.ndarray, spacing) -> np.ndarray:
-    """The nodes along each axis of the grid of ``spacing`` (one number, or one per axis) from the points' least
-    corner that covers them."""
-    low = points.min(axis=1, keepdims=True)
-    return np.floor((points - low) / _per_axis(spacing, points.shape[0])).astype(np.int64).max(axis=1) + 2
+        columns[:, j], values[:, j] = node * dim + components, weight
+    return columns, values, shape
 
 
 def _per_axis(spacing, dim: int) -> np.ndarray:
@@ -99,37 +103,58 @@ def fitted_spacing(points: np.ndarray, spacing: float) -> np.ndarray:
     return np.where(extent > 0, extent / cells, spacing)
 
 
-def graded_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, spacing: float) -> sp.csc_matrix:
+def graded_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, spacing: float) -> sp.csr_matrix:
     """Hats of grids of ``spacing`` · 2^k, k = 0, 1, …: a point's own grid is the finest whose spacing is at least
     CELLS × its cells' size (``sizes``); a grid's hat is kept where it reaches KEEP at a point of that grid or of a
     finer one, and on every grid but the coarsest only at the nodes the next coarser grid lacks (nested grids: a
-    coarse hat is a sum of fine ones)."""
+    coarse hat is a sum of fine ones). The grids' kept columns side by side (:func:`graded_grids`)."""
+    return _built(points, components, graded_grids(points, components, sizes, spacing))
+
+
+def graded_grids(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, spacing: float) -> tuple:
+    """The grids of :func:`graded_functions`, before any function is built (a too fine grid is only counted): the
+    points' box, each grid's spacing and the mask of its kept columns."""
     dim = points.shape[0]
     octaves = np.log2(np.maximum(CELLS * sizes / spacing, 1.0))
     level = np.ceil(octaves - 1e-9).astype(np.int64)  # sizes of equal cells differ in their last bits
     top = level.max(initial=0)
     fitted = fitted_spacing(points, spacing)  # the finest grid's sides on the body's (the coarser ones nest in it)
-    kept = []
-    for k in range(top + 1):
-        functions = grid_functions(points, components, fitted * 2**k)
-        own = functions[level <= k]
-        peak = np.zeros(functions.shape[1])
-        np.maximum.at(peak, own.indices, own.data)
+    box = points.min(axis=1, keepdims=True), points.max(axis=1, keepdims=True)
+    spacings, keeps = [fitted * 2**k for k in range(top + 1)], []
+    for k, grid in enumerate(spacings):
+        own = level <= k
+        hats, weights, shape = _hats(points[:, own], components[own], box, grid)
+        peak = np.zeros(int(shape.prod()) * dim)
+        np.maximum.at(peak, hats.ravel(), weights.ravel())
         keep = peak >= KEEP
         if k < top:
-            nodes = np.unravel_index(np.arange(functions.shape[1]) // dim, tuple(grid_shape(points, fitted * 2**k)))
+            nodes = np.unravel_index(np.arange(peak.size) // dim, tuple(shape))
             keep &= (np.stack(nodes) % 2).any(axis=0)
-        kept.append(functions.tocsc()[:, np.flatnonzero(keep)])
-    return sp.hstack(kept, format="csc")
+        keeps.append(keep)
+    return box, spacings, keeps
 
 
-def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, bodies: np.ndarray,
-                  K: sp.spmatrix) -> Callable:
+def _built(points: np.ndarray, components: np.ndarray, grids: tuple) -> sp.csr_matrix:
+    """The kept columns of ``grids`` (:func:`graded_grids`) at the points, a row's nonzeros only: a matrix per grid
+    converted to columns, sliced and stacked, and each grid's hats found twice, took 5.9 of the 11 s of the coarse
+    functions of the pair at 1.4·10⁶ DOFs."""
+    box, spacings, keeps = grids
+    blocks = []
+    for grid, keep in zip(spacings, keeps, strict=True):
+        hats, weights, _ = _hats(points, components, box, grid)
+        entries = keep[hats] & (weights != 0)  # a point on a grid line: a zero weight, not stored
+        indptr = np.concatenate([[0], np.cumsum(entries.sum(axis=1))])
+        blocks.append(sp.csr_matrix((weights[entries], (np.cumsum(keep) - 1)[hats[entries]], indptr),
+                                    shape=(points.shape[1], int(keep.sum()))))
+    return sp.hstack(blocks, format="csr")
+
+
+def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, bodies: np.ndarray) -> Callable:
     """``coarse(inside, contact)`` for :func:`~convexcontact.fem.factorization.slab`: on each body (``bodies``: a
     number per DOF) with contact DOFs (``contact``), :func:`graded_functions` on its DOFs outside the slab
     (``inside``, a mask), zero elsewhere, the finest spacing the body's slab's thickness (its farthest slab DOF from
     its contact DOFs) and at least CELLS of the cells there, coarser where that would give a body more than
-    DENSE_COLUMNS functions; of them, those independent in K's energy, checked body by body."""
+    DENSE_COLUMNS functions (the slab keeps those independent in K's energy: :func:`independent`)."""
 
     def coarse(inside: np.ndarray, contact: np.ndarray) -> sp.csr_matrix:
         columns = []
@@ -142,18 +167,21 @@ def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray,
             thickness = cKDTree(points[:, own_contact].T).query(points[:, inside & mine].T)[0].max()
             spacing = max(thickness, CELLS * sizes[rest].min())
             tried = []  # (spacing, functions) of each grid tried
-            while True:  # at most DENSE_COLUMNS functions a body, so that all of them are checked
-                functions = graded_functions(points[:, rest], components[rest], sizes[rest], spacing)
-                if functions.shape[1] <= DENSE_COLUMNS:
+            while True:  # at most DENSE_COLUMNS functions a body, so that all of them can be checked
+                grids = graded_grids(points[:, rest], components[rest], sizes[rest], spacing)
+                count = sum(int(keep.sum()) for keep in grids[2])
+                if count <= DENSE_COLUMNS:
                     break
-                tried.append((spacing, functions.shape[1]))
+                tried.append((spacing, count))
                 spacing = coarser(tried, points.shape[0])
-            functions = sp.csc_matrix((functions.data, rest[functions.indices], functions.indptr),
-                                      shape=(inside.size, functions.shape[1]))
-            columns.append(independent(functions, K))  # K couples no two bodies: each body's check is the whole's
+            functions = _built(points[:, rest], components[rest], grids)
+            indptr = np.zeros(inside.size + 1, dtype=np.int64)
+            indptr[rest + 1] = np.diff(functions.indptr)  # the body's rows among all DOFs
+            columns.append(sp.csr_matrix((functions.data, functions.indices, np.cumsum(indptr)),
+                                         shape=(inside.size, functions.shape[1])))
         if not columns:
             return sp.csr_matrix((inside.size, 0))
-        return sp.hstack(columns, format="csc").tocsr()
+        return sp.hstack(columns, format="csr")
 
     return coarse
 
@@ -173,20 +201,28 @@ def coarser(tried: list, dim: int) -> float:
     return spacing * (functions / (FILL * DENSE_COLUMNS)) ** (1 / exponent)
 
 
-def independent(functions: sp.csc_matrix, K: sp.spmatrix) -> sp.csc_matrix:
-    """The columns of ``functions`` (at most DENSE_COLUMNS) a pivoted Cholesky factorization of their stiffness
-    Fᵀ K F (scaled to a unit diagonal, LAPACK's pstrf) keeps with pivots above INDEPENDENT, in their order; all of
-    them where a sparse LDLᵀ of that stiffness (:func:`_least_pivot`) has no pivot below INDEPENDENT (the one-body
-    shapes: the dense factorization took 0.4 of the 1.25 s of CPU of the free strip 100 : 1's formulation at 10⁵
-    DOFs). A sparse selection (dropping the LDLᵀ's small pivots and factorizing again) was tried on the pair at
-    7.7·10⁵ DOFs: after 20 rounds it kept 2,131 of 3,632 functions and a singular set, where pstrf keeps 3,270."""
-    stiffness = sp.csc_matrix(functions.T @ (K @ functions))
-    scale = np.sqrt(np.maximum(stiffness.diagonal(), np.finfo(float).tiny))
-    stiffness = sp.csc_matrix(sp.diags(1.0 / scale) @ stiffness @ sp.diags(1.0 / scale))
-    if _least_pivot(stiffness) > INDEPENDENT:
-        return functions
-    _, order, rank, _ = lapack.dpstrf(stiffness.toarray(), lower=1, tol=INDEPENDENT, overwrite_a=1)
-    return functions[:, np.sort(order[:rank] - 1)]
+def independent(stiffness: sp.spmatrix) -> np.ndarray:
+    """The columns, in their order, of functions F whose stiffness Fᵀ K F is ``stiffness`` that are independent in
+    K's energy. Block by block (its connected components: K couples no two bodies, so a block is at most one body's
+    DENSE_COLUMNS functions), scaled to a unit diagonal: all of a block where a sparse LDLᵀ of it
+    (:func:`_least_pivot`) has no pivot below INDEPENDENT (the one-body shapes: the dense factorization took 0.4 of
+    the 1.25 s of CPU of the free strip 100 : 1's formulation at 10⁵ DOFs), else those a pivoted Cholesky
+    factorization (LAPACK's pstrf) keeps with pivots above INDEPENDENT. A sparse selection (dropping the LDLᵀ's
+    small pivots and factorizing again) was tried on the pair at 7.7·10⁵ DOFs: after 20 rounds it kept 2,131 of
+    3,632 functions and a singular set, where pstrf keeps 3,270."""
+    scale = 1.0 / np.sqrt(np.maximum(stiffness.diagonal(), np.finfo(float).tiny))
+    stiffness = sp.csr_matrix(sp.diags(scale) @ stiffness @ sp.diags(scale))
+    blocks = connected_components(stiffness, directed=False)[1]
+    order = np.argsort(blocks, kind="stable")
+    kept = []
+    for columns in np.split(order, np.flatnonzero(np.diff(blocks[order])) + 1):
+        block = sp.csc_matrix(stiffness[columns][:, columns])
+        if _least_pivot(block) > INDEPENDENT:
+            kept.append(columns)
+            continue
+        _, pivots, rank, _ = lapack.dpstrf(block.toarray(), lower=1, tol=INDEPENDENT, overwrite_a=1)
+        kept.append(columns[pivots[:rank] - 1])
+    return np.sort(np.concatenate(kept)) if kept else np.zeros(0, dtype=np.int64)
 
 
 def _least_pivot(stiffness: sp.csc_matrix) -> float:
@@ -220,4 +256,4 @@ def body_far_functions(fem) -> Callable:
         components[dofs] = component
     points = fem.basis.doflocs[:, fem.free]
     bodies = connected_components(fem.K, directed=False)[1]
-    return far_functions(points, components[fem.free], dof_cell_sizes(fem), bodies, fem.K)
+    return far_functions(points, components[fem.free], dof_cell_sizes(fem), bodies)
