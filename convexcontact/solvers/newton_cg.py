@@ -127,18 +127,19 @@ docs/performance.md, "Signorini on the clamped strip: the opening zone in one st
 GROW = 10
 """Times Newton's face may change per step where radii are fixed: to the face the natural map holds at its point
 (:func:`_released`), the point solved for again, until the face stays. Before, the face only grew: the sets the point
-leaves were held too, until it left none (a feasible point; :func:`_grown`, as where radii move). Tresca's slip zone was otherwise
-found a few nodes a step: Newton's point on too small a face overshoots the intervals of the nodes about to slip, its
-projection raises f, and the least f on the segment to it stops short of their bounds, where the next step's face is
-decided. Matrix-free (Newton steps / products with P, before → now): tall 2-D block 1 : 4 at 2·10⁴ DOFs 75 / 720 →
-5 / 118 (23 faces grown), at 10⁵ failed after 100 → 5 / 97; the two-body pair at 3·10⁴ DOFs 30 / 412 → 4 / 150, at
-10⁵ 47 / 1147 → 7 / 444; the dense W of the tall block 95 → 4 (docs/performance.md). Bounds alone (Signorini) too:
-an opening zone grows as a front, a few nodes a Newton point (the clamped strip 400 : 1, matrix-free, from the empty
-face: 5 / 6 / 6 Newton steps at 10⁵ / 2·10⁵ / 5·10⁵ DOFs, 7 at 10⁶, each a step with its residual and segment), and a
-grown face is one CG solve of 1–2 iterations (the bounds' preconditioner is one factorization per session): 2 / 2 / 2
-steps, 56 / 81 / 76 → 37 / 40 / 42 products. Dense W (the 2-D family at 2·10⁴ DOFs, Newton steps): the pair 10 → 2,
-the punch 4 → 1, clamped strips 20 / 100 : 1 5 / 24 → 3 / 9, at 10⁵ the pair 5 → 3, no more CPU. Before the empty
-face first, grown faces on that strip's swinging path cost more than they saved (385 products against 54).
+leaves were held too, until it left none (a feasible point; :func:`_grown`, as where radii move). Without either,
+Tresca's slip zone was found a few nodes a step: Newton's point on too small a face overshoots the intervals of the
+nodes about to slip, its projection raises f, and the least f on the segment to it stops short of their bounds, where
+the next step's face is decided. Matrix-free (Newton steps / products with P, before → now): tall 2-D block 1 : 4 at
+2·10⁴ DOFs 75 / 720 → 5 / 118 (23 faces grown), at 10⁵ failed after 100 → 5 / 97; the two-body pair at 3·10⁴ DOFs
+30 / 412 → 4 / 150, at 10⁵ 47 / 1147 → 7 / 444; the dense W of the tall block 95 → 4 (docs/performance.md). Bounds
+alone (Signorini) too: an opening zone grows as a front, a few nodes a Newton point (the clamped strip 400 : 1,
+matrix-free, from the empty face: 5 / 6 / 6 Newton steps at 10⁵ / 2·10⁵ / 5·10⁵ DOFs, 7 at 10⁶, each a step with its
+residual and segment), and a grown face is one CG solve of 1–2 iterations (the bounds' preconditioner is one
+factorization per session): 2 / 2 / 2 steps, 56 / 81 / 76 → 37 / 40 / 42 products. Dense W (the 2-D family at 2·10⁴
+DOFs, Newton steps): the pair 10 → 2, the punch 4 → 1, clamped strips 20 / 100 : 1 5 / 24 → 3 / 9, at 10⁵ the pair 5 →
+3, no more CPU. Before the empty face first, grown faces on that strip's swinging path cost more than they saved (385
+products against 54).
 
 Grown faces never released a set: on the 2-D pair, whose answer has nearly every node slipping, an interval held at
 the wrong end stayed there for the step, its natural residual exactly 2s (the ∞-norm's floor while any node flips),
@@ -240,10 +241,11 @@ with a bound:
 - the same face as the system factored (free variables, spheres, tangent bases) and D within a spread of REUSE
   (max over min of d/d_kept): the kept system's exact inverse then has its eigenvalues against this one's within
   [min d/d_kept, max d/d_kept] (the two differ by a diagonal), so CG's condition number is at most REUSE;
-- a grown face (:func:`_grown`; none released, GROW) of a step whose first system was factored: its variables held more only remove terms
-  (a bound's 1/δ) or shrink them (a ball's two δ⁻¹ e eᵀ to one b bᵀ/(bᵀδb + curvature), smaller by Cauchy–Schwarz),
-  so the factors of H + G₀ᵀ D₀⁻¹ G₀ with this face's G and D are the exact inverse of D + G H′⁻¹ Gᵀ with H′ ⪰ H
-  (Woodbury): SPD, its eigenvalues against the system's ≥ 1, those above 1 at most the rank of the terms removed."""
+- a grown face (:func:`_grown`; none released, GROW) of a step whose first system was factored: its variables held
+  more only remove terms (a bound's 1/δ) or shrink them (a ball's two δ⁻¹ e eᵀ to one b bᵀ/(bᵀδb + curvature), smaller
+  by Cauchy–Schwarz), so the factors of H + G₀ᵀ D₀⁻¹ G₀ with this face's G and D are the exact inverse of D + G H′⁻¹ Gᵀ
+  with H′ ⪰ H (Woodbury): SPD, its eigenvalues against the system's ≥ 1, those above 1 at most the rank of the terms
+  removed."""
 KEPT_FORCING = 0.01
 """CG on a grown face preconditioned by the factors of the face it grew from (REUSE) stops at KEPT_FORCING × its first
 residual, not GROWN_FORCING: the exact inverse went well past GROWN_FORCING in its one or two iterations, and at
@@ -475,11 +477,12 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
 
     def newton_point(v, y, target, damping, empty=False):
         """Newton's point from v on the face y holds, the CG iterations it took and how far the first solve went
-        (‖point − v‖∞, see FAR); with fixed radii the face grown by the sets that point leaves (:func:`grown_point`),
-        whose solves stop at GROWN_FORCING alone where y is the ``empty`` face (see FIRST_FORCING)."""
+        (‖point − v‖∞, see FAR) and ∇f there where known; with fixed radii on the face the natural map holds at that
+        point (:func:`grown_point`), whose solves stop at GROWN_FORCING alone where y is the ``empty`` face (see
+        FIRST_FORCING)."""
         face = {}  # the dense Cholesky factor of this step's first system, for its grown faces (_direct)
-        newton, iterations, known = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix, damping,
-                                   proximal=proximal, face=face)
+        newton, iterations, known = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix,
+                                          damping, proximal=proximal, face=face)
         reach = np.abs(newton - v).max(initial=0.0)
         if sets.coupling is None:
             newton, more, known = grown_point(v, y, newton, 0.0 if empty else target, damping, face, known=known)
@@ -894,9 +897,10 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
 def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, damping=0.0,
           relative=0.0, proximal=0.0, face=None, grown=False):
     """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v, the CG
-    (GMRES, where radii move) iterations it took and ∇f at the new v where CG's products give it (else None), CG stopping at ``target`` or ``relative`` × its first residual
-    (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃) and the system has at most DIRECT_LIMIT unknowns, a dense
-    Cholesky (LU where that fails or radii move) instead, or the factor kept in ``face`` (:func:`_direct`).
+    (GMRES, where radii move) iterations it took and ∇f at the new v where CG's products give it (else None), CG
+    stopping at ``target`` or ``relative`` × its first residual (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃)
+    and the system has at most DIRECT_LIMIT unknowns, a dense Cholesky (LU where that fails or radii move) instead, or
+    the factor kept in ``face`` (:func:`_direct`).
     ``damping`` μ adds μ/c to the system's diagonal (:func:`_damped`, DAMPING), ``proximal`` (0 or one number per
     variable) its own number to each variable's (:func:`_inert`); ``grown``: the face is a grown one of the step's
     (:func:`_grown`), whose preconditioner may be the step's factors (REUSE, KEPT_FORCING)."""
@@ -971,7 +975,8 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
                                                      grown=grown), dtype=float)
         callback = lambda *_: count.__setitem__(0, count[0] + 1)
         if moving is None:
-            def follow(x):  # ∇f follows CG's iterate: P̃ Z (x − its last) = α P̃ Z p, CG's own product (GROW)
+            def follow(x):  # ∇f follows CG's iterate: P̃ Z (x − its last) = α P̃ Z p, CG's own product (GROW); scipy's
+                # CG multiplies each direction p once, then steps x by α p and calls back (tests/test_pair_plateau.py)
                 callback()
                 p, Pp, before = last
                 gradient[:] += ((x - before) @ p / (p @ p)) * Pp
