@@ -131,10 +131,11 @@ def test_the_condensation_factors_s_in_its_own_memory(backend):
 def test_a_dense_w_takes_the_segment_before_the_arc():
     """One globalization for a dense W and an operator: the least f on the segment to Newton's point, then the arc.
     The pair's dense Tresca dual at 3·10⁴ DOFs (422 unknowns) took 9 Newton steps and 33 grown faces with Π(Newton's
-    point) first (the dense order before), 5 and 12 now; at 10⁵ DOFs 17 and 74 against 8 and 25."""
+    point) first (the dense order before), 5 and 12 after; at 10⁵ DOFs 17 and 74 against 8 and 25. Since a step's
+    faces are the natural map's at Newton's point (newton_cg.GROW, released sets too), 3 and 20."""
     model = cc.prepare(two_body_scene("tresca", 3e4), "dual")
     solution = newton_cg.solve(model.program)
-    assert solution.status == "solved" and solution.iterations <= 6 and solution.info["grown"] <= 16
+    assert solution.status == "solved" and solution.iterations <= 4 and solution.info["grown"] <= 20
     assert model.result(solution, {}, model.slip_bound).certificate.worst < 1e-10
 
 

@@ -47,8 +47,12 @@ def test_the_pairs_tresca_dual_is_solved_from_the_stick_start_as_clarabel_solves
 
 
 def test_the_check_catches_newton_cg_without_the_damping(monkeypatch):
-    """Without the damping (no Newton point is ever far) the same solve takes no Newton point and fails."""
+    """Without the damping (no Newton point is ever far) and with a step's faces only grown by the sets Newton's point
+    leaves (newton_cg.GROW, before the face at Newton's point) the same solve takes no Newton point and fails. The
+    face at Newton's point alone solves it too (6 steps, 26 products; with the damping 6 and 28)."""
     monkeypatch.setattr(newton_cg, "FAR", np.inf)
+    monkeypatch.setattr(newton_cg, "_released", lambda y, newton, g, c, sets, released: (
+        newton_cg._grown(y, newton, sets, sets.radius), False))
     _, solution = solve_from_the_stick_start()
     assert solution.status != "solved" and solution.info["steps"]["residual"] == 0
 

@@ -27,9 +27,10 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
 Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
 way; after a point far from v its systems are damped (FAR, DAMPING: a face with a near-singular system), and a solve
 from no start with P an operator takes the empty face's first (FIRST_FORCING), which (a) or (b) judges as any other.
-With fixed radii it is Newton's point on a face grown until the point is feasible (GROW): the face the natural map
-holds at v, plus the sets Newton's point on it leaves, solved for again; a face only grows, so this ends, and a step
-solves at most GROW + 1 Newton systems.
+With fixed radii it is Newton's point on the face the natural map holds at v, then on the face it holds at that point
+(the primal-dual active set update: the sets the point leaves held, those whose multipliers point inward released,
+an interval moved to the end its multiplier pushes it to), solved for again until the face stays, at most GROW times
+(GROW): a step solves at most GROW + 1 Newton systems.
 
 All points lie in {f ≤ f(v₀)}, so between two steps (a) the steps (b) with ‖p(v) − v‖_{C⁻¹} > ε number at most
 (f(v₀) − f*) / (σ ε²): the method stops for any tol > 0 after a bounded number of steps, and without a tol the
@@ -124,19 +125,34 @@ relative to ‖c q‖, 10³ ‖v‖ on the clamped strip 400 : 1, where it stopp
 point missed the opening zone's last node (5·10⁵ DOFs, Signorini: 3 Newton steps / 54 products → 2 / 42;
 docs/performance.md, "Signorini on the clamped strip: the opening zone in one step")."""
 GROW = 10
-"""Times Newton's face may grow per step where radii are fixed: the sets its point leaves are held too and the
-point solved for again, until it leaves none (a feasible point; :func:`_grown`). Tresca's slip zone was otherwise
-found a few nodes a step: Newton's point on too small a face overshoots the intervals of the nodes about to slip, its
-projection raises f, and the least f on the segment to it stops short of their bounds, where the next step's face is
-decided. Matrix-free (Newton steps / products with P, before → now): tall 2-D block 1 : 4 at 2·10⁴ DOFs 75 / 720 →
-5 / 118 (23 faces grown), at 10⁵ failed after 100 → 5 / 97; the two-body pair at 3·10⁴ DOFs 30 / 412 → 4 / 150, at
-10⁵ 47 / 1147 → 7 / 444; the dense W of the tall block 95 → 4 (docs/performance.md). Bounds alone (Signorini) too:
-an opening zone grows as a front, a few nodes a Newton point (the clamped strip 400 : 1, matrix-free, from the empty
-face: 5 / 6 / 6 Newton steps at 10⁵ / 2·10⁵ / 5·10⁵ DOFs, 7 at 10⁶, each a step with its residual and segment), and a
-grown face is one CG solve of 1–2 iterations (the bounds' preconditioner is one factorization per session): 2 / 2 / 2
-steps, 56 / 81 / 76 → 37 / 40 / 42 products. Dense W (the 2-D family at 2·10⁴ DOFs, Newton steps): the pair 10 → 2,
-the punch 4 → 1, clamped strips 20 / 100 : 1 5 / 24 → 3 / 9, at 10⁵ the pair 5 → 3, no more CPU. Before the empty
-face first, grown faces on that strip's swinging path cost more than they saved (385 products against 54)."""
+"""Times Newton's face may change per step where radii are fixed: to the face the natural map holds at its point
+(:func:`_released`), the point solved for again, until the face stays. Before, the face only grew: the sets the point
+leaves were held too, until it left none (a feasible point; :func:`_grown`, as where radii move). Without either,
+Tresca's slip zone was found a few nodes a step: Newton's point on too small a face overshoots the intervals of the
+nodes about to slip, its projection raises f, and the least f on the segment to it stops short of their bounds, where
+the next step's face is decided. Matrix-free (Newton steps / products with P, before → now): tall 2-D block 1 : 4 at
+2·10⁴ DOFs 75 / 720 → 5 / 118 (23 faces grown), at 10⁵ failed after 100 → 5 / 97; the two-body pair at 3·10⁴ DOFs
+30 / 412 → 4 / 150, at 10⁵ 47 / 1147 → 7 / 444; the dense W of the tall block 95 → 4 (docs/performance.md). Bounds
+alone (Signorini) too: an opening zone grows as a front, a few nodes a Newton point (the clamped strip 400 : 1,
+matrix-free, from the empty face: 5 / 6 / 6 Newton steps at 10⁵ / 2·10⁵ / 5·10⁵ DOFs, 7 at 10⁶, each a step with its
+residual and segment), and a grown face is one CG solve of 1–2 iterations (the bounds' preconditioner is one
+factorization per session): 2 / 2 / 2 steps, 56 / 81 / 76 → 37 / 40 / 42 products. Dense W (the 2-D family at 2·10⁴
+DOFs, Newton steps): the pair 10 → 2, the punch 4 → 1, clamped strips 20 / 100 : 1 5 / 24 → 3 / 9, at 10⁵ the pair 5 →
+3, no more CPU. Before the empty face first, grown faces on that strip's swinging path cost more than they saved (385
+products against 54).
+
+Grown faces never released a set: on the 2-D pair, whose answer has nearly every node slipping, an interval held at
+the wrong end stayed there for the step, its natural residual exactly 2s (the ∞-norm's floor while any node flips),
+so ACCEPT refused Newton's point for 3–5 steps (a plateau) and the segment and projected-gradient steps moved
+thousands of intervals off their ends (docs/performance.md, "The pair at 1.4·10⁶ DOFs"). The face at Newton's point
+releases and flips them; ∇f there comes from CG's own products (:func:`_step`), so a face costs no more products than
+a grown one, and where Newton's point is feasible that ∇f serves the step's test too. A set released once in a step
+is not released again in it: CG's loose multipliers (GROWN_FORCING) released and held the same few nodes near the
+stick–slip ends in turn until GROW. Tresca on the pair, `auto` (matrix-free beyond 10⁵ DOFs), Newton steps / products
+before → the update without that rule → now: 2·10⁴ DOFs forced matrix-free 7 / 99 → 3 / 73 → 5 / 97; 10⁵ forced
+matrix-free 8 / 148 → 6 / 141 → 5 / 109; 10⁵ dense 8 / 49 → 3 / 60 → 3 / 58 (one n² product a face: ∇f); 2.8·10⁵
+9 / 193 → 7 / 180 → 5 / 152; 6·10⁵ 11 / 284 → 4 / 146 → 4 / 145 (docs/performance.md, "Tresca's plateau on the
+pair"). The convergence argument does not change: Newton's point is a trial."""
 GROW_MOVING = 3
 """Times the face may grow where radii move (:func:`coupled`), and only after Newton's point was refused (its natural
 residual not below the step's): a node that leaves its interval at Newton's point made its projection raise the
@@ -225,10 +241,11 @@ with a bound:
 - the same face as the system factored (free variables, spheres, tangent bases) and D within a spread of REUSE
   (max over min of d/d_kept): the kept system's exact inverse then has its eigenvalues against this one's within
   [min d/d_kept, max d/d_kept] (the two differ by a diagonal), so CG's condition number is at most REUSE;
-- a grown face (:func:`_grown`) of a step whose first system was factored: its variables held more only remove terms
-  (a bound's 1/δ) or shrink them (a ball's two δ⁻¹ e eᵀ to one b bᵀ/(bᵀδb + curvature), smaller by Cauchy–Schwarz),
-  so the factors of H + G₀ᵀ D₀⁻¹ G₀ with this face's G and D are the exact inverse of D + G H′⁻¹ Gᵀ with H′ ⪰ H
-  (Woodbury): SPD, its eigenvalues against the system's ≥ 1, those above 1 at most the rank of the terms removed."""
+- a grown face (:func:`_grown`; none released, GROW) of a step whose first system was factored: its variables held
+  more only remove terms (a bound's 1/δ) or shrink them (a ball's two δ⁻¹ e eᵀ to one b bᵀ/(bᵀδb + curvature), smaller
+  by Cauchy–Schwarz), so the factors of H + G₀ᵀ D₀⁻¹ G₀ with this face's G and D are the exact inverse of D + G H′⁻¹ Gᵀ
+  with H′ ⪰ H (Woodbury): SPD, its eigenvalues against the system's ≥ 1, those above 1 at most the rank of the terms
+  removed."""
 KEPT_FORCING = 0.01
 """CG on a grown face preconditioned by the factors of the face it grew from (REUSE) stops at KEPT_FORCING × its first
 residual, not GROWN_FORCING: the exact inverse went well past GROWN_FORCING in its one or two iterations, and at
@@ -410,12 +427,14 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         """:func:`_natural` with the residual's step lengths (see INERT)."""
         return _natural(v, g, c, sets, program.q, metric)
 
-    def move(v, g, w):
+    def move(v, g, w, known=None):
         """∇f at w, f(w) − f(v) (exact: f is quadratic) and P̃(w − v): one product. Where P x + q has its own
         formula (:func:`_affine`) ∇f at w is that, not g + P̃(w − v): the sum's errors, ε‖P̃‖‖w − v‖ a step, added
         up over the large first steps and stood for the gradient at the end (strip 400 : 1 clamped, Tresca: a natural
         residual of 6e-13 reported where ∇f gave 4e-10)."""
         d = w - v
+        if known is not None:  # ∇f at w, already computed
+            return known, g @ d + 0.5 * (d @ (known - g)), known - g
         if exact:
             g_end = gradient(w)
             return g_end, g @ d + 0.5 * (d @ (g_end - g)), g_end - g
@@ -430,7 +449,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         alpha = min(1.0, max(0.0, -slope / curve)) if curve > 0 else float(slope < 0)
         return v + alpha * d, g + alpha * Pd, alpha * slope + 0.5 * alpha**2 * curve
 
-    def descend(v, g, towards, residual, cauchy, risen):
+    def descend(v, g, towards, residual, cauchy, risen, known=None):
         """The step from v to Newton's point ``towards`` or towards it (see "Convergence" in the module's docstring):
         Π(``towards``) where its natural residual is below ``residual`` and f there is at most f(v₀) (f − f(v₀) =
         ``risen`` at v); else the first point that lowers f by ARMIJO × |``cauchy``|, the projected gradient's
@@ -438,7 +457,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         else the least f on the projected gradient's segment. The point, ∇f there, f's change and which point it is.
         One order whether P is a matrix or an operator (see ARC)."""
         end = _project(towards, sets)  # the points themselves are returned: v + (w − v) would leave bounds by round-off
-        g_end, change, Pd = move(v, g, end)
+        g_end, change, Pd = move(v, g, end, known if np.array_equal(end, towards) else None)
         if risen + change <= 0 and natural(end, g_end)[0] < residual:
             return end, g_end, change, "residual"
         on_segment = least_on_segment(v, g, end, Pd)
@@ -458,35 +477,42 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
 
     def newton_point(v, y, target, damping, empty=False):
         """Newton's point from v on the face y holds, the CG iterations it took and how far the first solve went
-        (‖point − v‖∞, see FAR); with fixed radii the face grown by the sets that point leaves (:func:`grown_point`),
-        whose solves stop at GROWN_FORCING alone where y is the ``empty`` face (see FIRST_FORCING)."""
+        (‖point − v‖∞, see FAR) and ∇f there where known; with fixed radii on the face the natural map holds at that
+        point (:func:`grown_point`), whose solves stop at GROWN_FORCING alone where y is the ``empty`` face (see
+        FIRST_FORCING)."""
         face = {}  # the dense Cholesky factor of this step's first system, for its grown faces (_direct)
-        newton, iterations = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix, damping,
-                                   proximal=proximal, face=face)
+        newton, iterations, known = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix,
+                                          damping, proximal=proximal, face=face)
         reach = np.abs(newton - v).max(initial=0.0)
         if sets.coupling is None:
-            newton, more = grown_point(v, y, newton, 0.0 if empty else target, damping, face)
+            newton, more, known = grown_point(v, y, newton, 0.0 if empty else target, damping, face, known=known)
             iterations += more
-        return newton, iterations, reach
+        return newton, iterations, reach, known
 
-    def grown_point(v, y, newton, target, damping, face=None, limit=None):
-        """Newton's point on the face y holds grown by the sets ``newton`` leaves until it leaves none (at most
-        ``limit`` times, GROW by default; see GROW), each solve started from the last point, projected; the CG
-        iterations it took."""
-        iterations, at = 0, v
+    def grown_point(v, y, newton, target, damping, face=None, limit=None, known=None):
+        """Newton's point on the face y holds, updated to the face the natural map holds at that point (fixed radii:
+        :func:`_released`, ∇f there ``known`` or one product) or, where radii move, grown by the sets the point leaves
+        (:func:`_grown`), each solve started from the last point, projected, until the face stays (at most ``limit``
+        times, GROW by default; see GROW); the point, the CG iterations it took and ∇f there where known."""
+        iterations, at, released, moved = 0, v, np.zeros(v.size, bool), False
         for _ in range(GROW if limit is None else limit):
-            y = _grown(y, newton, sets, sets.radii(at))
+            if sets.coupling is None:
+                y, more = _released(y, newton, gradient(newton) if known is None else known, c, sets, released)
+                moved = moved or more
+            else:
+                y = _grown(y, newton, sets, sets.radii(at))
             if y is None:
                 break
             at = _project(newton, sets)
             # not the step's kept factors where radii move: REUSE's bound is for CG's symmetric systems, and GMRES
-            # on the clamped plate's Coulomb problem (2·10⁴ DOFs) took over 4 min CPU with them, 13 s without
-            newton, more = _step(P, affine, sets, at, y, c, target, products,
-                                 cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face,
-                                 grown=sets.coupling is None)
+            # on the clamped plate's Coulomb problem (2·10⁴ DOFs) took over 4 min CPU with them, 13 s without; nor
+            # once a set was released (that bound is for faces that hold more)
+            newton, more, known = _step(P, affine, sets, at, y, c, target, products,
+                                        cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face,
+                                        grown=sets.coupling is None and not moved)
             iterations += more
             faces[0] += 1
-        return newton, iterations
+        return newton, iterations, known if y is None else None
 
     def backtrack(v, g, towards, residual, lengths=(1.0, 0.5, 0.25, 0.125, 0.0625)):
         """Without an f (moving balls), the first of ``lengths`` (1, ½, …, 1/16) of the way to ``towards``
@@ -533,14 +559,14 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         empty = steps == 0 and start is None and sets.coupling is None and matrix is None  # see FIRST_FORCING
         target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
         target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
-        newton, iterations, reach = newton_point(v, np.zeros_like(y) if empty else y, target, damping, empty)
+        newton, iterations, reach, known = newton_point(v, np.zeros_like(y) if empty else y, target, damping, empty)
         cg_total += iterations
         best = min(best, residual)
         damping = _damped(damping, reach > FAR * size, residual)
         if sets.coupling is not None:
             v, g, moved = backtrack(v, g, newton, residual, (1.0,))
             if not moved:  # Newton's point refused: first on the face grown by the sets it leaves (see GROW)
-                grown, more = grown_point(v, y, newton, target, damping, limit=min(GROW, GROW_MOVING))
+                grown, more, _ = grown_point(v, y, newton, target, damping, limit=min(GROW, GROW_MOVING))
                 cg_total += more
                 if grown is not newton:
                     v, g, moved = backtrack(v, g, grown, residual)
@@ -559,7 +585,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         # near the answer f's changes are round-off, and the segment alone stalled a 3-D Tresca dual at 2e-10), else a
         # point that lowers f at least as a fraction of the projected gradient's step does (see "Convergence")
         cauchy = g @ (_project(y, sets) - v)
-        v, g, change, kind = descend(v, g, newton, ACCEPT * best, cauchy, risen)
+        v, g, change, kind = descend(v, g, newton, ACCEPT * best, cauchy, risen, known)
         if kind in ("segment", "gradient") and natural(v, g)[0] > STALL * residual:
             v, g, more = gradient_step(v, g)
             change += more
@@ -790,6 +816,36 @@ def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds, radius: np.ndarray)
     return grown
 
 
+def _released(y: np.ndarray, newton: np.ndarray, g: np.ndarray, c, sets: _Bounds, released: np.ndarray):
+    """The face the natural map holds at ``newton``, Newton's point on the face y holds (fixed radii; ``g`` = ∇f
+    there): the primal-dual active set update (GROW), y' = newton − c g on the sets y holds (c g: their
+    multipliers), newton on the others (whose multipliers the Newton system set to 0). It holds the sets the point
+    leaves (as :func:`_grown`), releases those whose multiplier points inward, and moves an interval (a ball of one
+    variable) to the end its multiplier pushes it to; a set ``released`` before in this step (a mask over the
+    variables, updated here) stays as y holds it, and a ball of more variables held in both keeps y's point (its
+    tangent basis: REUSE). (y', whether a set was released), or (None, False) where the face is y's."""
+    held = np.zeros(y.size, bool)
+    held[sets.bounds[y[sets.bounds] < 0]] = True
+    on = np.linalg.norm(y[sets.balls], axis=1) > sets.radius
+    held[sets.balls[on].ravel()] = True
+    face = np.where(held, newton - c * g, newton)
+    again = np.zeros(y.size, bool)
+    again[sets.bounds] = face[sets.bounds] >= 0
+    again[sets.balls[np.linalg.norm(face[sets.balls], axis=1) <= sets.radius].ravel()] = True
+    again &= held & released
+    face[again] = y[again]
+    bounds_then, bounds_now = y[sets.bounds] < 0, face[sets.bounds] < 0
+    on_now = np.linalg.norm(face[sets.balls], axis=1) > sets.radius
+    kept = sets.balls[on & on_now]
+    if sets.balls.shape[1] > 1:
+        face[kept] = y[kept]
+    bounds_off, balls_off = sets.bounds[bounds_then & ~bounds_now], sets.balls[on & ~on_now]
+    released[bounds_off] = released[balls_off.ravel()] = True
+    changed = (bounds_off.size or balls_off.size or (bounds_now & ~bounds_then).any() or (on_now & ~on).any()
+               or (np.sign(face[kept]) != np.sign(y[kept])).any())
+    return (face, bool(bounds_off.size or balls_off.size)) if changed else (None, False)
+
+
 def _affine(program: ConicProgram):
     """x ↦ P x + q as a sum, and the program's own formula of it (``program.gradient``) or None (the contact dual's
     computes it from the displacement its multipliers leave, K⁻¹(f − Bᵀx), as the answer's fields are recovered:
@@ -840,10 +896,11 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
 
 def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, damping=0.0,
           relative=0.0, proximal=0.0, face=None, grown=False):
-    """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v and the CG
-    (GMRES, where radii move) iterations it took, CG stopping at ``target`` or ``relative`` × its first residual
-    (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃) and the system has at most DIRECT_LIMIT unknowns, a dense
-    Cholesky (LU where that fails or radii move) instead, or the factor kept in ``face`` (:func:`_direct`).
+    """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v, the CG
+    (GMRES, where radii move) iterations it took and ∇f at the new v where CG's products give it (else None), CG
+    stopping at ``target`` or ``relative`` × its first residual (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃)
+    and the system has at most DIRECT_LIMIT unknowns, a dense Cholesky (LU where that fails or radii move) instead, or
+    the factor kept in ``face`` (:func:`_direct`).
     ``damping`` μ adds μ/c to the system's diagonal (:func:`_damped`, DAMPING), ``proximal`` (0 or one number per
     variable) its own number to each variable's (:func:`_inert`); ``grown``: the face is a grown one of the step's
     (:func:`_grown`), whose preconditioner may be the step's factors (REUSE, KEPT_FORCING)."""
@@ -886,9 +943,12 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     Z = _expansion(n, free, sphere_vars, bases, None if moving is None else (directions, moving))
     R = Z if moving is None else _expansion(n, free, sphere_vars, bases)  # rows kept: Rᵀ, not Zᵀ, where radii move
 
+    last = [None, None, np.zeros(free.size + k * t)]  # CG's last direction, P̃ Z times it, its last iterate
+
     def hessian(xi):  # Rᵀ P̃ Z ξ + curvature on the tangent coordinates
         products[0] += 1
-        return R.T @ (sets.scale * P.matvec(sets.scale * (Z @ xi))) + np.concatenate(
+        last[0], last[1] = xi.copy(), sets.scale * P.matvec(sets.scale * (Z @ xi))  # CG scales xi in place after
+        return R.T @ last[1] + np.concatenate(
             [np.zeros(free.size), curvature * xi[free.size:]]) + shift * xi
 
     size = free.size + k * t
@@ -896,9 +956,10 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     # the right-hand side and the Krylov method's first residual took two
     start = R.T @ (v - new)
     products[0] += 1
-    rhs = -(R.T @ (sets.scale * affine(sets.shift + sets.scale * (new + Z @ start))))
+    gradient = sets.scale * affine(sets.shift + sets.scale * (new + Z @ start))  # ∇f at the step's start
+    rhs = -(R.T @ gradient)
     rhs[free.size:] -= curvature * start[free.size:]
-    count = [0]
+    count, at_point = [0], None if size else gradient  # ∇f at the point, where known without a product
     direct = size and matrix is not None and size <= DIRECT_LIMIT
     if direct:
         system = functools.partial(_system, matrix, Z, R, free.size, curvature, shift)
@@ -914,13 +975,21 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
                                                      grown=grown), dtype=float)
         callback = lambda *_: count.__setitem__(0, count[0] + 1)
         if moving is None:
+            def follow(x):  # ∇f follows CG's iterate: P̃ Z (x − its last) = α P̃ Z p, CG's own product (GROW); scipy's
+                # CG multiplies each direction p once, then steps x by α p and calls back (tests/test_pair_plateau.py)
+                callback()
+                p, Pp, before = last
+                gradient[:] += ((x - before) @ p / (p @ p)) * Pp
+                last[2] = x.copy()
+
             relative = min(relative, KEPT_FORCING) if getattr(precondition, "kept", False) else relative
-            xi, _ = spla.cg(H, rhs, rtol=relative, atol=target, maxiter=CG_LIMIT, M=M, callback=callback)
+            xi, _ = spla.cg(H, rhs, rtol=relative, atol=target, maxiter=CG_LIMIT, M=M, callback=follow)
+            at_point = gradient
         else:
             xi, _ = spla.gmres(H, rhs, rtol=0.0, atol=target, restart=GMRES_RESTART,
                                maxiter=CG_LIMIT // GMRES_RESTART, M=M, callback=callback, callback_type="pr_norm")
         new = new + Z @ (start + xi)
-    return new, count[0]
+    return new, count[0], at_point
 
 
 DENSE_THREADS = 1
@@ -940,9 +1009,9 @@ def _blas() -> threadpoolctl.ThreadpoolController:
 def _direct(system, free, rhs, symmetric: bool, face: dict | None):
     """ξ of the dense Newton system ``system()`` ξ = ``rhs``, or None where it is singular: Cholesky where it is
     ``symmetric`` and positive definite, else LU. ``face`` (None where the system has tangent coordinates) keeps the
-    Cholesky factor of a Newton step's first system; a grown face only holds more variables (bounds and intervals:
-    :func:`_grown`), so its system is a principal submatrix of that one, solved from the kept factor
-    (:func:`_on_face`) while that costs less than a factorization of its own."""
+    Cholesky factor of a Newton step's first system; a later face of the step that only holds more variables
+    (bounds and intervals, none released: GROW) has a principal submatrix of that one as its system, solved from the
+    kept factor (:func:`_on_face`) while that costs less than a factorization of its own."""
     if symmetric and face and _cheaper_on_face(face["free"], free):
         xi = _on_face(face["factor"], np.isin(face["free"], free), rhs)
         if xi is not None:
