@@ -230,6 +230,7 @@ def test_chain_sums_equal_a_dense_solve_of_each_patch_problem(scene, monkeypatch
     monkeypatch.setattr(flux_correction, "ITERATIONS", 0)
     whole = flux.equilibrate(fem, u, moments, held)
     monkeypatch.setattr(flux, "BLOCK", 7)
+    monkeypatch.setattr(flux, "_kept", (None, None))  # the circulation weights in blocks of 7 too, not the kept ones
     blocked = flux.equilibrate(fem, u, moments, held)
     np.testing.assert_allclose(blocked.symmetric, whole.symmetric, rtol=1e-13)
     np.testing.assert_allclose(blocked.skew, whole.skew, rtol=1e-13, atol=1e-13 * whole.skew.max())
@@ -266,3 +267,32 @@ def test_a_folded_mesh_is_refused_not_chained_wrongly():
                 flux.patch_chains(mesh, xy, det, flux.opposite_facets(mesh))
         else:
             assert flux.patch_chains(mesh, xy, det, flux.opposite_facets(mesh)).starts.size == mesh.nvertices
+
+
+def test_chains_are_kept_for_the_last_mesh_only_and_equal_fresh_ones():
+    """The chain order and circulation weights (mesh only) are computed once per mesh and reused: a second call on
+    the same mesh returns the kept arrays (read-only), equal to fresh ones; another mesh replaces them; a collected
+    mesh takes them with it; the estimate is the same whether they were kept or computed afresh."""
+    import gc
+
+    result = cc.solve(hertz_punch(nx=8))
+    fem = result.fem
+    u, state = result.displacement / fem.scaling.displacement, contact_state(result)
+    flux._kept = (None, None)
+    fresh = flux.flux_estimate(fem, u, state)
+    chains, weights = flux._kept[1]
+    assert flux._kept[0]() is fem.mesh and not (chains.order.flags.writeable or weights.leaving.flags.writeable)
+    again = flux.flux_estimate(fem, u, state)  # from the kept chains
+    assert flux._kept[1][0] is chains and flux._kept[1][1] is weights and again.eta == fresh.eta
+    np.testing.assert_array_equal(again.indicators, fresh.indicators)
+    xy, det, _ = triangles(fem.mesh)
+    recomputed = flux.patch_chains(fem.mesh, xy, det, flux.opposite_facets(fem.mesh))
+    for name in ("order", "starts", "leaving", "entering", "first_facet", "last_facet"):
+        np.testing.assert_array_equal(getattr(chains, name), getattr(recomputed, name))
+    other = fe.MeshTri.init_sqsymmetric().refined(2)
+    xy, det, _ = triangles(other)
+    assert flux.mesh_chains(other, xy, det, flux.opposite_facets(other))[0].starts.size == other.nvertices
+    assert flux._kept[0]() is other
+    del other, xy, det
+    gc.collect()
+    assert flux._kept == (None, None)

@@ -37,6 +37,7 @@ What does not depend on the chains (σ_h, σ̂ at the vertices, the cell norms, 
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from types import SimpleNamespace
 
@@ -199,6 +200,17 @@ class Chains:
         return self.starts + self.lengths - 1
 
 
+def oriented(positive: np.ndarray, rows: np.ndarray, counterclockwise, clockwise) -> np.ndarray:
+    """(3, cells): row k is ``rows[counterclockwise[k]]`` on the cells numbered counterclockwise (``positive``), else
+    ``rows[clockwise[k]]``; written into one output (np.where of gathered rows made four fresh (3, cells) arrays,
+    each faulted in page by page on every call)."""
+    out = np.empty((3, rows.shape[1]), rows.dtype)
+    for k in range(3):
+        out[k] = rows[clockwise[k]]
+        np.copyto(out[k], rows[counterclockwise[k]], where=positive)
+    return out
+
+
 def patch_chains(mesh, xy: np.ndarray, det: np.ndarray, opposite: np.ndarray) -> Chains:
     """The chains of cells around the vertices (:class:`Chains`), sorted once by vertex and the angle of the cells'
     centroids around it (``opposite``: :func:`opposite_facets`). That consecutive corners of a chain share their
@@ -208,16 +220,18 @@ def patch_chains(mesh, xy: np.ndarray, det: np.ndarray, opposite: np.ndarray) ->
     # counterclockwise around its vertex k a cell enters through its facet (k, k+1), opposite k+2, and leaves through
     # (k, k+2), opposite k+1; the other way round on a cell numbered clockwise
     positive = det > 0
-    enters = np.where(positive, opposite[behind], opposite[ahead]).ravel()
-    leaves = np.where(positive, opposite[ahead], opposite[behind]).ravel()
+    enters = oriented(positive, opposite, behind, ahead).ravel()
+    leaves = oriented(positive, opposite, ahead, behind).ravel()
     outside = mesh.f2t[1] == -1
     begins = outside[enters]
     vertex = mesh.t.ravel()
     # a pseudo-angle of the direction from the vertex to the cell's centroid (increasing with the angle, in
     # [−1, 3); no arctan2), measured from a boundary vertex's first corner
     dx, dy = (xy.mean(axis=1)[:, None] - xy).reshape(2, -1)
-    ratio = dy / (np.abs(dx) + np.abs(dy))
-    angle = np.where(dx < 0, 2.0 - ratio, ratio)
+    angle = np.abs(dx)  # dy / (|dx| + |dy|), then 2 − that where dx < 0: in place, no fresh temporaries
+    angle += np.abs(dy)
+    np.divide(dy, angle, out=angle)
+    np.subtract(2.0, angle, out=angle, where=dx < 0)
     reference = np.zeros(mesh.nvertices)
     reference[vertex[begins]] = angle[begins]
     angle -= reference[vertex]  # in (−4, 4): mod 4 by adding 4 where negative (np.remainder costs 3× more)
@@ -238,8 +252,8 @@ def patch_chains(mesh, xy: np.ndarray, det: np.ndarray, opposite: np.ndarray) ->
     position[order] = np.arange(order.size)
     position = position.reshape(3, -1)
     # facet k is left by the cell's corner k+2 and entered by its corner k+1 (counterclockwise cells)
-    return Chains(order, starts, lengths, np.where(positive, position[behind], position[ahead]),
-                  np.where(positive, position[ahead], position[behind]), around[starts],
+    return Chains(order, starts, lengths, oriented(positive, position, behind, ahead),
+                  oriented(positive, position, ahead, behind), around[starts],
                   np.where(begins[order[starts]], into[starts], -1), np.where(outside[out_of[lasts]], out_of[lasts], -1))
 
 
@@ -379,8 +393,7 @@ def rt0_fluxes(fem, u_components, xy, det, gradients, body_force, opposite, face
     area = 0.5 * np.abs(det)
 
     def chain_order():
-        chains = patch_chains(mesh, xy, det, opposite)
-        return chains, circulation_weights(chains, xy, det)
+        return mesh_chains(mesh, xy, det, opposite)
 
     def patch_data():
         sigma_h = elastic_stress(fem, u_components, gradients)
@@ -401,6 +414,34 @@ def rt0_fluxes(fem, u_components, xy, det, gradients, body_force, opposite, face
     return sigma_h, np.stack(flux_correction.parallel(
         lambda i: row_fluxes(chains, weights, rhs[i], target[i], (first[0][i], first[1][i]), (last[0][i], last[1][i])),
         range(2), det.size))
+
+
+_kept = (None, None)  # (a weak reference to the last mesh asked, its chains and circulation weights)
+
+
+def mesh_chains(mesh, xy: np.ndarray, det: np.ndarray, opposite: np.ndarray) -> tuple[Chains, Circulation]:
+    """:func:`patch_chains` and :func:`circulation_weights` of ``mesh``, kept for the last mesh asked while it lives:
+    they depend on the mesh alone (its cells and coordinates, which scikit-fem meshes do not change in place), and
+    the cases of a parameter grid share one mesh (``studies.parameters.grid``: one assembly per group). One mesh
+    only, so the memory held is one mesh's (≈ 190 bytes per cell) and an adaptive loop does not accumulate them; the
+    arrays are read-only."""
+    global _kept
+    ref, value = _kept
+    if ref is not None and ref() is mesh:
+        return value
+    chains = patch_chains(mesh, xy, det, opposite)
+    value = (chains, circulation_weights(chains, xy, det))
+    for part in value:
+        for array in vars(part).values():
+            array.flags.writeable = False
+
+    def forget(dead):  # called with the weak reference when the mesh is collected: its chains go with it
+        global _kept
+        if _kept[0] is dead:
+            _kept = (None, None)
+
+    _kept = (weakref.ref(mesh, forget), value)
+    return value
 
 
 def equilibrium_defect(flux: np.ndarray, volume: np.ndarray, body_force: np.ndarray) -> float:
