@@ -280,7 +280,7 @@ def test_chains_are_kept_for_the_last_mesh_only_and_equal_fresh_ones():
     u, state = result.displacement / fem.scaling.displacement, contact_state(result)
     flux._kept = (None, None)
     fresh = flux.flux_estimate(fem, u, state)
-    chains, weights = flux._kept[1]
+    chains, weights, _ = flux._kept[1]
     assert flux._kept[0]() is fem.mesh and not (chains.order.flags.writeable or weights.leaving.flags.writeable)
     again = flux.flux_estimate(fem, u, state)  # from the kept chains
     assert flux._kept[1][0] is chains and flux._kept[1][1] is weights and again.eta == fresh.eta
@@ -291,8 +291,13 @@ def test_chains_are_kept_for_the_last_mesh_only_and_equal_fresh_ones():
         np.testing.assert_array_equal(getattr(chains, name), getattr(recomputed, name))
     other = fe.MeshTri.init_sqsymmetric().refined(2)
     xy, det, _ = triangles(other)
-    assert flux.mesh_chains(other, xy, det, flux.opposite_facets(other))[0].starts.size == other.nvertices
-    assert flux._kept[0]() is other
-    del other, xy, det
+    kept = flux.mesh_chains(other, xy, det, flux.opposite_facets(other))
+    assert kept[0].starts.size == other.nvertices and flux._kept[0]() is other
+    other.doflocs[0] *= 2.0  # the same mesh moved in place: its chains are computed afresh, not the kept ones read
+    xy, det, _ = triangles(other)
+    moved = flux.mesh_chains(other, xy, det, flux.opposite_facets(other))
+    assert moved[1] is not kept[1] and flux._kept[1][1] is moved[1]
+    assert not np.array_equal(moved[1].leaving, kept[1].leaving)
+    del other, xy, det, kept, moved
     gc.collect()
     assert flux._kept == (None, None)

@@ -416,22 +416,23 @@ def rt0_fluxes(fem, u_components, xy, det, gradients, body_force, opposite, face
         range(2), det.size))
 
 
-_kept = (None, None)  # (a weak reference to the last mesh asked, its chains and circulation weights)
+_kept = (None, None)  # (a weak reference to the last mesh asked, (its chains, circulation weights, corners))
 
 
 def mesh_chains(mesh, xy: np.ndarray, det: np.ndarray, opposite: np.ndarray) -> tuple[Chains, Circulation]:
     """:func:`patch_chains` and :func:`circulation_weights` of ``mesh``, kept for the last mesh asked while it lives:
-    they depend on the mesh alone (its cells and coordinates, which scikit-fem meshes do not change in place), and
-    the cases of a parameter grid share one mesh (``studies.parameters.grid``: one assembly per group). One mesh
-    only, so the memory held is one mesh's (≈ 190 bytes per cell) and an adaptive loop does not accumulate them; the
-    arrays are read-only."""
+    they depend on the mesh alone (its cells and coordinates), and the cases of a parameter grid share one mesh
+    (``studies.parameters.grid``: one assembly per group). Kept with the cells' corners ``xy`` they were computed
+    from, and computed afresh where those differ: a mesh's arrays may be changed in place (a deformed
+    configuration), and comparing them costs a pass over 6 numbers a cell. One mesh only, so the memory held is one
+    mesh's (≈ 240 bytes per cell) and an adaptive loop does not accumulate them; the arrays are read-only."""
     global _kept
     ref, value = _kept
-    if ref is not None and ref() is mesh:
-        return value
+    if ref is not None and ref() is mesh and np.array_equal(value[2], xy):
+        return value[:2]
     chains = patch_chains(mesh, xy, det, opposite)
-    value = (chains, circulation_weights(chains, xy, det))
-    for part in value:
+    value = (chains, circulation_weights(chains, xy, det), xy.copy())
+    for part in value[:2]:
         for array in vars(part).values():
             array.flags.writeable = False
 
@@ -441,7 +442,7 @@ def mesh_chains(mesh, xy: np.ndarray, det: np.ndarray, opposite: np.ndarray) -> 
             _kept = (None, None)
 
     _kept = (weakref.ref(mesh, forget), value)
-    return value
+    return value[:2]
 
 
 def equilibrium_defect(flux: np.ndarray, volume: np.ndarray, body_force: np.ndarray) -> float:
