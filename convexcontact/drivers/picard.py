@@ -81,7 +81,9 @@ far from the answer's), one Tresca solve with the slip bounds F G S λ_N of the 
 (:func:`tresca_start`) and Newton's Coulomb solve starts from its answer. Products with W (stick start + Tresca +
 Newton), Newton's Coulomb steps, forced matrix-free (docs/performance.md, "Coulomb's start on the pair"): the 2-D pair
 at 2·10⁴ DOFs (74 % outside) 45 + 208, 9 → 45 + 30 + 108, 7; at 10⁵ (66 %) 48 + 164, 6 → 47 + 36 + 46, 2. Not on the
-clamped and free strips (under 1 % outside): there the Tresca solve cost 21–30 products and saved none."""
+clamped and free strips (under 1 % outside): there the Tresca solve cost 21–30 products and saved none. Only where
+the balls are intervals (2-D): the 3-D pair of spheres at 10⁴ DOFs (every point outside) took 128 + 160, 9 from the
+stick start and 128 + 32 + 16,602, 13 from the Tresca answer."""
 STICK_RADIUS = np.sqrt(np.finfo(float).max)
 """The slip bound of the stick start: one no multiplier reaches (its square still finite)."""
 
@@ -353,8 +355,8 @@ def newton_session(model: Model, attempt: Attempt, opened, linear: sp.spmatrix):
 def stick_start(model: Model, newton, linear: sp.spmatrix) -> bool:
     """Seed ``newton`` with the stick start (STICK_START): its program's first Newton points with every ball unbounded,
     each point outside its Coulomb disc (radius F G S λ_N there) put on its edge, then, where most points were outside
-    (TRESCA_SLIP), the Tresca answer for those discs; whether it did (not where a point is not finite). The session's
-    program and preconditioner serve, and are left for Newton's solve."""
+    and the balls are intervals (TRESCA_SLIP), the Tresca answer for those discs; whether it did (not where a point is
+    not finite). The session's program and preconditioner serve, and are left for Newton's solve."""
     stuck = newton.trial(model.bound_update(np.full(model.friction.count, STICK_RADIUS))["b"], STICK_START)
     if not np.isfinite(stuck.x).all():
         return False
@@ -364,7 +366,7 @@ def stick_start(model: Model, newton, linear: sp.spmatrix) -> bool:
     outside = norms > radii
     x[balls[outside]] *= (radii[outside] / norms[outside])[:, None]
     newton.seed(replace(stuck, x=x))
-    if outside.mean() > TRESCA_SLIP:
+    if balls.shape[1] == 1 and outside.mean() > TRESCA_SLIP:
         tresca_start(model, newton, radii)
     return True
 
