@@ -17,6 +17,7 @@ from convexcontact.formulations.dual import normal_multipliers, stick_guess
 from convexcontact.scene.description import Coulomb, SceneError
 from convexcontact.scene.library import punch_3d, whole_face
 from convexcontact.solvers import newton_cg
+from convexcontact.studies.benchmarks.bench import two_body_scene
 
 
 def coulomb_like(rng, nodes: int, size: int, friction: float):
@@ -233,3 +234,31 @@ def test_a_sweep_s_next_coulomb_solve_starts_from_the_last_answer_not_a_stick_st
     second = model.with_law(Coulomb(friction=0.35)).solve()
     assert first.status == second.status == "solved" and second.certificate.worst <= 1e-8
     assert second.extra["history"][0]["coulomb_newton"] and len(trials) == 1
+
+
+def test_where_most_points_slip_at_the_stick_start_newton_starts_from_the_tresca_answer(monkeypatch):
+    """On the 2-D pair (W an operator) most points of the stick start lie outside their Coulomb discs (TRESCA_SLIP):
+    one Tresca solve follows, its slip bounds F·λ_N of the stick start's pressure (recomputed here from the start's
+    recovered pressure by the Picard map's own bound), and Newton's Coulomb solve from its answer takes fewer steps
+    than from the stick start (measured 4 → 2; docs/performance.md, "Coulomb's start on the pair")."""
+    bounds = []
+    tresca_start = picard.tresca_start
+    monkeypatch.setattr(picard, "tresca_start", lambda model, newton, radii: bounds.append(radii) or
+                        tresca_start(model, newton, radii))
+    scene = two_body_scene("coulomb", 3e3)
+
+    def newton_steps(model):
+        result = model.solve()
+        assert result.status == "solved" and result.certificate.worst <= 1e-10
+        assert result.extra["history"][0]["coulomb_newton"]
+        return len(result.extra["history"][0]["newton_residuals"]) - 1
+
+    model = cc.prepare(scene, "dual-matrix-free")
+    tresca = newton_steps(model)
+    assert len(bounds) == 1
+    stuck = newton_cg.Session(model.program).trial(
+        model.bound_update(np.full(model.friction.count, picard.STICK_RADIUS))["b"], picard.STICK_START)
+    bound, _, _ = picard.pressure_map(model)
+    np.testing.assert_allclose(bounds[0], bound(model.recover(stuck).pressure), rtol=1e-10, atol=1e-14)
+    monkeypatch.setattr(picard, "TRESCA_SLIP", 1.0)  # the stick start alone
+    assert tresca < newton_steps(cc.prepare(scene, "dual-matrix-free")) and len(bounds) == 1

@@ -75,6 +75,15 @@ tall block 10 + 126, 7 → 10 + 61, 5; flat block 9 + 44, 6 → 9 + 36, 5; the p
 106 + 156, 9; but the 2-D pair at 2·10⁴ 48 + 87, 6 → 46 + 117, 7. Not where W is a matrix: there the first point is
 no empty face's (FIRST_FORCING), and from the stick point the 3-D tall block at 2·10⁴ DOFs stalled after 5 Newton
 steps (the Picard map answered) where it takes 6 from the frictionless start."""
+TRESCA_SLIP = 0.5
+"""Where more than this fraction of the stick start's points lie outside their Coulomb disc (most slip: its point is
+far from the answer's), one Tresca solve with the slip bounds F G S λ_N of the stick start's pressure follows it
+(:func:`tresca_start`) and Newton's Coulomb solve starts from its answer. Products with W (stick start + Tresca +
+Newton), Newton's Coulomb steps, forced matrix-free (docs/performance.md, "Coulomb's start on the pair"): the 2-D pair
+at 2·10⁴ DOFs (74 % outside) 45 + 208, 9 → 45 + 30 + 108, 7; at 10⁵ (66 %) 48 + 164, 6 → 47 + 36 + 46, 2. Not on the
+clamped and free strips (under 1 % outside): there the Tresca solve cost 21–30 products and saved none. Only where
+the balls are intervals (2-D): the 3-D pair of spheres at 10⁴ DOFs (every point outside) took 128 + 160, 9 from the
+stick start and 128 + 32 + 16,602, 13 from the Tresca answer."""
 STICK_RADIUS = np.sqrt(np.finfo(float).max)
 """The slip bound of the stick start: one no multiplier reaches (its square still finite)."""
 
@@ -345,7 +354,8 @@ def newton_session(model: Model, attempt: Attempt, opened, linear: sp.spmatrix):
 
 def stick_start(model: Model, newton, linear: sp.spmatrix) -> bool:
     """Seed ``newton`` with the stick start (STICK_START): its program's first Newton points with every ball unbounded,
-    each point outside its Coulomb disc (radius F G S λ_N there) put on its edge; whether it did (not where a point is
+    each point outside its Coulomb disc (radius F G S λ_N there) put on its edge, then, where most points were outside
+    and the balls are intervals (TRESCA_SLIP), the Tresca answer for those discs; whether it did (not where a point is
     not finite). The session's program and preconditioner serve, and are left for Newton's solve."""
     stuck = newton.trial(model.bound_update(np.full(model.friction.count, STICK_RADIUS))["b"], STICK_START)
     if not np.isfinite(stuck.x).all():
@@ -356,7 +366,17 @@ def stick_start(model: Model, newton, linear: sp.spmatrix) -> bool:
     outside = norms > radii
     x[balls[outside]] *= (radii[outside] / norms[outside])[:, None]
     newton.seed(replace(stuck, x=x))
+    if balls.shape[1] == 1 and outside.mean() > TRESCA_SLIP:
+        tresca_start(model, newton, radii)
     return True
+
+
+def tresca_start(model: Model, newton, radii: np.ndarray):
+    """Solve, from the session's start, its program with the slip bounds ``radii`` (F G S λ_N of the start's
+    pressure; TRESCA_SLIP): its answer, if solved, becomes the start of Newton's Coulomb solve, whose coupling
+    replaces these bounds."""
+    newton.update(b=model.bound_update(radii)["b"])
+    newton.solve()
 
 
 def radius_coupling(model: Model, linear: sp.spmatrix) -> sp.csr_matrix:
