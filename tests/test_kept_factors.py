@@ -7,11 +7,10 @@ import scipy.sparse as sp
 
 import convexcontact as cc
 from convexcontact.fem import coarse
-from convexcontact.fem.factorization import factorize
 from convexcontact.scene.description import Tresca
 from convexcontact.scene.library import whole_face
 from convexcontact.solvers import newton_cg
-from convexcontact.studies.benchmarks.bench import law_of, scene_of
+from convexcontact.studies.benchmarks.bench import law_of
 from convexcontact.studies.benchmarks.shapes import shape_scene
 
 
@@ -157,62 +156,3 @@ def test_the_first_factorization_s_matrix_is_h_plus_the_contact_block_on_h_s_own
     np.testing.assert_allclose(total.toarray(), H.toarray() + A.toarray(), rtol=0, atol=1e-15)
     assert np.shares_memory(total.indices, H.indices) == inside
     assert total.nnz == H.nnz + (not inside)
-
-
-def test_pardiso_reports_a_dense_cholesky_s_fill_and_flops():
-    """The measures KEEP_COST reads (iparm[17], iparm[18]) on a dense SPD matrix: at least the n(n + 1)/2 nonzeros
-    of its Cholesky factor (PARDISO's supernodes store some more) and about n³/3 flops (closed forms; PARDISO
-    counts its own way, so within a factor 2)."""
-    n = 400
-    A = np.random.default_rng(0).standard_normal((n, n))
-    factors = factorize(sp.csr_matrix(A @ A.T + n * np.eye(n)), "pardiso")
-    assert n * (n + 1) // 2 <= factors.fill <= 1.25 * n * (n + 1) // 2
-    assert 0.5 * n**3 / 3 <= factors.flops <= 2 * n**3 / 3
-
-
-class _Factors:
-    def __init__(self, flops):
-        self.flops = flops
-
-
-@pytest.mark.parametrize("flops, fill, keeps", [(20.0 * 100, 100, True), (19.9 * 100, 100, False),
-                                                (None, 100, False), (1e9, None, False)])
-def test_the_factors_are_kept_on_grown_faces_where_a_refactorization_costs_keep_cost_products(flops, fill, keeps):
-    """KEEP_COST = 5 products, a product a solve with K's factors: 4 flops per nonzero; unknown: not kept."""
-    assert newton_cg.KEEP_COST == 5.0
-    assert newton_cg._dear(_Factors(flops), fill) is keeps
-
-
-def test_a_system_kept_for_its_cost_that_takes_more_than_keep_cost_iterations_ends_the_keeping(face):
-    """The decision's other side within a session: a grown face keeps the step's factors while kept systems take
-    at most KEEP_COST CG iterations, then refactorizes (a body that is its own approximation keeps them always)."""
-    program, sets, _ = face
-    n = program.n_variables
-    R = newton_cg._expansion(n, np.arange(n), sets.balls[:0], np.zeros((0, sets.balls.shape[1], 0)))
-    kept = preconditioner(face)
-    kept._keeps, kept._costly = False, True  # a slab whose refactorization is dear (the face is its own body)
-    kept.system(R, np.zeros(n))
-    kept.system(R, np.zeros(n), grown=True)
-    assert kept.kept and kept.factorizations == 1
-    kept.spent(int(newton_cg.KEEP_COST))
-    kept.system(R, np.zeros(n), grown=True)
-    assert kept.kept and kept.factorizations == 1
-    kept.spent(int(newton_cg.KEEP_COST) + 1)
-    kept.system(R, np.zeros(n), grown=True)
-    assert not kept.kept and kept.factorizations == 2
-
-
-@pytest.mark.parametrize("rule", [True, False])
-def test_the_pair_keeps_its_step_s_factors_on_grown_faces(monkeypatch, rule):
-    """The 2-D pair's Tresca dual, 2·10⁴ DOFs forced matrix-free: its slab's refactorization costs 9 products (flops),
-    so grown faces keep the step's factors: 4 Newton steps, 22 factorizations; refactorizing every face (the rule
-    forced off, as before it) 5 steps, 28 factorizations. Both certified."""
-    if not rule:
-        monkeypatch.setattr(newton_cg, "_dear", lambda factors, fill: False)
-    solves = []
-    solve = newton_cg.newton_cg
-    monkeypatch.setattr(newton_cg, "newton_cg", lambda *a, **k: solves.append(solve(*a, **k)) or solves[-1])
-    result = cc.prepare(scene_of("two-body", 2, "tresca", 2e4), "dual-matrix-free").solve()
-    assert result.certificate.worst <= 1e-10
-    [solution] = solves
-    assert (sum(solution.info["steps"].values()), solution.info["factorizations"]) == ((4, 22) if rule else (5, 28))

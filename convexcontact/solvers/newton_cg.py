@@ -235,8 +235,8 @@ numeric refactorization of H + Gᵀ D⁻¹ G, where that is K-sized: a body that
 DOFs (a plate 20 : 20 : 1: 9 refactorizations, 35 of the 53 s of its Tresca solve at 7.9·10⁴ DOFs; one costs 15–30
 solves with its factors, as many products with W). Not on a slab with coarse functions: its factorization costs a
 few products (2-D strip at 10⁵ DOFs: 0.053 s against 0.016 s for a solve with K), and keeping the factors there cost
-more products than it saved (the 2-D family at 2·10⁴ DOFs, Tresca: 7–45 % more; the pair 99 → 150), unless the
-slab's refactorization is dear (KEEP_COST, grown faces only). Two cases, each with a bound:
+more products than it saved (the 2-D family at 2·10⁴ DOFs, Tresca: 7–45 % more; the pair 99 → 150). Two cases, each
+with a bound:
 
 - the same face as the system factored (free variables, spheres, tangent bases) and D within a spread of REUSE
   (max over min of d/d_kept): the kept system's exact inverse then has its eigenvalues against this one's within
@@ -246,15 +246,6 @@ slab's refactorization is dear (KEEP_COST, grown faces only). Two cases, each wi
   by Cauchy–Schwarz), so the factors of H + G₀ᵀ D₀⁻¹ G₀ with this face's G and D are the exact inverse of D + G H′⁻¹ Gᵀ
   with H′ ⪰ H (Woodbury): SPD, its eigenvalues against the system's ≥ 1, those above 1 at most the rank of the terms
   removed."""
-KEEP_COST = 5.0
-"""Where the step's factors serve its grown faces (REUSE) on a slab with coarse functions too: where a numeric
-refactorization of H + Gᵀ D⁻¹ G costs KEEP_COST products with W or more, by PARDISO's flops for it against a solve's
-with K's factors (4 per nonzero: load-independent), and until a system kept so takes more than KEEP_COST CG
-iterations (then the session refactorizes again). Measured at 10⁵ DOFs (flops in products): the 2-D pair 8.8, the
-strips 1.1–3.2, the block 0.5: the pair keeps (Tresca forced matrix-free 5 / 110 / 33 → 3 / 85 / 22 Newton steps /
-products / factorizations, 2.8·10⁵ 5 / 152 / 45 → 4 / 121 / 31), the strips do not (kept, they took 32 → 46, 29 → 42,
-38 → 50 products). The 3-D flat block at 3·10⁴ DOFs (21 products) took 47 → 116 products kept throughout (its kept
-systems 7 → 16 CG iterations); stopped after its first, 53 (docs/performance.md, "The kept factors by their cost")."""
 KEPT_FORCING = 0.01
 """CG on a grown face preconditioned by the factors of the face it grew from (REUSE) stops at KEPT_FORCING × its first
 residual, not GROWN_FORCING: the exact inverse went well past GROWN_FORCING in its one or two iterations, and at
@@ -647,8 +638,6 @@ class _Preconditioner:
         self.kept = False  # whether the last system's are those of the face it grew from (see KEPT_FORCING)
         self._factorize = approximation.factorize
         self._keeps = approximation.slab in (None, self.H.shape[0])  # H is K on DOFs, no coarse functions: see REUSE
-        self._fill = approximation.fill  # nonzeros of K's factors: a product's cost (KEEP_COST)
-        self._costly = False  # whether a refactorization costs more than kept factors' products (KEEP_COST)
         if not self.exact:
             self.factors = self._factorize(_stored_sum(sp.csr_matrix(self.H),
                                                        self.G.T @ sp.diags(1.0 / self.shift) @ self.G))
@@ -668,7 +657,7 @@ class _Preconditioner:
             return lambda xi: R.T @ _woodbury(self.factors, self.G, self.shift, R @ xi)
         d = R.multiply(R).T @ self.shift + curvature  # a tangent coordinate's δ: its ball's, weighted by its basis
         G = sp.csr_matrix(R.T @ self.G)
-        self.kept = grown and self._grows and (self._keeps or self._costly)
+        self.kept = grown and self._grows and self._keeps
         if self.kept:  # H + Gᵀ D⁻¹ G of the face it grew from bounds this one's: see REUSE
             return lambda xi: _woodbury(self.factors, G, d, xi)
         kept = self._factored
@@ -680,26 +669,11 @@ class _Preconditioner:
         if self.factors is None:
             self.factors = self._factorize(_on_pattern(sp.csr_matrix(self.H), _with_pattern(contact, self._pattern)))
             self._pattern = None
-            self._costly = _dear(self.factors, self._fill)  # see KEEP_COST
         else:
             self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
         self.factorizations += 1
         self._factored, self._grows = (R, G, d), True
         return lambda xi: _woodbury(self.factors, G, d, xi)
-
-    def spent(self, iterations: int) -> None:
-        """CG's ``iterations`` on the last system: past KEEP_COST on a system kept for its cost, the kept factors
-        cost more products than a refactorization would have, and the session refactorizes again."""
-        if self.kept and not self._keeps and iterations > KEEP_COST:
-            self._costly = False
-
-
-def _dear(factors, fill: int | None) -> bool:
-    """Whether a refactorization of the preconditioner's ``factors`` costs KEEP_COST products with W or more: its
-    flops against a solve's with the factors of K, ``fill`` nonzeros (4 flops each: forward and back); False where
-    either is not known."""
-    flops = getattr(factors, "flops", None)
-    return fill is not None and flops is not None and flops >= KEEP_COST * 4 * fill
 
 
 def _face_signs(R: sp.csr_matrix, other: sp.csr_matrix) -> np.ndarray | None:
@@ -1010,8 +984,6 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
 
             relative = min(relative, KEPT_FORCING) if getattr(precondition, "kept", False) else relative
             xi, _ = spla.cg(H, rhs, rtol=relative, atol=target, maxiter=CG_LIMIT, M=M, callback=follow)
-            if precondition is not None:
-                precondition.spent(count[0])
             at_point = gradient
         else:
             xi, _ = spla.gmres(H, rhs, rtol=0.0, atol=target, restart=GMRES_RESTART,
