@@ -13,6 +13,7 @@ import dataclasses
 import itertools
 
 import numpy as np
+import pytest
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
@@ -155,3 +156,25 @@ def test_the_generator_covers_every_law():
 
     collect()
     assert seen == {"Signorini", "Tresca", "NormalCompliance", "Coulomb"}
+
+
+GAUSS_TRESCA_Q2 = cc.Scene(
+    name="fuzz", body=cc.Body(cc.Rectangle(width=50.0, height=25.0, nx=8, ny=4, origin=(-25.0, 0.0), refine_y="top"),
+                              "Q2"),
+    materials=cc.Material(1.0, 0.001), dirichlet=(cc.Dirichlet("top", ux=0.019140625, uy=0.0),),
+    contact=cc.Contact("bottom", cc.Obstacle("expression", expression="0.001 * x * x / 50 - 0.05"),
+                       cc.Tresca(slip_bound=0.0003828125, quadrature="gauss")))
+"""The long profile's find (2026-11-26): Q2, Tresca by Gauss points (57 dual rows, W of rank 34)."""
+
+
+@pytest.mark.xfail(strict=True, reason="open: OSQP's contact forces are 2.4e3 times its certificate off the answer")
+def test_osqp_forces_within_its_certificate_on_a_gauss_tresca_q2_block():
+    """OSQP's certified answer against newton-cg's (certificate 2e-15) on the long profile's find. Measured: OSQP's
+    forces 4.7e-5 off, its displacement 7.8e-6, its certificate 2.0e-8 (friction law), so 2.4e3 × its residual in
+    forces, beyond AGREEMENT; Clarabel's 1.7e-6 with 1.5e-8 (110 ×). W's range has a spread of 211 (eigenvalues
+    2.9e-4 to 0.061, 23 of its 57 zero), so that spread does not explain OSQP's 2.4e3; not yet understood."""
+    model = cc.prepare(GAUSS_TRESCA_Q2, "dual")
+    reference, answer = model.solve("newton-cg"), model.solve("osqp")
+    assert reference.certificate.worst < 1e-12 and answer.status == "solved"
+    error = np.abs(answer.contact.forces - reference.contact.forces).max() / np.abs(reference.contact.forces).max()
+    assert error <= AGREEMENT * answer.certificate.worst
