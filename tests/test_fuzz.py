@@ -13,7 +13,6 @@ import dataclasses
 import itertools
 
 import numpy as np
-import pytest
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 

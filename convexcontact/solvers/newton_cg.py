@@ -257,6 +257,18 @@ ROTATION = 0.3
 """Largest change of a tangent basis's entries (~ its angle) for which a Newton system is the same face as the one
 factored (REUSE)."""
 GMRES_RESTART = 50
+UPDATE_RANK = 64
+"""Largest number of rank-one terms g gᵀ/d (a free variable or tangent coordinate joining or leaving the face, or its
+d changing) by which a Newton system's H + Gᵀ D⁻¹ G may differ from the one factored and still be solved with those
+factors by Woodbury (:class:`_Updated`) instead of a numeric refactorization. The preconditioner stays exact (up to
+rounding), so the Newton path does not change, unlike a kept, inexact one (REUSE; ``keptrule`` in
+docs/performance.md: 6 → 8 Newton steps on the pair at 1.4·10⁶ DOFs). The pair at 2.8·10⁵ DOFs, Tresca: consecutive
+faces differ by 1–20 terms on 23 of its 44 refactorized systems (docs/performance.md, "The preconditioner updated by
+low rank"). Each CG iteration then also multiplies by Z (rank × H's size)."""
+UPDATE_SOLVES = 12
+"""Largest number of the update's terms not met since the factorization (each a solve with the factors, ≈ 7 ms on the
+pair at 2.8·10⁵ DOFs, against ≈ 0.1 s for a refactorization): a term met on an earlier face of the same factors keeps
+its solve."""
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 
 
@@ -416,6 +428,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         cache["precondition"] = approximation and _Preconditioner(approximation, sets.scale, sets.balls,
                                                                   SHIFT * _shifts(approximation, sets, curvature))
     factorized = getattr(cache["precondition"], "factorizations", 0)  # before this solve (info["factorizations"])
+    updated = getattr(cache["precondition"], "updates", 0)
     v = np.zeros(program.n_variables) if start is None else (start - sets.shift) / sets.scale
     if start is not None and sets.coupling is None:  # the last answer may be outside this program's sets (a Picard
         v = _project(v, sets)  # step's smaller radii), and the convergence argument needs v₀ in them
@@ -595,7 +608,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     x = sets.shift + sets.scale * v
     info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history,
             "steps": kinds, "descent": descent, "grown": faces[0],
-            "factorizations": getattr(cache["precondition"], "factorizations", 0) - factorized}
+            "factorizations": getattr(cache["precondition"], "factorizations", 0) - factorized,
+            "updates": getattr(cache["precondition"], "updates", 0) - updated}
     if sets.coupling is not None:  # the program of the radii reached: x is its answer
         b = program.b.copy()
         b[form.ball_radius_rows] = info["radii"] = sets.radii(v)
@@ -633,6 +647,8 @@ class _Preconditioner:
         self.shift = np.broadcast_to(np.asarray(shift, dtype=float), scale.shape)  # δ, one or per variable
         self.exact = balls.size > 0
         self.factorizations = 0  # of H + Gᵀ D⁻¹ G, the first included
+        self.updates = 0  # systems solved with the factors updated by low rank (UPDATE_RANK)
+        self._solved: dict = {}  # a term's key (_terms) -> M⁻¹uᵀ with the factors of now (see _updated)
         self._factored = None  # (R, G, d) of the system the factors are of (see system)
         self._grows = False  # whether the factors are of this Newton step's first face (see system)
         self.kept = False  # whether the last system's are those of the face it grew from (see KEPT_FORCING)
@@ -665,6 +681,10 @@ class _Preconditioner:
         if signs is not None and _ratio_spread(d, kept[2]) <= REUSE:
             self._grows = False
             return lambda xi: signs * _woodbury(self.factors, kept[1], kept[2], signs * xi)
+        updated = self._updated(R, d)
+        if updated is not None:
+            self._grows, self.updates = False, self.updates + 1  # the factors are not of this step's first face
+            return lambda xi: _woodbury(updated, G, d, xi)
         contact = G.T @ sp.diags(1.0 / d) @ G
         if self.factors is None:
             self.factors = self._factorize(_on_pattern(sp.csr_matrix(self.H), _with_pattern(contact, self._pattern)))
@@ -672,8 +692,53 @@ class _Preconditioner:
         else:
             self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
         self.factorizations += 1
-        self._factored, self._grows = (R, G, d), True
+        self._factored, self._grows, self._terms, self._solved = (R, G, d), True, _terms(R, d), {}
         return lambda xi: _woodbury(self.factors, G, d, xi)
+
+    def _updated(self, R: sp.csr_matrix, d: np.ndarray):
+        """The factors of H + Gᵀ D⁻¹ G for face R and D, from those factored, where the two differ by at most
+        UPDATE_RANK terms g gᵀ/d, at most UPDATE_SOLVES of them not met since the factorization; else None."""
+        if self._factored is None:
+            return None
+        terms, kept = _terms(R, d), self._terms
+        added, removed = terms.keys() - kept.keys(), kept.keys() - terms.keys()
+        new = [key for key in (*added, *removed) if key not in self._solved]
+        if len(added) + len(removed) > UPDATE_RANK or len(new) > UPDATE_SOLVES:
+            return None
+        if not added and not removed:
+            return self.factors
+        R_kept, _, d_kept = self._factored
+        U = sp.csr_matrix(sp.hstack([sp.csc_matrix(R)[:, [terms[k] for k in added]],
+                                     sp.csc_matrix(R_kept)[:, [kept[k] for k in removed]]]).T @ self.G)
+        if new:  # M⁻¹uᵀ of the terms not yet met, in one solve with multiple right-hand sides
+            rows = [i for i, key in enumerate((*added, *removed)) if key not in self._solved]
+            self._solved.update(zip(new, self.factors.solve(U[rows].T.toarray()).T))
+        Z = np.stack([self._solved[key] for key in (*added, *removed)], axis=1)
+        weights = np.concatenate([1.0 / d[[terms[k] for k in added]], -1.0 / d_kept[[kept[k] for k in removed]]])
+        return _Updated(self.factors, U, Z, weights)
+
+
+class _Updated:
+    """Solves with M + Uᵀ diag(w) U from M's ``factors`` and Z = M⁻¹Uᵀ (Woodbury): M⁻¹b − Z C⁻¹ U M⁻¹b with
+    C = diag(1/w) + U Z, small and dense. w < 0 (terms leaving the face) make C indefinite, not singular:
+    M + Uᵀ diag(w) U is a face's SPD matrix."""
+
+    def __init__(self, factors, U: sp.csr_matrix, Z: np.ndarray, weights: np.ndarray):
+        self._factors, self._U, self._Z = factors, U, Z
+        self._C = scipy.linalg.lu_factor(np.diag(1.0 / weights) + U @ Z)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        y = self._factors.solve(b)
+        return y - self._Z @ scipy.linalg.lu_solve(self._C, self._U @ y)
+
+
+def _terms(R: sp.csr_matrix, d: np.ndarray) -> dict:
+    """R's columns with their d, each as a key (its entries' bytes) to its index: the rank-one terms g gᵀ/d of the
+    face's Gᵀ D⁻¹ G, compared between faces by key (:meth:`_Preconditioner._updated`)."""
+    R = sp.csc_matrix(R)
+    R.sort_indices()
+    return {(R.indices[a:b].tobytes(), R.data[a:b].tobytes(), d[j].tobytes()): j
+            for j, (a, b) in enumerate(zip(R.indptr[:-1], R.indptr[1:]))}
 
 
 def _face_signs(R: sp.csr_matrix, other: sp.csr_matrix) -> np.ndarray | None:
