@@ -16,7 +16,7 @@ import functools
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg as la
@@ -119,6 +119,8 @@ class Factorization(ABC):
 
     backend: str
     timings: dict[str, float]
+    fill: int | None = None  # nonzeros of the factors, where the backend reports them (PARDISO)
+    flops: float | None = None  # of a numeric factorization, where the backend reports them (PARDISO)
     _block = BLOCK
 
     @abstractmethod
@@ -137,7 +139,7 @@ class Factorization(ABC):
         """W = B K⁻¹ Bᵀ as an operator, never formed (see :class:`Delassus`); with ``K``, it carries the
         approximation of W by the slab of K next to B's columns (and ``coarse`` functions beyond it, see
         :func:`slab`)."""
-        return Delassus(B, self.solve, None if K is None else slab(K, B, coarse))
+        return Delassus(B, self.solve, None if K is None else replace(slab(K, B, coarse), fill=self.fill))
 
 
 SLAB = 1 / 3
@@ -168,6 +170,7 @@ class Approximation:
     H: sp.csr_matrix
     factorize: Callable
     slab: int | None = None  # None: every row of H is a DOF's
+    fill: int | None = None  # nonzeros of K's factors, whose solve is one product with W (None: not known)
 
     @functools.cached_property
     def diagonal(self) -> np.ndarray:
@@ -285,6 +288,14 @@ class _Direct(Factorization):
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self._solve(b)
+
+    @property
+    def fill(self) -> int | None:
+        return None if self._factors is None else self._factors.fill
+
+    @property
+    def flops(self) -> float | None:
+        return None if self._factors is None else self._factors.flops
 
     def refactorize(self, K: sp.spmatrix, *more: sp.spmatrix) -> None:
         """Factorize new values, K (+ ``more``, summed), on the sparsity pattern of the first K (entries outside it:

@@ -124,6 +124,7 @@ class Pardiso:
                                iparm.ctypes.data_as(_ptr(_i32)))
         iparm[7] = 0  # pardisoinit asks for 2 refinement steps per solve: 3× the cost, 100× for partial solves
         iparm[34] = 1  # 0-based ia/ja
+        iparm[18] = -1  # report a numeric factorization's flops (flops)
         if mtype == SADDLE:
             iparm[9], iparm[10], iparm[12] = PERTURBATION, 0, 0
         if schur is not None:
@@ -158,6 +159,16 @@ class Pardiso:
             self._run(phase, block, out, block.shape[1])
             x[:, start:start + BLOCK] = out
         return x
+
+    @property
+    def fill(self) -> int:
+        """Nonzeros of the factors (iparm[17])."""
+        return int(self._handle[1][17])
+
+    @property
+    def flops(self) -> float:
+        """Floating-point operations of a numeric factorization (iparm[18], in millions)."""
+        return 1e6 * float(self._handle[1][18])
 
     def refactorize(self, *terms: sp.spmatrix) -> None:
         """New values, the sum of ``terms`` (one matrix, or a few whose sum is not formed: a preconditioner's K and its

@@ -640,7 +640,14 @@ class _Preconditioner:
     Measured on whole faces (contact solve, the other choice in brackets): 3-D Tresca 10.4 s (restriction first,
     exact after a step of more than 8 Krylov iterations: 12.8 s; the restriction alone left 24–36 iterations a
     step), 2-D Tresca 7.0 s (8.0 s); Signorini 3.6 s (3.9 s) in 2-D and 3.6 s (4.5 s) in 3-D, whose held variables
-    are only the open nodes."""
+    are only the open nodes.
+    With bounds alone, where a system's CG takes more iterations than a refactorization of H + Gᵀ D⁻¹ G costs
+    products with W (PARDISO's flops against a solve's with K's factors, :func:`_cost`), the session's later systems
+    get their faces' exact inverse instead, as with balls (:meth:`spent`). Measured on Signorini (docs/performance.md,
+    "Signorini's faces exact where the restriction costs more"), restricted against exact throughout: the 2-D pair at
+    1.4·10⁶ DOFs 6 Newton steps / 277 products against 3 / 96 with 14 refactorizations (contact solve 63 → 52 s);
+    the 3-D pair at 3·10⁵ 4 / 60 against 2 / 43 with 9 refactorizations of ~4 s (20 → 57 s); the clamped strip
+    100 : 1 at 10⁶ 40 products against 35 with 2 (5.1 → 10.6 s)."""
 
     def __init__(self, approximation, scale: np.ndarray, balls: np.ndarray, shift):
         self.G, self.H = sp.csr_matrix(sp.diags(scale) @ approximation.G), approximation.H
@@ -657,6 +664,7 @@ class _Preconditioner:
         if not self.exact:
             self.factors = self._factorize(_stored_sum(sp.csr_matrix(self.H),
                                                        self.G.T @ sp.diags(1.0 / self.shift) @ self.G))
+            self._cost = _cost(self.factors, getattr(approximation, "fill", None))  # see spent
             return
         # every R D⁻¹ Rᵀ is on E: the pattern they all fit, factorized at the first system with its values (one
         # numeric factorization fewer than ordering it here with D = δ: the first system then refactorized at once)
@@ -695,6 +703,15 @@ class _Preconditioner:
         self._factored, self._grows, self._terms, self._solved = (R, G, d), True, _terms(R, d), {}
         return lambda xi: _woodbury(self.factors, G, d, xi)
 
+    def spent(self, iterations: int) -> None:
+        """CG's ``iterations`` on the last system: with bounds alone, past a refactorization's cost in products, the
+        session's later systems get their faces' exact inverse, starting from the factors it has: those of the face
+        with every variable free."""
+        if not self.exact and self._cost is not None and iterations > self._cost:
+            n = self.shift.size
+            self.exact, self._grows, self._solved = True, False, {}
+            self._factored, self._terms = (sp.eye(n, format="csr"), self.G, self.shift), _terms(sp.eye(n), self.shift)
+
     def _updated(self, R: sp.csr_matrix, d: np.ndarray):
         """The factors of H + Gᵀ D⁻¹ G for face R and D, from those factored, where the two differ by at most
         UPDATE_RANK terms g gᵀ/d, at most UPDATE_SOLVES of them not met since the factorization; else None."""
@@ -716,6 +733,13 @@ class _Preconditioner:
         Z = np.stack([self._solved[key] for key in (*added, *removed)], axis=1)
         weights = np.concatenate([1.0 / d[[terms[k] for k in added]], -1.0 / d_kept[[kept[k] for k in removed]]])
         return _Updated(self.factors, U, Z, weights)
+
+
+def _cost(factors, fill: int | None) -> float | None:
+    """A numeric refactorization of ``factors`` in products with W: its flops against a solve's with K's factors,
+    ``fill`` nonzeros (4 flops each: forward and back); None where either is not known (SuperLU)."""
+    flops = getattr(factors, "flops", None)
+    return None if fill is None or not flops else flops / (4 * fill)
 
 
 class _Updated:
@@ -1050,6 +1074,8 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
             relative = min(relative, KEPT_FORCING) if getattr(precondition, "kept", False) else relative
             xi, _ = spla.cg(H, rhs, rtol=relative, atol=target, maxiter=CG_LIMIT, M=M, callback=follow)
             at_point = gradient
+            if precondition is not None:
+                precondition.spent(count[0])
         else:
             xi, _ = spla.gmres(H, rhs, rtol=0.0, atol=target, restart=GMRES_RESTART,
                                maxiter=CG_LIMIT // GMRES_RESTART, M=M, callback=callback, callback_type="pr_norm")

@@ -1,5 +1,7 @@
-"""A Newton system's preconditioner from the factors of an earlier face, updated by low rank (solvers/newton_cg.py,
-UPDATE_RANK): exact up to rounding, so the Newton path is the one of a refactorization at every face."""
+"""The Newton systems' preconditioner (solvers/newton_cg.py, _Preconditioner): a face's exact inverse from the factors
+of an earlier face updated by low rank (UPDATE_RANK), exact up to rounding, so the Newton path is the one of a
+refactorization at every face; and with bounds alone, the faces' exact inverse once the restriction's CG costs more
+than a refactorization (_Preconditioner.spent)."""
 
 import numpy as np
 import pytest
@@ -7,6 +9,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import convexcontact as cc
+from convexcontact.fem import factorization
 from convexcontact.fem.factorization import factorize
 from convexcontact.solvers import newton_cg
 from convexcontact.studies.benchmarks.bench import scene_of
@@ -59,3 +62,34 @@ def test_the_pair_s_path_is_the_refactorized_one(pair, monkeypatch):
     assert result.certificate.worst <= 1e-10
     scale = np.abs(fresh.contact.forces).max()
     assert np.abs(result.contact.forces - fresh.contact.forces).max() <= 1e-9 * scale
+
+
+def signorini(shape, dim, size, restricted, monkeypatch):
+    """Newton's info on the Signorini dual of a bench shape forced matrix-free; ``restricted``: the restriction
+    throughout, as before the switch."""
+    if restricted:
+        monkeypatch.setattr(newton_cg._Preconditioner, "spent", lambda self, iterations: None)
+    solves, costs = [], []
+    solve, spent = newton_cg.newton_cg, newton_cg._Preconditioner.spent
+    monkeypatch.setattr(newton_cg, "newton_cg", lambda *a, **k: solves.append(solve(*a, **k)) or solves[-1])
+    monkeypatch.setattr(newton_cg._Preconditioner, "spent",
+                        lambda self, iterations: costs.append(self._cost) or spent(self, iterations))
+    result = cc.prepare(scene_of(shape, dim, "signorini", size), "dual-matrix-free").solve()
+    monkeypatch.undo()
+    [solution] = solves
+    assert result.certificate.worst <= 1e-10
+    return solution.info, costs[0] if costs else None
+
+
+@pytest.mark.skipif(factorization._pardiso() is None, reason="the costs come from PARDISO's flops")
+def test_signorini_faces_exact_where_the_restriction_costs_more(monkeypatch):
+    """The 2-D pair (2·10⁴ DOFs): a refactorization costs ~8 products, the restriction's first system more CG
+    iterations than that, so the session switches: fewer products (and Newton steps no more). The 3-D pair (10⁴
+    DOFs): a refactorization costs ~37 products, more than any system's CG, so nothing changes."""
+    before, _ = signorini("two-body", 2, 2e4, True, monkeypatch)
+    after, cost = signorini("two-body", 2, 2e4, False, monkeypatch)
+    assert 1 < cost < 20 and after["products"] < before["products"]
+    assert sum(after["steps"].values()) <= sum(before["steps"].values())
+    before, _ = signorini("two-body", 3, 1e4, True, monkeypatch)
+    after, cost = signorini("two-body", 3, 1e4, False, monkeypatch)
+    assert cost > 20 and after["products"] == before["products"] and after["factorizations"] == 0
