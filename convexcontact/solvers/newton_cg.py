@@ -644,10 +644,11 @@ class _Preconditioner:
     With bounds alone, where a system's CG takes more iterations than a refactorization of H + Gᵀ D⁻¹ G costs
     products with W (PARDISO's flops against a solve's with K's factors, :func:`_cost`), the session's later systems
     get their faces' exact inverse instead, as with balls (:meth:`spent`). Measured on Signorini (docs/performance.md,
-    "Signorini's faces exact where the restriction costs more"), restricted against exact throughout: the 2-D pair at
-    1.4·10⁶ DOFs 6 Newton steps / 277 products against 3 / 96 with 14 refactorizations (contact solve 63 → 52 s);
-    the 3-D pair at 3·10⁵ 4 / 60 against 2 / 43 with 9 refactorizations of ~4 s (20 → 57 s); the clamped strip
-    100 : 1 at 10⁶ 40 products against 35 with 2 (5.1 → 10.6 s)."""
+    "Signorini's faces exact where the restriction costs more"): the 2-D pair at 1.4·10⁶ DOFs (a refactorization
+    7.7 products) restricted 6 Newton steps / 277 products, switched after its first system 3 / 96 with 13
+    refactorizations; the 2-D family switches at 10⁵ (0.4–3.2 products) with the same or fewer products; the 3-D rows
+    (10–140 products) do not switch: exact throughout, the 3-D pair at 3·10⁵ took 2 / 43 against 4 / 60 but 9
+    refactorizations of ~4 s (contact solve 20 → 57 s)."""
 
     def __init__(self, approximation, scale: np.ndarray, balls: np.ndarray, shift):
         self.G, self.H = sp.csr_matrix(sp.diags(scale) @ approximation.G), approximation.H
