@@ -196,8 +196,8 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None, whole: 
     CG needs fewer iterations still; only beyond a slab of COARSE_LAYERS layers or more. Functions that leave that
     K singular (dependent on the rest) are dropped.
 
-    A body too thin for COARSE_LAYERS layers is its own approximation (G = B, H = K: exact, one more factorization
-    of K's size). A strip clamped at its ends has W's long waves from beam bending, which neither a clamped slab nor
+    A body too thin for COARSE_LAYERS layers is its own approximation (G = B, H = K: exact, one more numeric
+    factorization of K's size, on K's own analysis where ``whole`` is K's factors' twin). A strip clamped at its ends has W's long waves from beam bending, which neither a clamped slab nor
     grid functions beyond it have (aspect 100, 5 cells high: W's first bending mode 4·10⁴ times the slab's); its
     Signorini dual at aspect 400 (2.4·10⁴ DOFs) took 17,006 CG iterations with the 1-layer slab, 1694 with coarse
     functions beyond it, 22 with the whole strip (docs/performance.md, "Shapes"). ``whole`` factorizes the
