@@ -196,12 +196,13 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None, whole: 
     CG needs fewer iterations still; only beyond a slab of COARSE_LAYERS layers or more. Functions that leave that
     K singular (dependent on the rest) are dropped.
 
-    A body too thin for COARSE_LAYERS layers is its own approximation (G = B, H = K: exact, one more numeric
-    factorization of K's size, on K's own analysis where ``whole`` is K's factors' twin). A strip clamped at its ends has W's long waves from beam bending, which neither a clamped slab nor
-    grid functions beyond it have (aspect 100, 5 cells high: W's first bending mode 4·10⁴ times the slab's); its
-    Signorini dual at aspect 400 (2.4·10⁴ DOFs) took 17,006 CG iterations with the 1-layer slab, 1694 with coarse
-    functions beyond it, 22 with the whole strip (docs/performance.md, "Shapes"). ``whole`` factorizes the
-    approximation where it is the whole body (K's factors' :meth:`Factorization.twin`), else :func:`factorize`."""
+    A body too thin for COARSE_LAYERS layers is its own approximation (G = B, H = K: exact, one more factorization
+    of K's size, by ``whole``). A strip clamped at its ends has W's long waves from beam bending, which neither a
+    clamped slab nor grid functions beyond it have (aspect 100, 5 cells high: W's first bending mode 4·10⁴ times the
+    slab's); its Signorini dual at aspect 400 (2.4·10⁴ DOFs) took 17,006 CG iterations with the 1-layer slab, 1694
+    with coarse functions beyond it, 22 with the whole strip (docs/performance.md, "Shapes"). ``whole`` factorizes the
+    approximation where it is the whole body (K's factors' :meth:`Factorization.twin`: numeric only, on K's own
+    analysis), else :func:`factorize`."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
     graph = sp.csr_matrix(((K.data != 0).astype(np.int32), K.indices, K.indptr), shape=K.shape)  # int8 sums of
     # neighbours overflow; K's own indices, a stored zero a 0 (abs(K) > 0 copied K twice: a thin body's peak)
