@@ -136,10 +136,14 @@ class Factorization(ABC):
         return 0.5 * (W + W.T)
 
     def delassus(self, B: sp.spmatrix, K: sp.spmatrix | None = None, coarse: Callable | None = None) -> Delassus:
-        """W = B K⁻¹ Bᵀ as an operator, never formed (see :class:`Delassus`); with ``K``, it carries the
-        approximation of W by the slab of K next to B's columns (and ``coarse`` functions beyond it, see
-        :func:`slab`)."""
-        return Delassus(B, self.solve, None if K is None else replace(slab(K, B, coarse), fill=self.fill))
+        """W = B K⁻¹ Bᵀ as an operator, never formed (see :class:`Delassus`); with ``K`` (the matrix factorized), it
+        carries the approximation of W by the slab of K next to B's columns (and ``coarse`` functions beyond it, see
+        :func:`slab`); where that is the whole body, its matrices are factorized by :meth:`twin`."""
+        return Delassus(B, self.solve, None if K is None else replace(slab(K, B, coarse, self.twin), fill=self.fill))
+
+    def twin(self, A: sp.spmatrix) -> Factorization:
+        """Factors of A, a matrix on (part of) K's pattern."""
+        return factorize(A, self.backend)
 
 
 SLAB = 1 / 3
@@ -184,7 +188,7 @@ class Approximation:
         return local_diagonal(self.H[:slab, :slab], self.G[:, :slab])
 
 
-def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Approximation:
+def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None, whole: Callable | None = None) -> Approximation:
     """K on the DOFs within a few layers of B's columns (the rest clamped), and B on them: the same Delassus
     operator for a thin body, which has the contact face's short waves right (they decay within a few
     layers) and only its long ones wrong; as a preconditioner it leaves CG few iterations.
@@ -196,10 +200,12 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Appr
     K singular (dependent on the rest) are dropped.
 
     A body too thin for COARSE_LAYERS layers is its own approximation (G = B, H = K: exact, one more factorization
-    of K's size). A strip clamped at its ends has W's long waves from beam bending, which neither a clamped slab nor
-    grid functions beyond it have (aspect 100, 5 cells high: W's first bending mode 4·10⁴ times the slab's); its
-    Signorini dual at aspect 400 (2.4·10⁴ DOFs) took 17,006 CG iterations with the 1-layer slab, 1694 with coarse
-    functions beyond it, 22 with the whole strip (docs/performance.md, "Shapes")."""
+    of K's size, by ``whole``). A strip clamped at its ends has W's long waves from beam bending, which neither a
+    clamped slab nor grid functions beyond it have (aspect 100, 5 cells high: W's first bending mode 4·10⁴ times the
+    slab's); its Signorini dual at aspect 400 (2.4·10⁴ DOFs) took 17,006 CG iterations with the 1-layer slab, 1694
+    with coarse functions beyond it, 22 with the whole strip (docs/performance.md, "Shapes"). ``whole`` factorizes the
+    approximation where it is the whole body (K's factors' :meth:`Factorization.twin`: numeric only, on K's own
+    analysis), else :func:`factorize`."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
     graph = sp.csr_matrix(((K.data != 0).astype(np.int32), K.indices, K.indptr), shape=K.shape)  # int8 sums of
     # neighbours overflow; K's own indices, a stored zero a 0 (abs(K) > 0 copied K twice: a thin body's peak)
@@ -217,7 +223,7 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None) -> Appr
         inside[:] = True
     index = np.flatnonzero(inside)
     if inside.all():  # the whole body: K itself, not a copy
-        return Approximation(B, K, factorize, index.size)
+        return Approximation(B, K, whole or factorize, index.size)
     rows = K[index]
     G, H = B[:, index], rows[:, index]
     far = None if coarse is None or layers < COARSE_LAYERS else coarse(inside, contact)
@@ -296,6 +302,22 @@ class _Direct(Factorization):
     @property
     def flops(self) -> float | None:
         return None if self._factors is None else self._factors.flops
+
+    def twin(self, A: sp.spmatrix) -> Factorization:
+        """Factors of A, a matrix on (part of) K's pattern (the preconditioner of a body that is its own
+        approximation: K + a contact block within K's node blocks): with PARDISO a second numeric factorization on
+        K's analysis (:meth:`~convexcontact.fem.pardiso.Pardiso.twin`: no second ordering, nor its memory); else,
+        or where A has entries outside K's pattern or PARDISO holds its most factorizations, factors of its own."""
+        try:
+            factors = self._factors and self._factors.twin(A)
+        except ValueError:  # outside K's pattern
+            factors = None
+        if not factors:
+            return factorize(A, self.backend, self._dim)
+        twin = object.__new__(_Direct)
+        twin.backend, twin._dim, twin._factors, twin._block = self.backend, self._dim, factors, self._block
+        twin._solve, twin.timings = factors.solve, {}
+        return twin
 
     def refactorize(self, K: sp.spmatrix, *more: sp.spmatrix) -> None:
         """Factorize new values, K (+ ``more``, summed), on the sparsity pattern of the first K (entries outside it:
