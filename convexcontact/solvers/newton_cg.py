@@ -731,7 +731,8 @@ class _Preconditioner:
         if new:  # M⁻¹uᵀ of the terms not yet met, in one solve with multiple right-hand sides
             rows = [i for i, key in enumerate((*added, *removed)) if key not in self._solved]
             self._solved.update(zip(new, self.factors.solve(U[rows].T.toarray()).T))
-        Z = np.stack([self._solved[key] for key in (*added, *removed)], axis=1)
+        self._solved = {key: self._solved[key] for key in (*added, *removed)}  # at most UPDATE_RANK held
+        Z = np.stack(list(self._solved.values()), axis=1)
         weights = np.concatenate([1.0 / d[[terms[k] for k in added]], -1.0 / d_kept[[kept[k] for k in removed]]])
         return _Updated(self.factors, U, Z, weights)
 
