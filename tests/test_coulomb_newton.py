@@ -262,3 +262,21 @@ def test_where_most_points_slip_at_the_stick_start_newton_starts_from_the_tresca
     np.testing.assert_allclose(bounds[0], bound(model.recover(stuck).pressure), rtol=1e-10, atol=1e-14)
     monkeypatch.setattr(picard, "TRESCA_SLIP", 1.0)  # the stick start alone
     assert tresca < newton_steps(cc.prepare(scene, "dual-matrix-free")) and len(bounds) == 1
+
+
+def test_a_stall_is_left_by_the_fixed_point_map_s_step(monkeypatch):
+    """Discs, F = 4 (seed 6): Newton on the Coulomb problem stalls at a natural residual of 2.6e-3 where no step may
+    raise it (FIXED_STEPS = 0); one step to the Tresca answer under the radii reached (Picard's, from there) gets it
+    past, and its answer is the Tresca answer for the radii it reached (Clarabel, an independent solve). The 3-D tall
+    block stalled so only at 3.2·10⁵ DOFs (not at 3·10⁴ or 10⁵): this program stands in for it."""
+    program, coupling = coulomb_like(np.random.default_rng(6), 12, 2, 4.0)
+    monkeypatch.setattr(newton_cg, "FIXED_STEPS", 0)
+    stalled = newton_cg.coupled(program, coupling, None)
+    assert stalled.solver_status == "stalled" and stalled.info["natural_residual"] > 1e-4
+    monkeypatch.setattr(newton_cg, "FIXED_STEPS", 3)
+    answer = newton_cg.coupled(program, coupling, None)
+    assert answer.status == "solved" and answer.info["fixed_steps"] == 1
+    b = program.b.copy()
+    b[12 + np.arange(12) * 3] = answer.info["radii"]
+    tresca = solvers.solve(dataclasses.replace(program, b=b), "clarabel", tol=1e-12)
+    assert np.abs(tresca.x - answer.x).max() < 1e-8 * np.abs(answer.x).max()

@@ -256,7 +256,19 @@ and they took 3 Newton steps instead of 2 (0.01: 2 steps, 32–33 products; 0.00
 ROTATION = 0.3
 """Largest change of a tangent basis's entries (~ its angle) for which a Newton system is the same face as the one
 factored (REUSE)."""
+FIXED_STEPS = 3
+"""Where radii move and no step lowers the natural residual (a stall), at most FIXED_STEPS times the step to the answer
+of the program whose radii are fixed at v's (the fixed-point map x ↦ that answer: Picard's, from v) is taken, whether
+or not it lowers the residual: finitely many such steps, so the monotone rule holds from the last of them on, and
+Newton's point stays a trial. The 3-D tall block at 3.2·10⁵ DOFs (matrix-free) stalled after 3 steps at 2.1e-3, the
+residual's ∞-norm refusing every point, and the Picard map ran (9 Tresca solves, 479 products with W, certificate
+9.7e-10); the Tresca answer under v's radii raised it to 8.2e-3 (so a monotone test refused it too), and from there 4
+Newton steps reached 3e-16: 212 products, certificate 9e-15 (docs/performance.md, "The 3-D tall block's Coulomb
+stall")."""
+FIXED_FORCING = 1e-3
+"""The fixed-point step's solve stops at FIXED_FORCING × the natural residual it starts from (or tol)."""
 GMRES_RESTART = 50
+"""Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
 UPDATE_RANK = 64
 """Largest number of rank-one terms g gᵀ/d (a free variable or tangent coordinate joining or leaving the face, or its
 d changing) by which a Newton system's H + Gᵀ D⁻¹ G may differ from the one factored and still be solved with those
@@ -267,9 +279,7 @@ faces differ by 1–20 terms on 23 of its 44 refactorized systems (docs/performa
 low rank"). Each CG iteration then also multiplies by Z (rank × H's size)."""
 UPDATE_SOLVES = 12
 """Largest number of the update's terms not met since the factorization (each a solve with the factors, ≈ 7 ms on the
-pair at 2.8·10⁵ DOFs, against ≈ 0.1 s for a refactorization): a term met on an earlier face of the same factors keeps
-its solve."""
-"""Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
+pair at 2.8·10⁵ DOFs, against ≈ 0.1 s for a refactorization): a term of the last update keeps its solve."""
 
 
 def check_settings(names) -> None:
@@ -377,7 +387,8 @@ def coupled(program: ConicProgram, coupling: sp.spmatrix, start: np.ndarray, tol
     """Newton's method from ``start`` on the program whose ball radii move with x: ‖v_k‖ ≤ (coupling x)_k,
     a quasi-variational inequality (no f is minimized: the Newton system is not symmetric, GMRES solves it,
     and a step is taken where it lowers the natural residual: Newton's point, else the point on the face grown by the
-    sets it leaves (GROW_MOVING), else a point towards Newton's or the projected gradient's). ``coupling`` (balls × variables) may not involve the balls' own variables. The answer is that
+    sets it leaves (GROW_MOVING), else a point towards Newton's or the projected gradient's, else the fixed-point
+    map's step, FIXED_STEPS). ``coupling`` (balls × variables) may not involve the balls' own variables. The answer is that
     of the program whose radius rows hold the radii it reached (also ``info["radii"]``); "failed" (solver
     status "stalled") where no step lowers the residual: without a convexity argument Newton's method is local,
     so start near the answer (a fixed point of x ↦ the program's answer with radii coupling x)."""
@@ -546,6 +557,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     risen, kinds, descent = 0.0, dict.fromkeys(("residual", "segment", "arc", "gradient"), 0), []
     steps = cg_total = 0
     faces = [0]  # the faces grown (see GROW)
+    fixed_steps = 0  # the fixed-point map's steps taken where radii move (see FIXED_STEPS)
     damping = 0.0  # μ of the Newton systems (see DAMPING)
     status, word = "failed", "max_iter"
     floor = SUM_FLOOR * EPS * (c * np.abs(sets.scale * program.q)).max(initial=0.0)
@@ -590,6 +602,17 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             if not moved and inert is not None:  # the inert sets' rounding may be what stalls it: see INERT
                 (metric, proximal), inert = inert, None
                 continue
+            if not moved and fixed_steps < FIXED_STEPS:  # the fixed-point map's step (see FIXED_STEPS)
+                fixed_steps += 1
+                b = program.b.copy()
+                b[form.ball_radius_rows] = sets.radii(v)
+                fixed = newton_cg(program.updated(b=b), form, sets.shift + sets.scale * v, max(tol, FIXED_FORCING *
+                                  residual), max_iter, verbose, None, cache)
+                products[0] += fixed.info["products"]
+                cg_total += fixed.info["cg_iterations"]
+                if fixed.solved:
+                    v = (fixed.x - sets.shift) / sets.scale
+                    g, moved = gradient(v), True
             if not moved:
                 word = "stalled"
                 break
@@ -607,7 +630,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         descent.append((kind, change, cauchy))
     x = sets.shift + sets.scale * v
     info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history,
-            "steps": kinds, "descent": descent, "grown": faces[0],
+            "steps": kinds, "descent": descent, "grown": faces[0], "fixed_steps": fixed_steps,
             "factorizations": getattr(cache["precondition"], "factorizations", 0) - factorized,
             "updates": getattr(cache["precondition"], "updates", 0) - updated}
     if sets.coupling is not None:  # the program of the radii reached: x is its answer
