@@ -20,6 +20,7 @@ import convexcontact as cc
 from convexcontact import solvers
 from convexcontact.results.certificate import certify
 from convexcontact.scene.description import Box
+from convexcontact.solvers.cone_polish import bound_form
 
 AGREEMENT = 1e3
 """How far two certified answers may differ, in units of their worst residuals: a residual r bounds the
@@ -114,7 +115,12 @@ def test_certified_answers_agree(scene):
         f_scale = max(np.abs(ra.contact.forces).max(), np.abs(rb.contact.forces).max(), scaling.force * weight)
         du = np.abs(ra.displacement - rb.displacement).max() / u_scale
         df = np.abs(ra.contact.forces - rb.contact.forces).max() / f_scale
-        assert du <= allowed and df <= allowed, (a, b, du, df, allowed)
+        forces = allowed
+        if any("friction_at_points" in r.not_unique for r in (ra, rb)):  # see the Gauss-point Tresca block below
+            sigma = faces_conditioning(scene)[1]
+            forces = allowed if sigma is None else max(allowed, (ra.certificate.worst + rb.certificate.worst)
+                                                       / np.sqrt(sigma))
+        assert du <= allowed and df <= forces, (a, b, du, df, allowed, forces)
 
 
 @given(scenes(), st.sampled_from(["u", "pressure", "friction"]), st.floats(1e-7, 1e-3), st.randoms())
@@ -166,6 +172,27 @@ GAUSS_TRESCA_Q2 = cc.Scene(
 """The long profile's find (2026-11-26): Q2, Tresca by Gauss points (57 dual rows, W of rank 34)."""
 
 
+def faces_conditioning(scene: cc.Scene) -> tuple[float, float | None]:
+    """Relative to W's largest eigenvalue: the smallest of W's block on the free variables of newton-cg's answer to
+    the scene's dual, and the smallest over that block with one degenerate set added (held at its bound or sphere
+    with a slip below 1e-6 of the largest), None where there is none. A residual r bounds the nodal forces' error
+    by about r / √σ (in energy), σ the smallest eigenvalue of the face a solver's point sits on."""
+    program = cc.prepare(scene, "dual").program
+    form, x = bound_form(program), solvers.solve(program, "newton-cg").x
+    W = program.P.toarray()
+    slip, largest = np.abs(W @ x + program.q), np.linalg.eigvalsh(W)[-1]
+    free = np.ones(x.size, bool)
+    free[form.bound_vars] = x[form.bound_vars] > 0
+    sphere = np.linalg.norm(x[form.ball_vars], axis=1) >= program.b[form.ball_radius_rows] * (1 - 1e-9)
+    free[form.ball_vars[sphere].ravel()] = False
+    small = 1e-6 * slip.max()
+    degenerate = [[j] for j in form.bound_vars if not free[j] and slip[j] < small] + [
+        list(ball) for ball in form.ball_vars[sphere] if np.linalg.norm(slip[ball]) < small]
+    smallest = lambda rows: np.linalg.eigvalsh(W[np.ix_(rows, rows)])[0] / largest
+    own = np.flatnonzero(free)
+    return smallest(own), min((smallest(np.append(own, rows)) for rows in degenerate), default=None)
+
+
 def test_forces_within_the_adjacent_faces_conditioning_on_a_degenerate_gauss_tresca_q2_block():
     """The long profile's find, explained: AGREEMENT assumes a moderate κ, and this answer's κ is not.
 
@@ -177,19 +204,11 @@ def test_forces_within_the_adjacent_faces_conditioning_on_a_degenerate_gauss_tre
     OSQP's 2.4e3 × its certificate (Clarabel's 110 ×) lies within it, and beyond AGREEMENT (measured 2026-11-26,
     docs/certificate.md)."""
     model = cc.prepare(GAUSS_TRESCA_Q2, "dual")
-    program, reference = model.program, model.solve("newton-cg")
-    m = next(cone.dim for cone in program.cones if cone.kind == "nonnegative")  # the normal multipliers
+    reference = model.solve("newton-cg")
     assert reference.certificate.worst < 1e-12 and "friction_at_points" in reference.not_unique
-    x = solvers.solve(program, "newton-cg").x
-    W, bound = program.P.toarray(), program.b.max()  # the one slip bound, scaled; the other b rows are 0
-    slip = W @ x + program.q
-    free = np.concatenate([x[:m] > 0, np.abs(x[m:]) < bound * (1 - 1e-9)])
-    degenerate = np.flatnonzero(~free & (np.abs(slip) < 1e-6 * np.abs(slip).max()))
-    largest = np.linalg.eigvalsh(W)[-1]
-    assert np.linalg.eigvalsh(W[np.ix_(free, free)])[0] / largest > 1e-4  # the answer's own face: well conditioned
-    sigma = min(np.linalg.eigvalsh(W[np.ix_(rows, rows)])[0] / largest
-                for rows in (np.append(np.flatnonzero(free), i) for i in degenerate))
-    assert degenerate.size and sigma < 1e-6 / AGREEMENT  # the adjacent faces: κ = 1/√σ beyond AGREEMENT
+    own, sigma = faces_conditioning(GAUSS_TRESCA_Q2)
+    assert own > 1e-4  # the answer's own face: well conditioned
+    assert sigma < 1e-6 / AGREEMENT  # the adjacent faces: κ = 1/√σ beyond AGREEMENT
     for name in ("osqp", "clarabel"):
         answer = model.solve(name)
         assert answer.status == "solved"
