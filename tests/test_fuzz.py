@@ -188,7 +188,9 @@ def faces_conditioning(scene: cc.Scene) -> tuple[float, float | None]:
     small = 1e-6 * slip.max()
     degenerate = [[j] for j in form.bound_vars if not free[j] and slip[j] < small] + [
         list(ball) for ball in form.ball_vars[sphere] if np.linalg.norm(slip[ball]) < small]
-    smallest = lambda rows: np.linalg.eigvalsh(W[np.ix_(rows, rows)])[0] / largest
+    def smallest(rows):  # an empty block (nothing free) has nothing to be ill-conditioned
+        return np.linalg.eigvalsh(W[np.ix_(rows, rows)])[0] / largest if rows.size else 1.0
+
     own = np.flatnonzero(free)
     return smallest(own), min((smallest(np.append(own, rows)) for rows in degenerate), default=None)
 
