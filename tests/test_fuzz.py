@@ -188,8 +188,10 @@ def faces_conditioning(scene: cc.Scene) -> tuple[float, float | None]:
     small = 1e-6 * slip.max()
     degenerate = [[j] for j in form.bound_vars if not free[j] and slip[j] < small] + [
         list(ball) for ball in form.ball_vars[sphere] if np.linalg.norm(slip[ball]) < small]
-    def smallest(rows):  # an empty block (nothing free) has nothing to be ill-conditioned
-        return np.linalg.eigvalsh(W[np.ix_(rows, rows)])[0] / largest if rows.size else 1.0
+    def smallest(rows):  # the least eigenvalue above W's rounding (n eps): below it a null direction of W, which
+        # moves no nodal force; 1 where there is none (an empty block: nothing free)
+        values = np.linalg.eigvalsh(W[np.ix_(rows, rows)]) / largest if rows.size else np.ones(1)
+        return values[values > W.shape[0] * np.finfo(float).eps].min(initial=1.0)
 
     own = np.flatnonzero(free)
     return smallest(own), min((smallest(np.append(own, rows)) for rows in degenerate), default=None)
