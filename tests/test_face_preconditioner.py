@@ -39,7 +39,7 @@ def pair():
 
 def solved(pair, monkeypatch, update):
     if not update:  # a refactorization at every face, as before the updates
-        monkeypatch.setattr(newton_cg._Preconditioner, "_updated", lambda self, R, d: None)
+        monkeypatch.setattr(newton_cg._Preconditioner, "_updated", lambda self, R, d, terms: None)
     solves = []
     solve = newton_cg.newton_cg
     monkeypatch.setattr(newton_cg, "newton_cg", lambda *a, **k: solves.append(solve(*a, **k)) or solves[-1])

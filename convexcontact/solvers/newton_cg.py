@@ -688,7 +688,7 @@ class _Preconditioner:
         if not self.exact:
             self.factors = self._factorize(_stored_sum(sp.csr_matrix(self.H),
                                                        self.G.T @ sp.diags(1.0 / self.shift) @ self.G))
-            self._cost = _cost(self.factors, getattr(approximation, "fill", None))  # see spent
+            self._cost = _cost(self.factors, approximation.fill)  # see spent
             return
         # every R D⁻¹ Rᵀ is on E: the pattern they all fit, factorized at the first system with its values (one
         # numeric factorization fewer than ordering it here with D = δ: the first system then refactorized at once)
@@ -713,7 +713,8 @@ class _Preconditioner:
         if signs is not None and _ratio_spread(d, kept[2]) <= REUSE:
             self._grows = False
             return lambda xi: signs * _woodbury(self.factors, kept[1], kept[2], signs * xi)
-        updated = self._updated(R, d)
+        terms = None if self._factored is None else _terms(R, d)  # the first system: after its factorization
+        updated = self._updated(R, d, terms)
         if updated is not None:
             self._grows, self.updates = False, self.updates + 1  # the factors are not of this step's first face
             return lambda xi: _woodbury(updated, G, d, xi)
@@ -724,7 +725,8 @@ class _Preconditioner:
         else:
             self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
         self.factorizations += 1
-        self._factored, self._grows, self._terms, self._solved = (R, G, d), True, _terms(R, d), {}
+        self._factored, self._grows, self._solved = (R, G, d), True, {}
+        self._terms = _terms(R, d) if terms is None else terms
         return lambda xi: _woodbury(self.factors, G, d, xi)
 
     def spent(self, iterations: int) -> None:
@@ -736,28 +738,27 @@ class _Preconditioner:
             self.exact, self._grows, self._solved = True, False, {}
             self._factored, self._terms = (sp.eye(n, format="csr"), self.G, self.shift), _terms(sp.eye(n), self.shift)
 
-    def _updated(self, R: sp.csr_matrix, d: np.ndarray):
-        """The factors of H + Gᵀ D⁻¹ G for face R and D, from those factored, where the two differ by at most
-        UPDATE_RANK terms g gᵀ/d, at most UPDATE_SOLVES of them not met since the factorization; else None."""
-        if self._factored is None:
+    def _updated(self, R: sp.csr_matrix, d: np.ndarray, terms: dict | None):
+        """The factors of H + Gᵀ D⁻¹ G for face R and D (``terms``: :func:`_terms`), from those factored, where the two
+        differ by at most UPDATE_RANK terms g gᵀ/d, at most UPDATE_SOLVES of them not met since the factorization;
+        else None (and where nothing is factored yet)."""
+        if terms is None:
             return None
-        terms, kept = _terms(R, d), self._terms
-        added, removed = terms.keys() - kept.keys(), kept.keys() - terms.keys()
-        new = [key for key in (*added, *removed) if key not in self._solved]
+        kept = self._terms
+        added, removed = list(terms.keys() - kept.keys()), list(kept.keys() - terms.keys())
+        new = [i for i, key in enumerate(added + removed) if key not in self._solved]
         if len(added) + len(removed) > UPDATE_RANK or len(new) > UPDATE_SOLVES:
             return None
         if not added and not removed:
             return self.factors
         R_kept, _, d_kept = self._factored
-        U = sp.csr_matrix(sp.hstack([sp.csc_matrix(R)[:, [terms[k] for k in added]],
-                                     sp.csc_matrix(R_kept)[:, [kept[k] for k in removed]]]).T @ self.G)
+        joining, leaving = [terms[key] for key in added], [kept[key] for key in removed]
+        U = sp.csr_matrix(sp.hstack([sp.csc_matrix(R)[:, joining], sp.csc_matrix(R_kept)[:, leaving]]).T @ self.G)
         if new:  # M⁻¹uᵀ of the terms not yet met, in one solve with multiple right-hand sides
-            rows = [i for i, key in enumerate((*added, *removed)) if key not in self._solved]
-            self._solved.update(zip(new, self.factors.solve(U[rows].T.toarray()).T))
-        self._solved = {key: self._solved[key] for key in (*added, *removed)}  # at most UPDATE_RANK held
+            self._solved.update(zip([(added + removed)[i] for i in new], self.factors.solve(U[new].T.toarray()).T))
+        self._solved = {key: self._solved[key] for key in added + removed}  # at most UPDATE_RANK held
         Z = np.stack(list(self._solved.values()), axis=1)
-        weights = np.concatenate([1.0 / d[[terms[k] for k in added]], -1.0 / d_kept[[kept[k] for k in removed]]])
-        return _Updated(self.factors, U, Z, weights)
+        return _Updated(self.factors, U, Z, np.concatenate([1.0 / d[joining], -1.0 / d_kept[leaving]]))
 
 
 def _cost(factors, fill: int | None) -> float | None:
@@ -782,11 +783,12 @@ class _Updated:
 
 
 def _terms(R: sp.csr_matrix, d: np.ndarray) -> dict:
-    """R's columns with their d, each as a key (its entries' bytes) to its index: the rank-one terms g gᵀ/d of the
-    face's Gᵀ D⁻¹ G, compared between faces by key (:meth:`_Preconditioner._updated`)."""
+    """R's columns with their d, each as a key (its rows', entries' and d's bytes, one bytes object: its length
+    fixes the column's count of entries) to its index: the rank-one terms g gᵀ/d of the face's Gᵀ D⁻¹ G, compared
+    between faces by key (:meth:`_Preconditioner._updated`)."""
     R = sp.csc_matrix(R)
     R.sort_indices()
-    return {(R.indices[a:b].tobytes(), R.data[a:b].tobytes(), d[j].tobytes()): j
+    return {R.indices[a:b].tobytes() + R.data[a:b].tobytes() + d[j].tobytes(): j
             for j, (a, b) in enumerate(zip(R.indptr[:-1], R.indptr[1:]))}
 
 
