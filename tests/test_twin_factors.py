@@ -59,15 +59,27 @@ def test_twins_are_numbered_up_to_maxfct_and_freed_with_their_factors():
     assert sorted(first._free) == list(range(2, pardiso.MAXFCT + 1))
 
 
-def test_outside_k_s_pattern_the_factors_are_their_own():
-    """A matrix with entries outside K's pattern gets a factorization of its own, which solves it."""
+@pytest.mark.parametrize("inside", [True, False])
+def test_a_twin_of_terms_solves_their_sum_on_k_s_analysis_or_with_its_own_outside_it(inside):
+    """K and a block given as terms, not summed (duplicates and explicit zeros in the block): within K's pattern a
+    twin on K's analysis; with an entry outside it, factors of their own (of the stored sum). Both solve K + the
+    block."""
     K = laplacian(4)
+    n = K.shape[0]
     direct = factorization.factorize(K)
-    outside = sp.csr_matrix(([1.0, 1.0], ([0, K.shape[0] - 1], [K.shape[0] - 1, 0])), shape=K.shape)
-    own = direct.twin(K + outside)
-    assert own._factors._handle[0] is not direct._factors._handle[0]
-    b = np.ones(K.shape[0])
-    np.testing.assert_allclose(own.solve(b), spla.spsolve(sp.csc_matrix(K + outside), b), rtol=1e-10)
+    rng = np.random.default_rng(6)
+    stored = sp.coo_matrix(K)
+    pick = rng.choice(stored.nnz, 30)
+    rows, columns, values = stored.row[pick], stored.col[pick], rng.uniform(0.0, 1.0, 30)
+    values[0] = 0.0
+    if not inside:
+        rows, columns, values = np.append(rows, [0, n - 1]), np.append(columns, [n - 1, 0]), np.append(values, [1, 1])
+    block = sp.coo_matrix((values, (rows, columns)), shape=K.shape)
+    block = block + block.T
+    twin = direct.twin(K, block)
+    assert (twin._factors._handle[0] is direct._factors._handle[0]) == inside
+    b = np.ones(n)
+    np.testing.assert_allclose(twin.solve(b), spla.spsolve(sp.csc_matrix(K + block), b), rtol=1e-10)
 
 
 @pytest.mark.parametrize("law", ["signorini", "tresca"])
@@ -86,7 +98,8 @@ def test_the_plate_s_preconditioner_is_k_s_twin_with_the_same_newton_steps(monke
         return result, len(analyses), len(products), model.result(result, {}, model.slip_bound).certificate.worst
 
     twin, twin_analyses, twin_products, twin_certificate = solved()
-    monkeypatch.setattr(factorization._Direct, "twin", lambda self, A: factorization.factorize(A, self.backend))
+    monkeypatch.setattr(factorization._Direct, "twin",
+                        lambda self, *terms: factorization.factorize(factorization.stored_sum(*terms), self.backend))
     own, own_analyses, own_products, own_certificate = solved()
     assert (twin_analyses, own_analyses) == (0, 1)
     assert twin.status == own.status == "solved" and twin.iterations == own.iterations and twin_products == own_products
