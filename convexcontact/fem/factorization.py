@@ -338,6 +338,8 @@ class _Direct(Factorization):
         terms placed, not summed: a K-sized sum was Signorini's peak on a clamped plate, 1.90 against 1.78 × the
         linear solve's at 9.4·10⁴ DOFs); else, or where a term has entries outside K's pattern or PARDISO holds its
         most factorizations, factors of their :func:`stored_sum`."""
+        if any(term.shape != terms[0].shape for term in terms):  # not to be taken for an entry outside the pattern
+            raise ValueError(f"twin: terms of shapes {[term.shape for term in terms]}: give each the matrix's shape")
         try:
             factors = self._factors and self._factors.twin(*terms)
         except ValueError:  # outside K's pattern

@@ -720,8 +720,8 @@ class _Preconditioner:
         contact = G.T @ sp.diags(1.0 / d) @ G
         if self.factors is None:
             pattern = sp.coo_matrix(self._pattern)  # its entries held as zeros: every later face's
-            self.factors = self._factorize(self.H, contact, sp.coo_matrix((np.zeros(pattern.nnz), (pattern.row,
-                                                                                                 pattern.col))))
+            self.factors = self._factorize(self.H, contact, sp.coo_matrix(
+                (np.zeros(pattern.nnz), (pattern.row, pattern.col)), shape=pattern.shape))
             self._pattern = None
         else:
             self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
