@@ -133,26 +133,3 @@ def test_coarser_grids_reach_the_dense_limit_in_a_few_tries(exponent, dim):
         spacing = coarse.coarser(tried, dim)
         tried.append((spacing, functions(spacing)))
     assert len(tried) <= 4 and coarse.FILL * coarse.DENSE_COLUMNS * (1 - 1e-9) <= tried[-1][1] <= coarse.DENSE_COLUMNS
-
-
-@pytest.mark.parametrize("inside", [True, False])
-def test_the_first_factorization_s_matrix_is_h_plus_the_contact_block_on_h_s_own_indices(inside):
-    """H + A with A's entries within H's pattern (duplicates and explicit zeros included): H's index arrays shared,
-    the values the sum's; an entry outside it: every entry either stores (the stored sum)."""
-    rng = np.random.default_rng(6)
-    H = sp.random(40, 40, density=0.2, random_state=rng, format="csr") + sp.eye(40, format="csr")
-    H.sum_duplicates()
-    stored = sp.coo_matrix(H)
-    pick = rng.choice(stored.nnz, 30)
-    rows, columns = stored.row[pick], stored.col[pick]
-    values = rng.standard_normal(30)
-    values[0] = 0.0
-    if not inside:
-        outside = np.argwhere(H.toarray() == 0)[0]
-        rows, columns = np.append(rows, outside[0]), np.append(columns, outside[1])
-        values = np.append(values, 0.0)
-    A = sp.coo_matrix((values, (rows, columns)), shape=H.shape)
-    total = newton_cg._on_pattern(H, A)
-    np.testing.assert_allclose(total.toarray(), H.toarray() + A.toarray(), rtol=0, atol=1e-15)
-    assert np.shares_memory(total.indices, H.indices) == inside
-    assert total.nnz == H.nnz + (not inside)

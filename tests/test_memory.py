@@ -76,7 +76,7 @@ def test_the_stored_sum_keeps_every_entry_and_adds_the_values():
     H = sp.coo_matrix(sp.random(30, 30, density=0.2, random_state=rng))
     i, j = H.row[0], H.col[0]  # A cancels H there
     A = sp.coo_matrix(([0.0, -H.data[0], 2.0], ([0, i, 7], [29, j, 7])), shape=(30, 30))
-    total = sp.coo_matrix(newton_cg._stored_sum(sp.csr_matrix(H), A))
+    total = sp.coo_matrix(factorization.stored_sum(sp.csr_matrix(H), A))
     np.testing.assert_allclose(total.toarray(), H.toarray() + A.toarray(), rtol=0, atol=1e-15)
     stored = set(zip(H.row, H.col)) | set(zip(A.row, A.col))
     assert set(zip(total.row, total.col)) == stored and total.nnz == len(stored)
@@ -134,7 +134,7 @@ def test_refactorize_of_terms_solves_with_their_sum(strip, backend):
         pytest.skip("PARDISO does not load here")
     K, B = sp.csr_matrix(strip.fem.K), sp.csr_matrix(strip.program.P.B)
     block = (B.T @ sp.diags(np.random.default_rng(4).uniform(1.0, 2.0, B.shape[0])) @ B).tocsr()
-    factors = factorization.factorize(newton_cg._stored_sum(K, block), backend)  # K's stored zeros too
+    factors = factorization.factorize(factorization.stored_sum(K, block), backend)  # K's stored zeros too
     b = np.random.default_rng(5).standard_normal(K.shape[0])
     factors.refactorize(2.0 * K, block)
     by_terms = factors.solve(b)
@@ -150,7 +150,7 @@ def test_refactorize_keeps_each_term_s_places_while_its_pattern_stays(strip, mon
         pytest.skip("PARDISO does not load here")
     K, B = sp.csr_matrix(strip.fem.K), sp.csr_matrix(strip.program.P.B)
     rng = np.random.default_rng(6)
-    factors = factorization.factorize(newton_cg._stored_sum(K, (B.T @ B).tocsr()), "pardiso")
+    factors = factorization.factorize(factorization.stored_sum(K, (B.T @ B).tocsr()), "pardiso")
     searched = []
     places = pardiso.Pardiso._places
     monkeypatch.setattr(pardiso.Pardiso, "_places", lambda self, *args: searched.append(1) or places(self, *args))

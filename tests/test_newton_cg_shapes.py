@@ -12,7 +12,7 @@ import scipy.sparse.linalg as spla
 import convexcontact as cc
 from convexcontact import solvers
 from convexcontact.conic import ConicProgram
-from convexcontact.fem.factorization import Approximation, factorize
+from convexcontact.fem.factorization import Approximation, factorize, factorize_sum
 from convexcontact.fem.local_delassus import colouring, local_diagonal
 from convexcontact.scene.library import whole_face
 from convexcontact.solvers import newton_cg
@@ -52,7 +52,7 @@ def scaled_program(seed: int, bounds: int, balls: int, size: int, spread: float)
     matrix = ConicProgram(sp.csc_matrix(P), S @ base.q, sp.csc_matrix(base.A @ S), base.b, base.cones)
     operator = spla.aslinearoperator(P)
     operator.approximation = Approximation(sp.csr_matrix(np.linalg.cholesky(P)), sp.eye(P.shape[0], format="csr"),
-                                           factorize)
+                                           factorize_sum)
     operator.approximation.__dict__["diagonal"] = np.diag(P) * rng.uniform(0.5, 2.0, P.shape[0])
     return replace(matrix, P=operator), matrix, answer * row
 

@@ -686,8 +686,7 @@ class _Preconditioner:
         self._factorize = approximation.factorize
         self._keeps = approximation.slab in (None, self.H.shape[0])  # H is K on DOFs, no coarse functions: see REUSE
         if not self.exact:
-            self.factors = self._factorize(_stored_sum(sp.csr_matrix(self.H),
-                                                       self.G.T @ sp.diags(1.0 / self.shift) @ self.G))
+            self.factors = self._factorize(self.H, self.G.T @ sp.diags(1.0 / self.shift) @ self.G)
             self._cost = _cost(self.factors, approximation.fill)  # see spent
             return
         # every R D⁻¹ Rᵀ is on E: the pattern they all fit, factorized at the first system with its values (one
@@ -720,7 +719,9 @@ class _Preconditioner:
             return lambda xi: _woodbury(updated, G, d, xi)
         contact = G.T @ sp.diags(1.0 / d) @ G
         if self.factors is None:
-            self.factors = self._factorize(_on_pattern(sp.csr_matrix(self.H), _with_pattern(contact, self._pattern)))
+            pattern = sp.coo_matrix(self._pattern)  # its entries held as zeros: every later face's
+            self.factors = self._factorize(self.H, contact, sp.coo_matrix(
+                (np.zeros(pattern.nnz), (pattern.row, pattern.col)), shape=pattern.shape))
             self._pattern = None
         else:
             self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
@@ -825,47 +826,6 @@ def _shifts(approximation, sets: _Bounds, curvature: float) -> np.ndarray:
 def _woodbury(factors, G: sp.csr_matrix, d, xi: np.ndarray) -> np.ndarray:
     """(D + G H⁻¹ Gᵀ)⁻¹ ξ = D⁻¹(ξ − G (H + Gᵀ D⁻¹ G)⁻¹ Gᵀ D⁻¹ ξ), ``factors`` those of H + Gᵀ D⁻¹ G, D = diag(d)."""
     return (xi - G @ factors.solve(G.T @ (xi / d))) / d
-
-
-def _with_pattern(A: sp.spmatrix, pattern: sp.spmatrix) -> sp.csr_matrix:
-    """A, holding explicit zeros on the rest of ``pattern`` (scipy drops the zeros of sums and products, and a
-    later refactorization may need them)."""
-    pattern = sp.coo_matrix(pattern)
-    return _stored_sum(sp.csr_matrix(A), sp.coo_matrix((np.zeros(pattern.nnz), (pattern.row, pattern.col)),
-                                                       shape=pattern.shape))
-
-
-def _on_pattern(H: sp.csr_matrix, A: sp.spmatrix) -> sp.csr_matrix:
-    """H + A on H's own pattern, sharing H's index arrays, where every entry A stores lies in it (a body's contact
-    block within K's node blocks: the plate 20 : 20 : 1, its own approximation); else :func:`_stored_sum`. Only A's
-    rows are searched. The sum's own indices were a third of the K-sized copy alive while PARDISO factorizes it, the
-    contact solve's peak on the plate (7.9·10⁴ DOFs: 815 MB against a linear solve's 399)."""
-    A = sp.coo_matrix(A)
-    if not H.has_canonical_format:
-        return _stored_sum(H, A)
-    rows = np.unique(A.row)
-    starts, counts = H.indptr[rows], np.diff(H.indptr)[rows]
-    where = np.repeat(starts - (np.cumsum(counts) - counts), counts) + np.arange(counts.sum())  # those rows' entries
-    keys = np.repeat(rows.astype(np.int64), counts) * H.shape[1] + H.indices[where]  # increasing: rows, then columns
-    wanted = A.row.astype(np.int64) * H.shape[1] + A.col
-    found = np.minimum(np.searchsorted(keys, wanted), max(keys.size - 1, 0))
-    if A.nnz and (keys.size == 0 or (keys[found] != wanted).any()):
-        return _stored_sum(H, A)
-    data = H.data.copy()
-    np.add.at(data, where[found], A.data)
-    return sp.csr_matrix((data, H.indices, H.indptr), shape=H.shape)
-
-
-def _stored_sum(H: sp.csr_matrix, A: sp.spmatrix) -> sp.csr_matrix:
-    """H + A holding every entry either stores, zeros included (scipy's sums drop them). H's rows are expanded
-    straight into the one triplet list: its COO copy, abs(H) and the sum of patterns this replaces held ~100 bytes
-    per entry of H at once, the preconditioner's peak on thin bodies (strip 400 : 1 clamped, 3.4·10⁴ DOFs, Tresca:
-    ~40 MB beside its 13 MB factor)."""
-    A = sp.coo_matrix(A)
-    rows = np.repeat(np.arange(H.shape[0], dtype=H.indices.dtype), np.diff(H.indptr))
-    return sp.csr_matrix((np.concatenate([H.data, A.data]), (np.concatenate([rows, A.row.astype(rows.dtype)]),
-                                                             np.concatenate([H.indices, A.col.astype(rows.dtype)]))),
-                         shape=H.shape)
 
 
 def _scaled(P, scale: np.ndarray):
