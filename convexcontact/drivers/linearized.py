@@ -204,7 +204,7 @@ def friction_state(result: ContactResult, friction: FrictionPoints, weighted: np
         moving = np.isin(normal, ("closed", "grazing")).astype(float)
         fixed = (abs(coupling) @ moving) == 0  # no closed or grazing node under the point: its bound stays 0
     weighted = friction.components(weighted)
-    slip = weighted / friction.lengths[:, None] / u_ref
+    slip = weighted / friction.weights[:, None] / u_ref
     epsilon = None if law.regularization is None else law.regularization / scaling.displacement
     status = friction_status(slip, traction / p_ref, bound / p_ref, held(friction.R, friction.dim), fixed, tol,
                              smooth=epsilon is not None)

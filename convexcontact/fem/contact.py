@@ -69,6 +69,7 @@ class ContactTrace:
     obstacle_tangential_force: float = 0.0
     bitangents: np.ndarray | None = None  # (m, 3) in 3-D
     points: ContactPoints | None = None  # Gauss-point non-penetration only
+    multiplier_transform: sp.csr_matrix | None = None  # ψ̃ = T ψ of weak rows (P2 tetrahedra)
 
     def in_displacement_units(self, scale: float) -> ContactTrace:
         """This trace with displacements measured in units ``scale`` times as large: gaps, offsets and the
@@ -99,21 +100,19 @@ class ContactTrace:
         return C @ self.gap
 
     def row_weights(self, C: sp.spmatrix) -> np.ndarray:
-        """The length (area) each row of ``C`` stands for, which turns C(u_N − g) back into a gap: w_i, or
-        Σ_j |C_ij| where ∫ψ_i vanishes (vertices of P2 triangles on the facets of P2 tetrahedra); ω_q at
-        Gauss points."""
+        """The length (area) each row of ``C`` stands for, which turns C(u_N − g) back into a gap: w_i = ∫ψ_i (∫ψ̃_i
+        for P2 tetrahedra: :func:`multiplier_transform`); ω_q at Gauss points."""
         if self.at_points(C):
             return self.points.weights
-        vanishing = self.weights <= 1e-9 * self.weights.max()
-        if not vanishing.any():
-            return self.weights
-        return np.where(vanishing, np.asarray(abs(C).sum(axis=1)).ravel(), self.weights)
+        return self.weights
 
     def nodal_pressure(self, C: sp.spmatrix, multipliers: np.ndarray) -> np.ndarray:
         """The pressure at the contact nodes: the multipliers themselves, or from Gauss-point multipliers
         the nodal force Cᵀλ over w_i (unique where the point multipliers are not: more points than nodes)."""
         if self.at_points(C):
             return (C.T @ multipliers) / self.weights
+        if self.multiplier_transform is not None and C is self.mass:  # p = Σ λ̃_k ψ̃_k = Σ (Tᵀλ̃)_j ψ_j
+            return self.multiplier_transform.T @ multipliers
         return multipliers
 
     @property
@@ -187,6 +186,7 @@ class _Nodes:
     normals: np.ndarray
     mass: sp.csr_matrix
     weights: np.ndarray
+    transform: sp.csr_matrix | None = None
 
 
 def _nodes(facets: np.ndarray, mesh: fe.Mesh, basis: fe.Basis, boundary: str) -> _Nodes:
@@ -199,19 +199,47 @@ def _nodes(facets: np.ndarray, mesh: fe.Mesh, basis: fe.Basis, boundary: str) ->
     # scalar DOF s, and the scalar basis holds a quarter (2-D) of the vector one's pairs of shape functions
     scalar = fe.FacetBasis(mesh, basis.elem.elem, facets=facets, disable_doflocs=True)
     nodes = dofs[:, 0] // dim
+    mass = fe.asm(fe.BilinearForm(lambda u, v, w: u * v), scalar).tocsr()[nodes][:, nodes]
+    # weak rows on P2 triangles test with ψ̃ = T ψ (multiplier_transform): their masses, weights and normals
+    transform = multiplier_transform(mesh, nodes) if type(basis.elem.elem).__name__ == "ElementTetP2" else None
+    if transform is not None:
+        mass = sp.csr_matrix(transform @ mass)
     # n_i ∝ ∫ ψ_i n ds: the outward normal averaged with the shape function's weight,
     # well defined for any Lagrange element and for curved facets
     weighted_normal = np.column_stack([fe.asm(fe.LinearForm(lambda v, w, a=a: w.n[a] * v), scalar)[nodes]
                                        for a in range(dim)])
+    if transform is not None:
+        weighted_normal = transform @ weighted_normal
     normals = weighted_normal / np.linalg.norm(weighted_normal, axis=1, keepdims=True)
     # the quadrature leaves round-off (~1e-17) in components that are zero on a plane face; through the
     # tangents it would couple a roller's eliminated direction to its friction multiplier (an empty row of
     # T becoming 1e-53: a rank-deficient instead of an empty column of the dual's W)
     normals[np.abs(normals) < ROUNDOFF] = 0.0
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    mass = fe.asm(fe.BilinearForm(lambda u, v, w: u * v), scalar).tocsr()[nodes][:, nodes]
     weights = np.asarray(mass.sum(axis=1)).ravel()  # partition of unity: Σ_j ∫ψ_iψ_j = ∫ψ_i
-    return _Nodes(dofs, basis.doflocs[:, dofs[:, 0]].T, normals, mass, weights)
+    return _Nodes(dofs, basis.doflocs[:, dofs[:, 0]].T, normals, mass, weights, transform)
+
+
+TRANSFORM = 0.2
+"""α of the P2 triangles' transformed multiplier basis (:func:`multiplier_transform`)."""
+
+
+def multiplier_transform(mesh: fe.Mesh, nodes: np.ndarray) -> sp.csr_matrix:
+    """T with ψ̃ = T ψ for the P2 trace on the triangles of a tetrahedral Γ_C (``nodes``: scalar DOFs, vertices
+    first, then edges, scikit-fem's order): ψ̃_v = ψ_v + α Σ_{edges e ∋ v} ψ_e, ψ̃_e = (1 − 2α) ψ_e, α = TRANSFORM.
+    A P2 triangle's vertex functions integrate to zero, so weak rows ∫ψ_v (u_N − g) ≤ 0 test with a sign-changing
+    weight and the multipliers oscillate between vertices and edges; ψ̃ keeps the partition of unity and gives every
+    function a positive mean (2|E|/15 per facet at a vertex, |E|/5 at an edge: the transformed quadratic basis of
+    Wohlmuth's and Popp's quadratic mortar methods)."""
+    nverts = mesh.p.shape[1]
+    local = np.full(mesh.p.shape[1] + mesh.edges.shape[1], -1)
+    local[nodes] = np.arange(nodes.size)
+    edge = np.flatnonzero(nodes >= nverts)
+    ends = local[mesh.edges[:, nodes[edge] - nverts]]  # (2, edges): both on Γ_C
+    rows = np.concatenate([np.arange(nodes.size), ends[0], ends[1]])
+    columns = np.concatenate([np.arange(nodes.size), edge, edge])
+    values = np.concatenate([np.where(nodes >= nverts, 1.0 - 2.0 * TRANSFORM, 1.0), np.full(2 * edge.size, TRANSFORM)])
+    return sp.csr_matrix((values, (rows, columns)), shape=(nodes.size, nodes.size))
 
 
 def _mean_frame(nodes: _Nodes) -> tuple[np.ndarray, np.ndarray]:
@@ -333,6 +361,7 @@ def contact_trace(
         coordinate=coordinate,
         weights=weights,
         mass=nodes.mass,
+        multiplier_transform=nodes.transform,
         N=N_full[:, free],
         T=T_full[:, free],
         normal_offset=N_full @ prescribed,

@@ -30,9 +30,8 @@ class FrictionPoints:
 
     ``R`` (points·(d−1) × free DOFs, component-major) and ``offset`` give the weighted
     slip R u + offset; ``dim`` = d − 1 is the number of tangential components;
-    ``weights`` ω_k are the lengths (areas) the points stand for, ``lengths`` the same where ω_k vanishes
-    (weak contact on P2 tetrahedra: ∫ψ_k = 0 at the facets' vertices) replaced by Σ_j |M_kj|, so that weighted
-    slips divided by them are lengths; ``interpolation`` G
+    ``weights`` ω_k are the lengths (areas) the points stand for (weighted slips divided by them are lengths);
+    ``interpolation`` G
     (points × contact nodes) maps nodal values (pressures, coefficients) to the
     points; ``coords`` locate the points; ``coupling`` is R applied to a unit
     tangential translation of the obstacle (None without a tangential force).
@@ -45,11 +44,6 @@ class FrictionPoints:
     coords: np.ndarray
     coupling: np.ndarray | None
     dim: int = 1
-    lengths: np.ndarray | None = None
-
-    def __post_init__(self):
-        if self.lengths is None:
-            self.lengths = self.weights
 
     @property
     def count(self) -> int:
@@ -60,7 +54,7 @@ class FrictionPoints:
         return values.reshape(self.dim, -1).T
 
     def slip(self, u: np.ndarray) -> np.ndarray:
-        """Weighted slip R u + offset at the points (divide by ``lengths`` for a length)."""
+        """Weighted slip R u + offset at the points (divide by ``weights`` for a length)."""
         return self.R @ u + self.offset
 
     def nodal_traction(self, contact: ContactTrace, traction: np.ndarray) -> np.ndarray:
@@ -78,7 +72,6 @@ def friction_points(
 ) -> FrictionPoints:
     """The friction rows for the chosen quadrature and non-penetration form; ``nodes``: the contact nodes
     that carry friction (nodal quadrature), all when None."""
-    lengths = None  # the weights, but where weak contact's ∫ψ_k vanishes
     if quadrature == "gauss":
         G, weights, coords = gauss_interpolation(mesh, basis, contact.facets, contact.dofs)
         weighting = sp.diags(weights) @ G
@@ -89,7 +82,6 @@ def friction_points(
     else:
         G, weights, coords = sp.identity(contact.m, format="csr"), contact.weights, contact.coords
         weighting = contact.mass if non_penetration == "weak" else sp.diags(weights)
-        lengths = contact.row_weights(weighting)
     coupling = None if contact.tangential_coupling is None else weighting @ contact.tangential_coupling
     components = contact.dim - 1
     weighting = sp.block_diag([weighting] * components, format="csr")  # the same weights for each tangent
@@ -101,5 +93,4 @@ def friction_points(
         coords=coords,
         coupling=coupling,
         dim=components,
-        lengths=lengths,
     )

@@ -41,7 +41,7 @@ def contact_weights(contact: ContactTrace, non_penetration: str) -> sp.csr_matri
                              "law (cc.prepare), not with Model.with_law")
         return contact.points.C
     if non_penetration == "nodal":
-        if contact.weights.min() <= 1e-9 * contact.weights.max():
+        if contact.multiplier_transform is not None:
             # P2 tetrahedra: the vertex shape functions of a P2 triangle integrate to 0
             raise SceneError("contact.non_penetration", "node-wise contact cannot weigh the nodes whose shape "
                              "functions integrate to zero on Γ_C (vertices of P2 tetrahedra)",

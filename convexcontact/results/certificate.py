@@ -147,7 +147,7 @@ def friction_residuals(friction, fields, slip_bound, p_ref, u_ref, epsilon=None)
     """‖λ_T‖ ≤ s, and the natural map of the friction law at each point (vectors of d − 1
     components per point in 3-D; slips as lengths, the weights divided out)."""
     lam_T = friction.components(fields.friction)
-    slip = friction.components(weighted_slip(friction, fields)) / friction.lengths[:, None]
+    slip = friction.components(weighted_slip(friction, fields)) / friction.weights[:, None]
     if epsilon is None:  # λ_T = Π_{B(s)}(λ_T − ρ v)
         trial = lam_T - (p_ref / u_ref) * slip
         size = np.linalg.norm(trial, axis=1)

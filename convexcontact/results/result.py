@@ -306,10 +306,11 @@ uniform and adaptive levels) divided by 1.1, so the calibrated estimate reads 1.
 equilibrated bound (2-D P1) is reported as it is; ``P1`` is measured alike on 2-D P1's residual estimate, which the
 budget does not use."""
 
-EFFECTIVITY_3D = {"P1": 2.8, "P2": 4.7}
+EFFECTIVITY_3D = {"P1": 2.8, "P2": 3.7}
 """The same for tetrahedra (docs/estimate.md, "The calibration, family by family"): P1 from the adaptive 3-D Hertz
-levels (raw 3.1–4.5; uniform Hertz boxes 3.8–5.1, the two spheres 3.5–5.4), P2 from the uniform Hertz box (raw
-5.2–7.6). Hexahedra keep the 2-D constants."""
+levels (raw 3.1–4.5; uniform Hertz boxes 3.8–5.1, the two spheres 3.5–5.4), P2 from the uniform Hertz box with and
+without Tresca (raw 4.1–6.6; the graded box 4.6–7.2, the adaptive loop 4.5–5.8: docs/estimate.md, "P2 tetrahedra's
+weak multiplier"). Hexahedra keep the 2-D constants."""
 
 
 def effectivity(element: str, dim: int) -> float:
