@@ -241,7 +241,7 @@ class StreamOperator:
 def conjugate_gradients(operator, load, diagonal, admissible, iterations: int, energy: float = 0.0,
                         tolerance: float = 0.0) -> np.ndarray:
     """At most ``iterations`` Jacobi-preconditioned CG steps on operator x = −load over the admissible coefficients
-    (rows, facets + vertices), from x = 0, in the floating type of ``load``; J(0) = ``energy``. A step lowers J by α r·z;
+    (rows, facets + vertices), from x = 0, in the floating type of ``load`` (overwritten); J(0) = ``energy``. A step lowers J by α r·z;
     once that is under ``tolerance`` × J, the next step is the last. The last step needs only the curvature along its
     direction (:meth:`StreamOperator.curvature`: no residual follows it), not the product.
 
@@ -250,11 +250,12 @@ def conjugate_gradients(operator, load, diagonal, admissible, iterations: int, e
     The preconditioner is 0 off the admissible coefficients, so every search direction, and x, stays admissible
     without masking the products. Stops early where the preconditioned residual or the curvature along the direction
     is zero (J already minimal there: zero data, or no admissible coefficient)."""
-    inverse = np.where(admissible, 1.0 / np.where(admissible, diagonal, 1.0), 0.0).astype(load.dtype)
-    residual = -load
+    # six vectors, each written in place by every step: fresh ones cost their page faults on every call
+    inverse = np.zeros_like(load)
+    np.divide(1.0, diagonal, out=inverse, where=admissible)
+    residual = np.negative(load, out=load)
     z = inverse * residual
-    direction, x = z.copy(), np.zeros_like(load)
-    product, scaled = np.empty_like(load), np.empty_like(load)  # reused by every step
+    direction, x, product = z.copy(), np.zeros_like(load), np.empty_like(load)
     rz = np.einsum("ij,ij", residual, z)
     last = False
     for step in range(iterations):
@@ -267,12 +268,12 @@ def conjugate_gradients(operator, load, diagonal, admissible, iterations: int, e
         if not (rz > 0 and curvature > 0):
             break
         alpha = rz / curvature
-        x += np.multiply(alpha, direction, out=scaled)
+        x += np.multiply(alpha, direction, out=z)  # z is free until the residual's next preconditioning
         if last:
             break
         energy -= alpha * rz
         last = alpha * rz < tolerance * energy
-        residual -= np.multiply(alpha, product, out=scaled)
+        residual -= np.multiply(alpha, product, out=product)
         np.multiply(inverse, residual, out=z)
         rz, previous = np.einsum("ij,ij", residual, z), rz
         direction *= rz / previous
