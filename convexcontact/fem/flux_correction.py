@@ -15,6 +15,8 @@ here a post-processing). The coefficients minimize the convex quadratic
 
 by a few conjugate-gradient steps from τ = 0, matrix-free with a diagonal preconditioner: each step lowers J, and
 every iterate keeps the bound valid (any coefficients do), so an inexact minimizer costs sharpness, never the guarantee.
+The steps stop once one lowers J by under :data:`TOLERANCE` of J (one more step then, the last), at most
+:data:`ITERATIONS`; the last step needs only the curvature along its direction, not the product.
 For the same reason the steps run in single precision (:data:`WORKING`): τ and η are evaluated in float64 from the
 coefficients they produce.
 
@@ -33,8 +35,14 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 ITERATIONS = 5
-"""Conjugate-gradient steps: on the uniform punch at 4,160 and 65,792 DOFs they reach η within 11–12 % of the exact
-minimizer's (10 steps: 3–4 %, 3 steps: 21–22 %; RT0 alone: 2.1×) (docs/estimate.md, "Cost of the bound")."""
+"""Conjugate-gradient steps at most: on the uniform punch at 4,160 and 65,792 DOFs they reach η within 11–12 % of the
+exact minimizer's (10 steps: 3–4 %, 3 steps: 21–22 %; RT0 alone: 2.1×) (docs/estimate.md, "Cost of the bound")."""
+
+TOLERANCE = 0.045
+"""After a step that lowers J by under this fraction of J, one more step and no other: the strip 100 : 1, the pair, the
+Hertz block and the two cylinders at 10⁴–10⁵ DOFs then take 4 steps, η within 0.2–1.3 % of 5 steps' (within 1 % at
+10⁵), the punches, whose steps lower J more slowly, all 5 (docs/estimate.md, "Fewer correction steps"). 0: always
+:data:`ITERATIONS` steps."""
 
 WORKING = np.float32
 """The floating type of the conjugate-gradient steps: they only choose φ's coefficients, and any coefficients keep
@@ -186,10 +194,29 @@ class StreamOperator:
         parallel(add, [(0, 0), (0, 1), (1, 0), (1, 1)], self.loads.shape[-1])
         return out
 
-    def gradient(self, misfit) -> np.ndarray:
-        """J's gradient at τ = 0 (half of it), ``misfit(cells)`` σ̂ − σ_h at the midpoints of a block of cells."""
-        for_blocks(self.loads.shape[-1], lambda cells: self.adjoint(self.weighted_form(misfit(cells), cells), cells))
-        return self.scatter(self.curls.dtype)
+    def gradient(self, misfit) -> tuple[np.ndarray, float]:
+        """J's gradient at τ = 0 (half of it) and J at τ = 0, ``misfit(cells)`` σ̂ − σ_h at the midpoints of a block of
+        cells."""
+        def block(cells):
+            X = misfit(cells)
+            W = self.weighted_form(X, cells)
+            self.adjoint(W, cells)
+            return np.einsum("ijkc,ijkc", X, W, dtype=float)
+
+        energy = self.summed(block)  # the loads first, then their sums
+        return self.scatter(self.curls.dtype), energy
+
+    def summed(self, work) -> float:
+        """Σ work(cells) over the blocks, in block order whatever the threads (the same sum with 1, 2 or 3)."""
+        return float(sum(parallel(work, blocks(self.loads.shape[-1]), self.loads.shape[-1])))
+
+    def curvature(self, x: np.ndarray) -> float:
+        """x · (operator x), by the cells' τ = curl φ and Q, without summing loads back onto facets and vertices."""
+        def block(cells):
+            tau = midpoint_values(*self.gather(x, cells), self.curls[..., cells])
+            return np.einsum("ijkc,ijkc", tau, self.weighted_form(tau, cells), dtype=float)
+
+        return self.summed(block)
 
     def __call__(self, x: np.ndarray, out=None) -> np.ndarray:
         def block(cells):
@@ -211,32 +238,42 @@ class StreamOperator:
         return self.scatter(float)
 
 
-def conjugate_gradients(operator, load, diagonal, admissible, iterations: int) -> np.ndarray:
-    """``iterations`` Jacobi-preconditioned CG steps on operator x = −load over the admissible coefficients (rows,
-    facets + vertices), from x = 0, in the floating type of ``load``; no tolerance: a fixed number of steps, each
-    lowering J.
+def conjugate_gradients(operator, load, diagonal, admissible, iterations: int, energy: float = 0.0,
+                        tolerance: float = 0.0) -> np.ndarray:
+    """At most ``iterations`` Jacobi-preconditioned CG steps on operator x = −load over the admissible coefficients
+    (rows, facets + vertices), from x = 0, in the floating type of ``load`` (overwritten); J(0) = ``energy``. A step lowers J by α r·z;
+    once that is under ``tolerance`` × J, the next step is the last. The last step needs only the curvature along its
+    direction (:meth:`StreamOperator.curvature`: no residual follows it), not the product.
 
     Written out rather than scipy's ``cg``: its vectors are float64 and its dot products BLAS calls, which OpenBLAS
     spreads over threads that contend with a busy machine (a 4 ms dot product of 4·10⁵ entries, against 0.1 ms).
     The preconditioner is 0 off the admissible coefficients, so every search direction, and x, stays admissible
     without masking the products. Stops early where the preconditioned residual or the curvature along the direction
     is zero (J already minimal there: zero data, or no admissible coefficient)."""
-    inverse = np.where(admissible, 1.0 / np.where(admissible, diagonal, 1.0), 0.0).astype(load.dtype)
-    residual = -load
+    # six vectors, each written in place by every step: fresh ones cost their page faults on every call
+    inverse = np.zeros_like(load)
+    np.divide(1.0, diagonal, out=inverse, where=admissible)
+    residual = np.negative(load, out=load)
     z = inverse * residual
-    direction, x = z.copy(), np.zeros_like(load)
-    product, scaled = np.empty_like(load), np.empty_like(load)  # reused by every step
+    direction, x, product = z.copy(), np.zeros_like(load), np.empty_like(load)
     rz = np.einsum("ij,ij", residual, z)
+    last = False
     for step in range(iterations):
-        operator(direction, out=product)
-        curvature = np.einsum("ij,ij", direction, product)
+        last = last or step + 1 == iterations
+        if last:
+            curvature = operator.curvature(direction)
+        else:
+            operator(direction, out=product)
+            curvature = np.einsum("ij,ij", direction, product)
         if not (rz > 0 and curvature > 0):
             break
         alpha = rz / curvature
-        x += np.multiply(alpha, direction, out=scaled)
-        if step + 1 == iterations:
+        x += np.multiply(alpha, direction, out=z)  # z is free until the residual's next preconditioning
+        if last:
             break
-        residual -= np.multiply(alpha, product, out=scaled)
+        energy -= alpha * rz
+        last = alpha * rz < tolerance * energy
+        residual -= np.multiply(alpha, product, out=product)
         np.multiply(inverse, residual, out=z)
         rz, previous = np.einsum("ij,ij", residual, z), rz
         direction *= rz / previous
@@ -248,8 +285,8 @@ def corrected(vertex_stress, sigma_h, gradients, area, lame, mesh, opposite, hel
               iterations: int | None = None) -> np.ndarray:
     """σ̂ + curl φ at the vertices of each cell, written over ``vertex_stress`` (as in
     :class:`convexcontact.fem.flux.Equilibrated`: (rows, x, cells, 3), a view of a (rows, x, 3, cells) array), φ from
-    ``iterations`` CG steps on J (None: :data:`ITERATIONS`) in :data:`WORKING` precision, τ = curl φ then evaluated
-    in float64. ``held`` the (rows, facets) mask of held components, ``korn`` C_K, ``gradients`` ∇λ_k (x, k, cells);
+    at most ``iterations`` CG steps on J (None: :data:`ITERATIONS`; :data:`TOLERANCE` may stop them earlier) in
+    :data:`WORKING` precision, τ = curl φ then evaluated in float64. ``held`` the (rows, facets) mask of held components, ``korn`` C_K, ``gradients`` ∇λ_k (x, k, cells);
     the other arguments are ``equilibrate``'s per-cell data."""
     iterations = ITERATIONS if iterations is None else iterations
     if iterations == 0:
@@ -262,8 +299,9 @@ def corrected(vertex_stress, sigma_h, gradients, area, lame, mesh, opposite, hel
         corners = at[..., cells]
         return (0.5 * (corners.sum(axis=2, keepdims=True) - corners) - stress[..., cells]).astype(WORKING)
 
-    x = conjugate_gradients(operator, operator.gradient(misfit), operator.diagonal(),
-                            admissible_stream_functions(mesh, held), iterations)
+    gradient, energy = operator.gradient(misfit)
+    x = conjugate_gradients(operator, gradient, operator.diagonal(), admissible_stream_functions(mesh, held),
+                            iterations, energy, TOLERANCE)
     return with_curl(vertex_stress, x.astype(float), gradients, operator, out=at)
 
 
