@@ -107,12 +107,16 @@ class ContactTrace:
         return self.weights
 
     def nodal_pressure(self, C: sp.spmatrix, multipliers: np.ndarray) -> np.ndarray:
-        """The pressure at the contact nodes: the multipliers themselves, or from Gauss-point multipliers
-        the nodal force Cᵀλ over w_i (unique where the point multipliers are not: more points than nodes)."""
+        """The pressure at the contact nodes: the multipliers themselves (weak rows on P2 tetrahedra: the nodal values
+        Tᵀλ̃ of p = Σ λ̃_k ψ̃_k), or from Gauss-point multipliers the nodal force Cᵀλ over w_i (unique where the
+        point multipliers are not: more points than nodes; on P2 tetrahedra ∫p ψ̃_i / ∫ψ̃_i, ψ's vertex moments
+        being ~0 for a smooth p)."""
+        transform = self.multiplier_transform
         if self.at_points(C):
-            return (C.T @ multipliers) / self.weights
-        if self.multiplier_transform is not None and C is self.mass:  # p = Σ λ̃_k ψ̃_k = Σ (Tᵀλ̃)_j ψ_j
-            return self.multiplier_transform.T @ multipliers
+            forces = C.T @ multipliers
+            return (forces if transform is None else transform @ forces) / self.weights
+        if transform is not None and C is self.mass:
+            return transform.T @ multipliers
         return multipliers
 
     @property
