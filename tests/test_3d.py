@@ -92,7 +92,7 @@ def test_p2_tetrahedra_gauss_point_pressures_are_moments_of_the_transformed_basi
     """Gauss-point rows on P2 tetrahedra report ∫p ψ̃_i / ∫ψ̃_i at the nodes (the point forces' moments with the
     transformed basis): near Hertz's peak (measured 0.89 p₀ at 4 cells), where the force over ∫ψ̃_i read 1.40 p₀
     (a vertex's ∫p ψ_i is ~0 for a smooth p) and over ψ's own ∫ψ_i ≈ 1e-19 anything at all."""
-    a, p0 = hertz_sphere(HERTZ_SPHERE_FORCE, 1.0, 1.0, 0.3)
+    _, p0 = hertz_sphere(HERTZ_SPHERE_FORCE, 1.0, 1.0, 0.3)
     result = cc.solve(hertz_scene(4, "P2", law=cc.Signorini(non_penetration="gauss")))
     assert result.certificate.passes(1e-8)
     assert result.max_pressure == pytest.approx(p0, rel=0.2)
