@@ -6,6 +6,10 @@ patch ω_a of each vertex a, row by row of the stress (docs/estimate.md, "The eq
           ∫_E σ n = ∫_E ψ_a g_i     on the facets E ∋ a of Γ_N and Γ_C (g_i the applied or the lumped contact traction),
           σ n = 0 on ∂ω_a inside the body, free on the facets where component i is held (Dirichlet).
 
+A pair of bodies is one mesh whose bodies share no vertex, so no patch spans both: each body's contact side takes
+its own lumped traction as the datum (the master's from the forces the mortar coupling transfers), as in 2-D
+(:func:`.flux.bound`; docs/estimate.md, "The equilibrated bound on pairs of P1 tetrahedra").
+
 In 3-D a patch is a graph of cells and facets, not a chain: its unknowns are the fluxes through the facets that
 contain a (the facet of a cell opposite a lies on ∂ω_a), one divergence constraint per cell. Each patch is an
 equality-constrained least-squares problem, solved through its KKT system
@@ -52,14 +56,13 @@ CHUNK = 1024
 
 
 def supported(fem: FEModel) -> bool:
-    """The reconstruction covers one body of 3-D P1 tetrahedra (pairs keep the residual estimate)."""
-    return (fem.dim == 3 and fem.scene.body.element == "P1" and fem.mesh.t.shape[0] == 4
-            and getattr(fem.contact, "master_dofs", None) is None)
+    """The reconstruction covers 3-D P1 tetrahedra, one body or a pair (each body's contact side its own datum)."""
+    return fem.dim == 3 and fem.scene.body.element == "P1" and fem.mesh.t.shape[0] == 4
 
 
 def flux_estimate(fem: FEModel, u: np.ndarray, state: ContactState) -> FluxEstimate:
-    """The equilibrated-flux bound of the full (scaled) P1 displacement ``u`` under the contact ``state``
-    (:func:`.flux.bound` with :func:`equilibrate`)."""
+    """The equilibrated-flux bound of the full (scaled) P1 displacement ``u`` under the contact ``state``, one body or
+    a pair (:func:`.flux.bound` with :func:`equilibrate`)."""
     return bound(fem, u, state, equilibrate)
 
 

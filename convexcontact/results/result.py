@@ -160,8 +160,8 @@ class ContactResult:
     @cached_property
     def equilibrated_bound(self) -> FluxEstimate | None:
         """The guaranteed equilibrated-flux bound of the discretization error (given Korn's constant), scaled
-        units: one body of P1 triangles (:mod:`convexcontact.fem.flux`) or tetrahedra
-        (:mod:`convexcontact.fem.flux3d`); None elsewhere, without an answer or when switched off."""
+        units: P1 triangles (:mod:`convexcontact.fem.flux`) or tetrahedra (:mod:`convexcontact.fem.flux3d`), one
+        body or a pair; None elsewhere, without an answer or when switched off."""
         if not self.estimated:
             return None
         for bound in (flux, flux3d):
