@@ -623,6 +623,11 @@ def flux_estimate(fem: FEModel, u: np.ndarray, state: ContactState) -> FluxEstim
 def bound(fem: FEModel, u: np.ndarray, state: ContactState, equilibrate) -> FluxEstimate:
     """:class:`FluxEstimate` of ``u`` with the stress ``equilibrate(fem, u_components, facet_moments, held)``
     reconstructs (:func:`equilibrate` on triangles, :func:`.flux3d.equilibrate` on tetrahedra)."""
+    with flux_correction.one_blas_thread():
+        return _bound(fem, u, state, equilibrate)
+
+
+def _bound(fem: FEModel, u: np.ndarray, state: ContactState, equilibrate) -> FluxEstimate:
     mesh = fem.mesh
     on = contact_facets(fem)
     lumped = lumped_traction(fem, state, on)
