@@ -83,8 +83,9 @@ def _pools() -> threadpoolctl.ThreadpoolController:
 
 def one_blas_thread():
     """A context with BLAS on one thread: the bound's work is shared out by :func:`parallel`, and OpenBLAS's own
-    threads, spinning after each of its dot products, took the CPU from them (quiet, 10⁵ DOFs, a first call: strip
-    100 : 1 0.53 → 0.45 of a linear solve, the pair 0.48 → 0.46; docs/estimate.md, "Cost of the bound")."""
+    threads, spinning after each of its dot products, took the CPU from them (quiet, 10⁵ DOFs, a first call with the
+    default threads: strip 100 : 1 0.53 → 0.42 of a linear solve, the pair 0.48 → 0.37; docs/estimate.md, "Fewer
+    correction steps")."""
     return _pools().limit(limits=1, user_api="blas")
 
 
