@@ -11,6 +11,7 @@ import scipy.linalg as la
 import scipy.sparse as sp
 
 import convexcontact as cc
+from convexcontact import blas
 from convexcontact.fem.factorization import condense
 from convexcontact.formulations.dual import dense_csc
 from convexcontact.solvers import newton_cg
@@ -156,10 +157,10 @@ def test_the_dense_newton_systems_run_on_one_blas_thread(pair, monkeypatch):
     """Each dense Newton system is gathered and factored with BLAS on DENSE_THREADS thread(s), the process's own
     setting restored after it: the pair's systems (a few hundred unknowns) paid a second thread's start at every call
     (docs/performance.md, "The dense Newton systems on one BLAS thread")."""
-    blas = lambda: {pool["num_threads"] for pool in newton_cg._blas().info() if pool["user_api"] == "blas"}
-    outside, inside = blas(), []
+    threads = lambda: {pool["num_threads"] for pool in blas.pools().info() if pool["user_api"] == "blas"}
+    outside, inside = threads(), []
     direct = newton_cg._direct
-    monkeypatch.setattr(newton_cg, "_direct", lambda *args: inside.append(blas()) or direct(*args))
+    monkeypatch.setattr(newton_cg, "_direct", lambda *args: inside.append(threads()) or direct(*args))
     solution = newton_cg.solve(pair.program)
-    assert solution.status == "solved" and inside and all(threads == {newton_cg.DENSE_THREADS} for threads in inside)
-    assert blas() == outside
+    assert solution.status == "solved" and inside and all(count == {newton_cg.DENSE_THREADS} for count in inside)
+    assert threads() == outside

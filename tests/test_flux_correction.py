@@ -12,6 +12,7 @@ import pytest
 from test_estimate import flat_punch, hertz_levels, under_gravity
 
 import convexcontact as cc
+from convexcontact import blas
 from convexcontact.fem import flux, flux_correction
 from convexcontact.results.result import contact_state
 
@@ -247,5 +248,5 @@ def test_the_bound_runs_blas_on_one_thread_and_gives_the_pools_back(monkeypatch)
     eta = flux.flux_estimate(fem, u, state).eta
     assert seen and set(seen) == {1}
     assert [pool["num_threads"] for pool in threadpoolctl.threadpool_info()] == before
-    monkeypatch.setattr(flux_correction, "one_blas_thread", contextlib.nullcontext)
+    monkeypatch.setattr(blas, "limited", lambda threads: contextlib.nullcontext())
     assert flux.flux_estimate(fem, u, state).eta == pytest.approx(eta, rel=1e-12)

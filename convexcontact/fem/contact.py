@@ -205,7 +205,7 @@ def _nodes(facets: np.ndarray, mesh: fe.Mesh, basis: fe.Basis, boundary: str) ->
     nodes = dofs[:, 0] // dim
     mass = fe.asm(fe.BilinearForm(lambda u, v, w: u * v), scalar).tocsr()[nodes][:, nodes]
     # weak rows on P2 triangles test with ψ̃ = T ψ (multiplier_transform): their masses, weights and normals
-    transform = multiplier_transform(mesh, nodes) if type(basis.elem.elem).__name__ == "ElementTetP2" else None
+    transform = multiplier_transform(mesh, nodes) if isinstance(basis.elem.elem, fe.ElementTetP2) else None
     if transform is not None:
         mass = sp.csr_matrix(transform @ mass)
     # n_i ∝ ∫ ψ_i n ds: the outward normal averaged with the shape function's weight,

@@ -254,18 +254,17 @@ def stored_sum(*terms: sp.spmatrix) -> sp.csr_matrix:
     factor)."""
     if len(terms) == 1:
         return sp.csr_matrix(terms[0])
-    index = np.int64 if max(term.nnz for term in terms) >= 2**31 else np.int32
+    index = np.int64 if max(terms[0].shape) >= 2**31 else np.int32  # row and column numbers
 
-    def rows(term):
+    def triplets(term):  # (values, rows, columns)
         if sp.isspmatrix_csr(term):
-            return np.repeat(np.arange(term.shape[0], dtype=index), np.diff(term.indptr))
-        return term.row.astype(index)
+            return term.data, np.repeat(np.arange(term.shape[0], dtype=index), np.diff(term.indptr)), term.indices
+        term = sp.coo_matrix(term)
+        return term.data, term.row, term.col
 
-    terms = [term if sp.isspmatrix_csr(term) else sp.coo_matrix(term) for term in terms]
-    columns = [term.indices if sp.isspmatrix_csr(term) else term.col for term in terms]
-    return sp.csr_matrix((np.concatenate([term.data for term in terms]),
-                          (np.concatenate([rows(term) for term in terms]),
-                           np.concatenate([column.astype(index) for column in columns]))), shape=terms[0].shape)
+    data, rows, columns = (np.concatenate(parts) for parts in zip(*map(triplets, terms)))
+    return sp.csr_matrix((data, (rows.astype(index, copy=False), columns.astype(index, copy=False))),
+                         shape=terms[0].shape)
 
 
 CHUNK = 2**17

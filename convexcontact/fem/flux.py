@@ -43,6 +43,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .. import blas
 from . import flux_correction
 from .assembly import FEModel
 from .estimate import (
@@ -623,7 +624,10 @@ def flux_estimate(fem: FEModel, u: np.ndarray, state: ContactState) -> FluxEstim
 def bound(fem: FEModel, u: np.ndarray, state: ContactState, equilibrate) -> FluxEstimate:
     """:class:`FluxEstimate` of ``u`` with the stress ``equilibrate(fem, u_components, facet_moments, held)``
     reconstructs (:func:`equilibrate` on triangles, :func:`.flux3d.equilibrate` on tetrahedra)."""
-    with flux_correction.one_blas_thread():
+    # BLAS on one thread: the work is shared out by flux_correction.parallel, and OpenBLAS's own threads, spinning
+    # after each of its dot products, took the CPU from it (quiet, 10⁵ DOFs, a first call with the default threads:
+    # strip 100 : 1 0.53 → 0.42 of a linear solve, the pair 0.48 → 0.37; docs/estimate.md, "Fewer correction steps")
+    with blas.limited(1):
         return _bound(fem, u, state, equilibrate)
 
 

@@ -33,7 +33,6 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-import threadpoolctl
 
 ITERATIONS = 5
 """Conjugate-gradient steps at most: on the uniform punch at 4,160 and 65,792 DOFs they reach η within 11–12 % of the
@@ -73,20 +72,6 @@ def executor(workers: int) -> ThreadPoolExecutor:
     """The pool of ``workers`` threads that :func:`parallel` shares out to (made once per count)."""
     return ThreadPoolExecutor(workers, thread_name_prefix="convexcontact-cells",
                               initializer=lambda: setattr(_worker, "inside", True))
-
-
-@functools.cache
-def _pools() -> threadpoolctl.ThreadpoolController:
-    """The process's thread pools (scanned once: threadpoolctl reads the loaded libraries)."""
-    return threadpoolctl.ThreadpoolController()
-
-
-def one_blas_thread():
-    """A context with BLAS on one thread: the bound's work is shared out by :func:`parallel`, and OpenBLAS's own
-    threads, spinning after each of its dot products, took the CPU from them (quiet, 10⁵ DOFs, a first call with the
-    default threads: strip 100 : 1 0.53 → 0.42 of a linear solve, the pair 0.48 → 0.37; docs/estimate.md, "Fewer
-    correction steps")."""
-    return _pools().limit(limits=1, user_api="blas")
 
 
 def parallel(work, items, cells: int) -> list:

@@ -62,8 +62,8 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-import threadpoolctl
 
+from .. import blas
 from ..conic import ConicProgram, ConicSolution
 from .cone_polish import BoundForm, bound_form, tangent_bases, unit_rows
 
@@ -694,7 +694,8 @@ class _Preconditioner:
         n, p = scale.size, balls.shape[1]
         pairs = (np.repeat(balls, p, axis=1).ravel(), np.tile(balls, (1, p)).ravel())
         E = sp.eye(n) + sp.csr_matrix((np.ones(pairs[0].size), pairs), shape=(n, n))
-        self._pattern = abs(self.G).T @ E @ abs(self.G)  # on G's columns only: small beside H
+        self._pattern = sp.csr_matrix(abs(self.G).T @ E @ abs(self.G))  # on G's columns only: small beside H
+        self._pattern.data[:] = 0.0  # its entries held as zeros, a term of the first factorization: every later face's
         self.factors = None
 
     def system(self, R: sp.csr_matrix, curvature: np.ndarray, grown: bool = False):
@@ -719,9 +720,7 @@ class _Preconditioner:
             return lambda xi: _woodbury(updated, G, d, xi)
         contact = G.T @ sp.diags(1.0 / d) @ G
         if self.factors is None:
-            pattern = sp.coo_matrix(self._pattern)  # its entries held as zeros: every later face's
-            self.factors = self._factorize(self.H, contact, sp.coo_matrix(
-                (np.zeros(pattern.nnz), (pattern.row, pattern.col)), shape=pattern.shape))
+            self.factors = self._factorize(self.H, contact, self._pattern)
             self._pattern = None
         else:
             self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
@@ -1039,7 +1038,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     direct = size and matrix is not None and size <= DIRECT_LIMIT
     if direct:
         system = functools.partial(_system, matrix, Z, R, free.size, curvature, shift)
-        with _blas().limit(limits=DENSE_THREADS, user_api="blas"):
+        with blas.limited(DENSE_THREADS):
             xi = _direct(system, free, rhs, moving is None, face if k * t == 0 else None)
         direct = xi is not None
         if direct:
@@ -1076,12 +1075,6 @@ DIRECT_LIMIT unknowns): too small for a second thread to pay its start. The 2-D 
 solve on OpenBLAS's default 2 threads against 1 (the whole process): Tresca 0.69–0.74 s against 0.21–0.28 s, Coulomb
 0.75–0.83 s against 0.48–0.49 s; loaded, one 530 × 530 LU 0.11 s against 5 ms. The rest (S's Cholesky, W) keeps
 every thread (docs/performance.md, "The dense Newton systems on one BLAS thread")."""
-
-
-@functools.cache
-def _blas() -> threadpoolctl.ThreadpoolController:
-    """The process's thread pools (scanned once: threadpoolctl reads the loaded libraries)."""
-    return threadpoolctl.ThreadpoolController()
 
 
 def _direct(system, free, rhs, symmetric: bool, face: dict | None):
