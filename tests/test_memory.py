@@ -69,6 +69,12 @@ def test_the_preconditioner_holds_a_few_times_k_while_it_is_built(shape, dim, do
     assert peak <= 4.0 * nbytes(approximation.H)
 
 
+def test_the_stored_sum_refuses_terms_of_another_shape():
+    """A pattern whose shape was inferred from its largest index is an error that names the shapes."""
+    with pytest.raises(ValueError, match=r"^stored_sum: terms of shapes \[\(5, 5\), \(2, 3\)\]"):
+        factorization.stored_sum(sp.eye(5, format="csr"), sp.coo_matrix(([0.0], ([1], [2]))))
+
+
 def test_the_stored_sum_keeps_every_entry_and_adds_the_values():
     """H + A with every entry either stores, explicit zeros and cancellations included (a later refactorization on
     the pattern needs them); the values those of the sum."""

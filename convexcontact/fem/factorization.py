@@ -246,12 +246,19 @@ def factorize_sum(*terms: sp.spmatrix) -> Factorization:
     return factorize(stored_sum(*terms))
 
 
+def same_shape(terms, caller: str) -> None:
+    """ValueError naming the shapes where ``terms`` are not all of one."""
+    if any(term.shape != terms[0].shape for term in terms):
+        raise ValueError(f"{caller}: terms of shapes {[term.shape for term in terms]}: give each the matrix's shape")
+
+
 def stored_sum(*terms: sp.spmatrix) -> sp.csr_matrix:
     """The sum of ``terms`` holding every entry any of them stores, zeros included (scipy's sums drop them, and a
     later refactorization on the pattern needs them). A CSR term's rows are expanded straight into the one triplet
     list: its COO copy, abs(H) and the sum of patterns this replaces held ~100 bytes per entry of H at once, the
     preconditioner's peak on thin bodies (strip 400 : 1 clamped, 3.4·10⁴ DOFs, Tresca: ~40 MB beside its 13 MB
     factor)."""
+    same_shape(terms, "stored_sum")
     if len(terms) == 1:
         return sp.csr_matrix(terms[0])
     index = np.int64 if max(terms[0].shape) >= 2**31 else np.int32  # row and column numbers
@@ -337,8 +344,7 @@ class _Direct(Factorization):
         terms placed, not summed: a K-sized sum was Signorini's peak on a clamped plate, 1.90 against 1.78 × the
         linear solve's at 9.4·10⁴ DOFs); else, or where a term has entries outside K's pattern or PARDISO holds its
         most factorizations, factors of their :func:`stored_sum`."""
-        if any(term.shape != terms[0].shape for term in terms):  # not to be taken for an entry outside the pattern
-            raise ValueError(f"twin: terms of shapes {[term.shape for term in terms]}: give each the matrix's shape")
+        same_shape(terms, "twin")  # before the try: not to be taken for an entry outside the pattern
         try:
             factors = self._factors and self._factors.twin(*terms)
         except ValueError:  # outside K's pattern
