@@ -256,16 +256,20 @@ def test_p2_pairs_fail_the_patch_test_without_the_slaves_transformed_coefficient
 
 
 def test_hertz_two_spheres_of_p2_tetrahedra():
-    """Two equal P2 spheres (quarter model, 8 cells, the approach given): the force of Hertz's approach,
-    F = (4/3) E* √R δ^{3/2} / 4, within 2 % (measured 0.4 %; P1 on 12 cells, as many DOFs as P2 on 6, 11 % over), and
-    no negative pressure."""
-    scene = two_spheres(8)
+    """Two equal P2 spheres (quarter model, 6 cells, 12,168 DOFs, the approach δ given): the force of Hertz's approach,
+    F = (4/3) E* √R δ^{3/2} / 4, within 5 % and the fitted p₀ within 3 % (measured F +2.1 %, p₀ −2.4 %; P1 on as many
+    DOFs, 12 cells, F +11 %; the caps' own limit lies 1–4 % over Hertz's half-spaces, docs/bodies.md), and no
+    negative pressure."""
+    scene = two_spheres(6)
     parts = tuple(dataclasses.replace(part, element="P2") for part in scene.body.parts)
     result = cc.solve(bodies_scene(parts, scene.contact, dirichlet=list(scene.dirichlet)))
     assert result.certificate.passes(1e-9)
-    hertz = 4 / 3 * (0.5 / (1 - 0.3**2)) * 0.012**1.5 / 4
-    assert result.normal_force == pytest.approx(hertz, rel=0.02)
-    assert result.contact.pressure.min() >= 0
+    assert result.normal_force == pytest.approx(4 / 3 * (0.5 / (1 - 0.3**2)) * 0.012**1.5 / 4, rel=0.05)
+    _, p0 = hertz_sphere(4 * result.normal_force, 1.0, 0.5, 0.3)
+    p, r = result.contact.pressure, np.linalg.norm(result.contact.coords[:, :2], axis=1)
+    inside = p > 0.3 * p.max()
+    (c0, _), *_ = np.linalg.lstsq(np.column_stack([np.ones(inside.sum()), r[inside] ** 2]), p[inside] ** 2, rcond=None)
+    assert np.sqrt(c0) == pytest.approx(p0, rel=0.03) and p.min() >= 0
 
 
 def test_a_stiff_master_tends_to_the_rigid_obstacle_in_3d():
