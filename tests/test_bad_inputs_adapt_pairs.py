@@ -4,7 +4,6 @@ solve, exit code 2 and ``error: FIELD: … fix`` (a SceneError from Python), eve
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 from pathlib import Path
 

@@ -27,9 +27,6 @@ from scipy.spatial import cKDTree
 from ..scene.description import SceneError
 from .contact import TRANSFORM
 
-STRAIGHT = 1e-9
-"""How far (relative to its edge's length) a P2 facet's edge node may lie from the edge's midpoint."""
-
 FACING = 1e-3
 """A master facet faces a slave facet when their normals make more than 90° + 0.06° (a facet seen edge-on
 has no projection to integrate on)."""
@@ -64,7 +61,7 @@ class Facets:
 def facets_3d(mesh: fe.Mesh, facets: np.ndarray, field_name: str, basis: fe.Basis | None = None) -> Facets:
     """The ``facets`` of a tetrahedral or hexahedral mesh, numbered outwards; warped or non-parallelogram
     quadrilaterals are refused (their bilinear map and dual basis are not built). With a P2 ``basis`` each facet
-    also holds its edges' nodes (a node is a DOF's index over 3), which must lie at the edges' midpoints."""
+    also holds its edges' nodes (a node is a DOF's index over 3)."""
     nodes = mesh.facets[:, facets].T.copy()  # scikit-fem keeps a quadrilateral's vertices in cyclic order
     centroid = mesh.p[:, mesh.t[:, mesh.f2t[0, facets]]].mean(axis=1).T
     points = mesh.p[:, nodes].transpose(1, 2, 0)
@@ -86,27 +83,20 @@ def facets_3d(mesh: fe.Mesh, facets: np.ndarray, field_name: str, basis: fe.Basi
     first /= np.linalg.norm(first, axis=1, keepdims=True)
     measure = doubled / 2 if nodes.shape[1] == 3 else doubled
     if basis is not None and basis.elem.elem.edge_dofs > 0:
-        nodes = np.column_stack([nodes, edge_nodes(mesh, basis, nodes, field_name)])
+        nodes = np.column_stack([nodes, edge_nodes(mesh, nodes)])
     return Facets(nodes, points, measure, edges, normal, np.stack([first, np.cross(normal, first)], axis=1))
 
 
-def edge_nodes(mesh: fe.Mesh, basis: fe.Basis, corners: np.ndarray, field_name: str) -> np.ndarray:
-    """The P2 nodes of the edges AB, BC, CA of triangles with ``corners`` A, B, C: mesh vertices + the edge's index
-    (scikit-fem numbers a P2 basis's edge DOFs after the vertices'); refused where one is off its edge's midpoint."""
+def edge_nodes(mesh: fe.Mesh, corners: np.ndarray) -> np.ndarray:
+    """The P2 nodes of the edges AB, BC, CA of triangles with ``corners`` A, B, C: the mesh's vertex count + the
+    edge's index (scikit-fem numbers a P2 basis's edge DOFs after the vertices'). The bodies of a pair are joined as
+    straight-sided meshes (``scene.bodies.straight_sided``), so these nodes are the edges' midpoints."""
     ends = np.sort(np.stack([corners, np.roll(corners, -1, axis=1)], axis=-1), axis=-1).reshape(-1, 2)
-    n = mesh.nvertices  # not p's columns: a quadratic mesh's (MeshTet2) hold its edge nodes too
+    n = mesh.nvertices
     known = np.sort(mesh.edges, axis=0)
     codes = known[0] * n + known[1]
     order = np.argsort(codes)
-    nodes = (n + order[np.searchsorted(codes[order], ends[:, 0] * n + ends[:, 1])]).reshape(corners.shape)
-    middle = basis.doflocs[:, 3 * nodes.ravel()].T
-    offset = np.linalg.norm(middle - mesh.p[:, ends].mean(axis=2).T, axis=1)
-    length = np.linalg.norm(np.diff(mesh.p[:, ends], axis=2)[..., 0].T, axis=1)
-    if (offset > STRAIGHT * length).any():
-        raise SceneError(field_name, f"{np.count_nonzero(offset > STRAIGHT * length)} quadratic edges are curved (a "
-                         "middle node off its edge's midpoint): a pair's facets must be flat", "give the body a "
-                         "straight-sided mesh (a linear mesh: P2 adds the middle nodes), finer where the boundary curves")
-    return nodes
+    return (n + order[np.searchsorted(codes[order], ends[:, 0] * n + ends[:, 1])]).reshape(corners.shape)
 
 
 def plane_axes(normal: np.ndarray) -> np.ndarray:
