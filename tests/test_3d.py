@@ -1,7 +1,9 @@
 """3-D bodies: patch test, Hertz sphere, frictional punch with the exact isotropic cone, inputs, quadrature."""
 
 import dataclasses
+import functools
 
+import meshio
 import numpy as np
 import pytest
 import skfem as fe
@@ -13,7 +15,7 @@ from convexcontact.fem.stiffness import stiffness
 from convexcontact.scene.description import Box
 from convexcontact.scene.library import HERTZ_SPHERE_FORCE, punch_3d
 from convexcontact.scene.library import hertz_sphere as hertz_scene
-from convexcontact.scene.meshing import tensor_mesh
+from convexcontact.scene.meshing import build_mesh, tensor_mesh
 from convexcontact.solvers import ConeNotSupported
 
 
@@ -86,6 +88,42 @@ def test_p2_tetrahedra_hertz_sphere_against_the_closed_form():
     assert 0.85 <= result.obstacle_advance / a**2 <= 1.0
     assert result.contact_half_width == pytest.approx(a, rel=0.15)
     assert result.max_pressure == pytest.approx(p0, rel=0.35)
+
+
+@functools.cache
+def linear_and_quadratic_meshes():
+    """Hertz's box on P2 tetrahedra, solved on its MeshTet1 and on the same straight mesh as a MeshTet2 (as gmsh's
+    second-order files are read: p holds the edge nodes too)."""
+    scene = hertz_scene(4, "P2", law=cc.Signorini(non_penetration="weak"))
+    mesh = build_mesh(scene.body)
+    quadratic = fe.MeshTet2.from_mesh(mesh)
+    quadratic = dataclasses.replace(quadratic, _boundaries=mesh._boundaries, _subdomains=mesh._subdomains)
+    return tuple(cc.solve(dataclasses.replace(scene, body=dataclasses.replace(scene.body, geometry=m)))
+                 for m in (mesh, quadratic))
+
+
+def test_p2_tetrahedra_on_a_quadratic_mesh_take_the_same_transformed_multipliers():
+    """The transform counted a MeshTet2's edge nodes as vertices, so ψ̃ was ψ there and Hertz's box read an approach
+    15× and a peak 54× the linear mesh's, `inaccurate`: the two meshes now give the same answer."""
+    linear, quadratic = linear_and_quadratic_meshes()
+    assert quadratic.solved and quadratic.fem.n_free == linear.fem.n_free
+    assert quadratic.obstacle_advance == pytest.approx(linear.obstacle_advance, rel=1e-9)
+    np.testing.assert_allclose(quadratic.contact.pressure, linear.contact.pressure, atol=1e-9 * linear.max_pressure)
+
+
+def test_a_result_on_a_quadratic_mesh_is_written_at_every_node(tmp_path):
+    """solution.vtu of a MeshTet2 has a point at every P2 node: the displacement there is the DOFs' (vertices then
+    edges), the vertices' equal to the linear mesh's result. Before, writing it failed on a shape mismatch."""
+    linear, quadratic = linear_and_quadratic_meshes()
+    quadratic.save(tmp_path)
+    written = meshio.read(tmp_path / "solution.vtu")
+    assert len(written.points) == quadratic.fem.mesh.p.shape[1] > quadratic.fem.mesh.nvertices
+    displacement = written.point_data["displacement"]
+    np.testing.assert_allclose(displacement, quadratic.displacement.reshape(-1, 3), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(displacement[:linear.fem.mesh.nvertices],
+                               linear.displacement[linear.fem.basis.nodal_dofs].T, rtol=0, atol=1e-12)
+    pressure = written.point_data["contact_pressure"]
+    assert pressure.max() == pytest.approx(quadratic.max_pressure, rel=1e-12)
 
 
 def test_p2_tetrahedra_gauss_point_pressures_are_moments_of_the_transformed_basis():

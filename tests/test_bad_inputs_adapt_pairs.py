@@ -4,7 +4,6 @@ solve, exit code 2 and ``error: FIELD: … fix`` (a SceneError from Python), eve
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 from pathlib import Path
 
@@ -93,13 +92,15 @@ def test_run_adapt_refuses_a_curved_quadratic_mesh_file(capsys, folder):
             "gmsh: element order 1")
 
 
-def test_a_3d_pair_of_p2_tetrahedra_is_refused_naming_the_element():
-    """3-D pairs are built for P1 tetrahedra and Q1 hexahedra: a P2 pair is refused by the element (the mortar's dual
-    basis does not exist for it), with the elements that work, before the first level is solved."""
-    scene = two_spheres(cells=2)
-    parts = tuple(dataclasses.replace(part, element="P2") for part in scene.body.parts)
-    with pytest.raises(SceneError, match="^parts.element: 3-D pairs of P2/Q2 elements are not built.*use P1 tetrahedra"):
-        adapt(bodies_scene(parts, scene.contact, dirichlet=list(scene.dirichlet)))
+def test_a_3d_pair_of_q2_hexahedra_is_refused_naming_the_element():
+    """3-D pairs are built for P1/P2 tetrahedra and Q1 hexahedra: a Q2 pair is refused by the element (its faces'
+    clipping and integration are not built), with the elements that work, before the first level is solved."""
+    parts = [cc.Part(name, cc.Box(size=(1, 1, 1), cells=(2, 2, 1), origin=(0, 0, z)), cc.Material(1.0, 0.3), "Q2")
+             for name, z in (("upper", 1), ("lower", 0))]
+    scene = bodies_scene(parts, cc.Pair("upper.bottom", master="lower.top"),
+                         dirichlet=[cc.Dirichlet("lower.bottom", uz=0.0), cc.Dirichlet("upper.top", uz=-0.01)])
+    with pytest.raises(SceneError, match="^parts.element: 3-D pairs of Q2 hexahedra are not built.*use P1/P2 tetrahedra"):
+        adapt(scene)
 
 
 @pytest.mark.parametrize("option, value", [("--target", "0"), ("--target", "1"), ("--target", "nan"),

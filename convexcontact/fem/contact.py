@@ -235,8 +235,8 @@ def multiplier_transform(mesh: fe.Mesh, nodes: np.ndarray) -> sp.csr_matrix:
     weight and the multipliers oscillate between vertices and edges; ψ̃ keeps the partition of unity and gives every
     function a positive mean (2|E|/15 per facet at a vertex, |E|/5 at an edge: the transformed quadratic basis of
     Wohlmuth's and Popp's quadratic mortar methods)."""
-    nverts = mesh.p.shape[1]
-    local = np.full(mesh.p.shape[1] + mesh.edges.shape[1], -1)
+    nverts = mesh.nvertices  # not p's columns: a quadratic mesh's (MeshTet2) hold its edge nodes too
+    local = np.full(nverts + mesh.edges.shape[1], -1)
     local[nodes] = np.arange(nodes.size)
     edge = np.flatnonzero(nodes >= nverts)
     ends = local[mesh.edges[:, nodes[edge] - nverts]]  # (2, edges): both on Γ_C

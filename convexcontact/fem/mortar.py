@@ -35,7 +35,7 @@ import skfem as fe
 from ..scene.bodies import Pair, Pairs
 from ..scene.description import Contact, SceneError
 from ..scene.meshing import check_boundary
-from .contact import ContactTrace, contact_trace, tangent_frame
+from .contact import ContactTrace, contact_trace, multiplier_transform, tangent_frame
 from .mortar3d import Facets, facets_3d, mortar_3d
 from .scaling import Scaling
 
@@ -277,13 +277,28 @@ def projected(coords, normals, master: Segments, i: np.ndarray, f: np.ndarray) -
     return i[keep], f[keep], np.clip(eta[keep], 0.0, 1.0), distance[keep]
 
 
-def relative_rows(vectors, dofs, transfer: sp.coo_matrix, master_dofs, ndofs: int) -> sp.csr_matrix:
-    """Rows v_i·(u_i − Σ_k Π_ik u_k) on every DOF."""
-    m, dim = dofs.shape
-    rows = np.concatenate([np.repeat(np.arange(m), dim), np.repeat(transfer.row, dim)])
-    cols = np.concatenate([dofs.ravel(), master_dofs[transfer.col].ravel()])
-    values = np.concatenate([vectors.ravel(), -(transfer.data[:, None] * vectors[transfer.row]).ravel()])
+def relative_rows(vectors, dofs, transfer: sp.coo_matrix, master_dofs, ndofs: int,
+                  slave: sp.coo_matrix | None = None) -> sp.csr_matrix:
+    """Rows v_i·(ũ_i − Σ_k Π_ik u_k) on every DOF, ũ = S u the slave's coefficients in its multipliers' basis
+    (``slave``: S, rows × the nodes of ``dofs``, the identity where None; P2 facets in 3-D:
+    :func:`transformed_coefficients`)."""
+    slave = sp.identity(dofs.shape[0], format="coo") if slave is None else slave
+    m, dim = slave.shape[0], dofs.shape[1]
+    rows = np.concatenate([np.repeat(slave.row, dim), np.repeat(transfer.row, dim)])
+    cols = np.concatenate([dofs[slave.col].ravel(), master_dofs[transfer.col].ravel()])
+    values = np.concatenate([(slave.data[:, None] * vectors[slave.row]).ravel(),
+                             -(transfer.data[:, None] * vectors[transfer.row]).ravel()])
     return sp.csr_matrix((values, (rows, cols)), shape=(m, ndofs))
+
+
+def transformed_coefficients(mesh: fe.Mesh, nodes: np.ndarray) -> sp.csr_matrix:
+    """S = T⁻ᵀ for the P2 slave ``nodes`` (vertices first, as :func:`numpy.unique` sorts them): a displacement
+    Σ u_b ψ_b is Σ ũ_a ψ̃_a with ũ = S u, ψ̃ = T ψ (:func:`~convexcontact.fem.contact.multiplier_transform`). T is
+    its diagonal D plus vertex-to-edge terms E whose square is zero, so T⁻¹ = D⁻¹ − D⁻¹ E D⁻¹: at a vertex
+    ũ_v = u_v, at an edge ũ_e = (u_e − α(u_v + u_w)) / (1 − 2α)."""
+    T = multiplier_transform(mesh, nodes)
+    inverse = sp.diags(1.0 / T.diagonal())
+    return sp.csr_matrix(inverse - inverse @ (T - sp.diags(T.diagonal())) @ inverse).T.tocsr()
 
 
 def slave_nodes(slave: Segments | Facets) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -326,19 +341,17 @@ def transfer_matrix(pair: Pair, slave, master, local, weights, normals, coords):
     return sp.diags(1.0 / weights) @ mass, masters, ok
 
 
-QUADRATIC_3D = ("3-D pairs of P2/Q2 elements are not built: the quadratic triangle's vertex shape functions "
-                "integrate to zero (∫ψ_i = 0 on a P2 tetrahedron's face), so no dual (biorthogonal) multiplier basis "
-                "with a diagonal D exists — it needs a modified basis (Lamichhane–Wohlmuth; Popp et al.); the 9-node "
-                "faces of Q2 hexahedra have one (all ∫ψ_i > 0) but their clipping and integration are not built")
+QUADRATIC_3D = ("3-D pairs of Q2 hexahedra are not built: the 9-node faces have a dual basis (all ∫ψ_i > 0), but "
+                "their clipping and integration are not")
 
 
 def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray,
                prescribed: np.ndarray) -> PairTrace:
     """The trace of a contact pair: slave nodes, their normals and weights, N, T and the gap from geometry."""
     dim = mesh.dim()
-    if dim == 3 and quadratic(basis):
-        raise SceneError("parts.element", QUADRATIC_3D, "use P1 tetrahedra or Q1 hexahedra for a 3-D pair "
-                         "(P2 and Q2 pairs are built in 2-D)")
+    if dim == 3 and quadratic(basis) and not isinstance(mesh, fe.MeshTet):
+        raise SceneError("parts.element", QUADRATIC_3D, "use P1/P2 tetrahedra or Q1 hexahedra for a 3-D pair "
+                         "(Q2 pairs are built in 2-D)")
     if dim == 3 and pair.method == "node_to_segment":
         raise SceneError("contact.method", "node-to-segment is built in 2-D", "use method = 'mortar'")
     facets = check_boundary(mesh, pair.boundary, "contact.boundary")
@@ -346,8 +359,8 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
         slave = segments(mesh, facets, basis, "contact.boundary")
         master = segments(mesh, check_boundary(mesh, pair.master, "contact.master"), basis, "contact.master")
     else:
-        slave = facets_3d(mesh, facets, "contact.boundary")
-        master = facets_3d(mesh, check_boundary(mesh, pair.master, "contact.master"), "contact.master")
+        slave = facets_3d(mesh, facets, "contact.boundary", basis)
+        master = facets_3d(mesh, check_boundary(mesh, pair.master, "contact.master"), "contact.master", basis)
     nodes, local, weights, normals = slave_nodes(slave)
     coords = basis.doflocs[:, dim * nodes].T
     transfer, masters, ok = transfer_matrix(pair, slave, master, local, weights, normals, coords)
@@ -358,14 +371,19 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
                          "at the master, across from it")
     left_out = (f"{np.count_nonzero(~ok)} of {ok.size} nodes of {pair.boundary!r} have no master facet under their "
                 "whole support: they are left out of the contact (make the larger boundary the master)")
+    # the slave's coefficients in its multipliers' basis (P2 facets in 3-D; the identity else), on the kept rows
+    transformed = sp.identity(ok.size, format="csr") if not getattr(slave, "quadratic", False) else (
+        transformed_coefficients(mesh, nodes))
+    transformed = sp.coo_matrix(transformed[ok])
+    all_dofs = dim * nodes[:, None] + np.arange(dim)
     transfer, normals, weights, coords = sp.coo_matrix(transfer[ok]), normals[ok], weights[ok], coords[ok]
-    dofs, master_dofs = dim * nodes[ok, None] + np.arange(dim), dim * masters[:, None] + np.arange(dim)
+    dofs, master_dofs = all_dofs[ok], dim * masters[:, None] + np.arange(dim)
     master_coords = basis.doflocs[:, master_dofs[:, 0]].T
     tangents, bitangents, mean_tangent = tangent_frame(normals, weights)
-    N_full = relative_rows(normals, dofs, transfer, master_dofs, basis.N)
+    N_full = relative_rows(normals, all_dofs, transfer, master_dofs, basis.N, transformed)
     frame = [tangents] if bitangents is None else [tangents, bitangents]
-    T_full = sp.vstack([relative_rows(t, dofs, transfer, master_dofs, basis.N) for t in frame]).tocsr()
-    gap = ((transfer @ master_coords - coords) * normals).sum(axis=1)
+    T_full = sp.vstack([relative_rows(t, all_dofs, transfer, master_dofs, basis.N, transformed) for t in frame]).tocsr()
+    gap = ((transfer @ master_coords - transformed @ basis.doflocs[:, all_dofs[:, 0]].T) * normals).sum(axis=1)
     if gap.min() < -max(slave.size.max(), master.size.max()):
         raise SceneError("parts", f"the bodies overlap: {pair.boundary!r} lies up to {-gap.min() * scaling.length:.3g} "
                          f"inside {pair.master!r}, deeper than a cell of the interface",

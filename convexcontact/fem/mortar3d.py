@@ -1,11 +1,15 @@
-"""The 3-D mortar integrals of a pair: flat facets, triangles (P1 tetrahedra) or parallelograms (Q1 hexahedra).
+"""The 3-D mortar integrals of a pair: flat facets, triangles (P1 and P2 tetrahedra) or parallelograms (Q1
+hexahedra).
 
 Each master facet facing a slave facet is projected on the slave's plane along its normal and clipped by it
 (Sutherland–Hodgman, vectorized over all facet pairs at once: a quadrilateral clipped by four half-planes
 has at most eight vertices); the intersection is cut into a fan of triangles and integrated with a degree-4
 rule (exact for the product of two bilinear functions on parallelograms). The dual basis of a slave facet
 makes D diagonal as in 2-D (see :mod:`.mortar`): φ*_a = 4λ_a − 1 on a triangle, the tensor product of the
-1-D duals 2 − 3t and 3t − 1 on a parallelogram (∫φ*_a ψ_b = δ_ab ∫ψ_b on both).
+1-D duals 2 − 3t and 3t − 1 on a parallelogram (∫φ*_a ψ_b = δ_ab ∫ψ_b on both). A P2 triangle's vertex functions
+integrate to zero, so no such dual exists for ψ: on P2 facets the slave's basis is the transformed ψ̃ = T ψ of
+:func:`~convexcontact.fem.contact.multiplier_transform` (every ∫ψ̃_a > 0), and φ* is biorthogonal to ψ̃, φ* = A ψ̃
+with A = D̃ M̃⁻¹ on each facet (Popp, Gitterle, Gee & Wall 2010, dual quadratic mortar in 3-D); the master keeps ψ.
 
 The clipping is by hand: scikit-fem's ``skfem.supermeshing.intersect`` of two triangle meshes (shapely, not a
 dependency) loops in Python over the pairs: 97 s for the intersections alone at 10⁴ slave facets, where this
@@ -21,6 +25,7 @@ import skfem as fe
 from scipy.spatial import cKDTree
 
 from ..scene.description import SceneError
+from .contact import TRANSFORM
 
 FACING = 1e-3
 """A master facet faces a slave facet when their normals make more than 90° + 0.06° (a facet seen edge-on
@@ -33,8 +38,8 @@ class Facets:
     (B − A) × (C − A) is the outward normal; ``frame`` (facets, 2, 3) are two unit tangents of each facet's
     plane, the first along A→B."""
 
-    nodes: np.ndarray  # (facets, corners) vertex indices
-    points: np.ndarray  # (facets, corners, 3)
+    nodes: np.ndarray  # (facets, corners[ + 3]) the basis's nodes: the vertices, then (P2) the edges AB, BC, CA
+    points: np.ndarray  # (facets, corners, 3) the vertices
     measure: np.ndarray  # areas
     size: np.ndarray  # longest edges
     normal: np.ndarray
@@ -42,13 +47,21 @@ class Facets:
 
     @property
     def shares(self) -> np.ndarray:
-        """∫ψ_a / |e| of each corner: a third (triangle), a quarter (parallelogram)."""
+        """∫ψ_a / |e| of each node: a third (triangle), a quarter (parallelogram); on P2 triangles ∫ψ̃_a / |e|,
+        2/15 at a vertex and 1/5 at an edge."""
+        if self.quadratic:
+            return np.repeat([2.0 * TRANSFORM / 3.0, (1.0 - 2.0 * TRANSFORM) / 3.0], 3)
         return np.full(self.nodes.shape[1], 1.0 / self.nodes.shape[1])
 
+    @property
+    def quadratic(self) -> bool:
+        return self.nodes.shape[1] > self.points.shape[1]
 
-def facets_3d(mesh: fe.Mesh, facets: np.ndarray, field_name: str) -> Facets:
+
+def facets_3d(mesh: fe.Mesh, facets: np.ndarray, field_name: str, basis: fe.Basis | None = None) -> Facets:
     """The ``facets`` of a tetrahedral or hexahedral mesh, numbered outwards; warped or non-parallelogram
-    quadrilaterals are refused (their bilinear map and dual basis are not built)."""
+    quadrilaterals are refused (their bilinear map and dual basis are not built). With a P2 ``basis`` each facet
+    also holds its edges' nodes (a node is a DOF's index over 3)."""
     nodes = mesh.facets[:, facets].T.copy()  # scikit-fem keeps a quadrilateral's vertices in cyclic order
     centroid = mesh.p[:, mesh.t[:, mesh.f2t[0, facets]]].mean(axis=1).T
     points = mesh.p[:, nodes].transpose(1, 2, 0)
@@ -69,7 +82,21 @@ def facets_3d(mesh: fe.Mesh, facets: np.ndarray, field_name: str) -> Facets:
     first = points[:, 1] - points[:, 0]
     first /= np.linalg.norm(first, axis=1, keepdims=True)
     measure = doubled / 2 if nodes.shape[1] == 3 else doubled
+    if basis is not None and basis.elem.elem.edge_dofs > 0:
+        nodes = np.column_stack([nodes, edge_nodes(mesh, nodes)])
     return Facets(nodes, points, measure, edges, normal, np.stack([first, np.cross(normal, first)], axis=1))
+
+
+def edge_nodes(mesh: fe.Mesh, corners: np.ndarray) -> np.ndarray:
+    """The P2 nodes of the edges AB, BC, CA of triangles with ``corners`` A, B, C: the mesh's vertex count + the
+    edge's index (scikit-fem numbers a P2 basis's edge DOFs after the vertices'). The bodies of a pair are joined as
+    straight-sided meshes (``scene.bodies.straight_sided``), so these nodes are the edges' midpoints."""
+    ends = np.sort(np.stack([corners, np.roll(corners, -1, axis=1)], axis=-1), axis=-1).reshape(-1, 2)
+    n = mesh.nvertices
+    known = np.sort(mesh.edges, axis=0)
+    codes = known[0] * n + known[1]
+    order = np.argsort(codes)
+    return (n + order[np.searchsorted(codes[order], ends[:, 0] * n + ends[:, 1])]).reshape(corners.shape)
 
 
 def plane_axes(normal: np.ndarray) -> np.ndarray:
@@ -125,15 +152,38 @@ DUNAVANT = (np.array([[0.445948490915965, 0.445948490915965, 0.108103018168070],
 """Points (barycentric) and weights (fractions of the area) of Dunavant's degree-4 rule on a triangle."""
 
 
-def shapes(polygon: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(shape functions, dual basis) (n, q, corners) at ``points`` (n, q, 2) of the 2-D triangle or
-    parallelogram ``polygon`` (n, corners, 2)."""
+def quadratic_shapes(L: np.ndarray) -> np.ndarray:
+    """P2 shape functions (..., 6) of barycentric coordinates L (..., 3): the vertices, then the edges AB, BC, CA."""
+    return np.concatenate([L * (2 * L - 1), 4 * L * np.roll(L, -1, axis=-1)], axis=-1)
+
+
+def transformed_dual() -> tuple[np.ndarray, np.ndarray]:
+    """T and A of a P2 triangle: ψ̃ = T ψ (:func:`~convexcontact.fem.contact.multiplier_transform` on one facet) and
+    the dual basis φ* = A ψ̃, A = D̃ M̃⁻¹ with M̃ = ∫ψ̃ψ̃ᵀ and D̃ = diag(∫ψ̃) (Dunavant's rule: exact for M̃)."""
+    T = np.diag(np.repeat([1.0, 1.0 - 2.0 * TRANSFORM], 3))
+    for vertex, edges in enumerate(((3, 5), (3, 4), (4, 5))):
+        T[vertex, list(edges)] = TRANSFORM
+    points, fractions = DUNAVANT
+    psi = quadratic_shapes(points) @ T.T
+    mass = psi.T @ (fractions[:, None] * psi)
+    return T, np.diag(mass.sum(axis=1)) @ np.linalg.inv(mass)
+
+
+TRANSFORMED, DUAL_P2 = transformed_dual()
+
+
+def shapes(polygon: np.ndarray, points: np.ndarray, quadratic: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(shape functions, dual basis) (n, q, nodes) at ``points`` (n, q, 2) of the 2-D triangle or parallelogram
+    ``polygon`` (n, corners, 2); ``quadratic``: P2 on the triangle, the dual that of ψ̃ (:func:`transformed_dual`)."""
     origin, first, last = polygon[:, 0][:, None], polygon[:, 1][:, None], polygon[:, -1][:, None]
     area = cross2(first - origin, last - origin)
     xi = cross2(points - origin, last - origin) / area
     eta = cross2(first - origin, points - origin) / area
     if polygon.shape[1] == 3:
         shape = np.stack([1 - xi - eta, xi, eta], axis=-1)
+        if quadratic:
+            psi = quadratic_shapes(shape)
+            return psi, psi @ (DUAL_P2 @ TRANSFORMED).T
         return shape, 4 * shape - 1
     one = [(1 - xi, 2 - 3 * xi), (xi, 3 * xi - 1)]  # along A→B: (shape, dual) of the nodes at 0 and 1
     two = [(1 - eta, 2 - 3 * eta), (eta, 3 * eta - 1)]  # along A→D
@@ -150,8 +200,8 @@ def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
     origin, frame = slave.points[e, 0], slave.frame[e]  # (n, 3), (n, 2, 3)
     flat = np.einsum("nkc,njc->nkj", slave.points[e] - origin[:, None], frame)  # slave vertices in its plane
     projected = np.einsum("nkc,njc->nkj", master.points[f] - origin[:, None], frame)
-    corners = slave.nodes.shape[1]
-    polygon, count = projected[:, ::-1], np.full(len(e), master.nodes.shape[1])  # the master runs clockwise here
+    corners = slave.points.shape[1]
+    polygon, count = projected[:, ::-1], np.full(len(e), master.points.shape[1])  # the master runs clockwise here
     for k in range(corners):
         polygon, count = clip(polygon, count, flat[:, k], flat[:, (k + 1) % corners])
     overlap = count >= 3
@@ -165,9 +215,9 @@ def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
     points, fractions = DUNAVANT
     at = np.einsum("qk,nfkc->nfqc", points, vertices).reshape(len(e), fan.size * len(fractions), 2)
     weight = (area[:, :, None] * fractions).reshape(len(e), fan.size * len(fractions))  # sizes given: e may be empty
-    dual = shapes(flat, at)[1]
-    shape = shapes(projected, at)[0]
+    dual = shapes(flat, at, slave.quadratic)[1]
+    shape = shapes(projected, at, master.quadratic)[0]
     entries = [(e, np.full_like(e, a), f, np.full_like(f, b), (weight * dual[..., a] * shape[..., b]).sum(axis=1))
-               for a in range(corners) for b in range(master.nodes.shape[1])]
+               for a in range(slave.nodes.shape[1]) for b in range(master.nodes.shape[1])]
     covered = np.bincount(e, weights=area.sum(axis=1), minlength=slave.measure.size) / slave.measure
     return [np.concatenate(parts) for parts in zip(*entries)], covered

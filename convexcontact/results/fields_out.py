@@ -28,15 +28,24 @@ def element_stress(result) -> dict[str, np.ndarray]:
     return mean
 
 
+def point_dofs(fem) -> np.ndarray:
+    """(points, d) the DOFs at each point of the mesh (``mesh.p``, as to_meshio writes it): a linear mesh's vertices,
+    every node of a quadratic one (MeshTri2, MeshTet2: its p holds the edge nodes, in the P2 basis's order)."""
+    if fem.mesh.p.shape[1] > fem.mesh.nvertices:
+        return np.arange(fem.basis.N).reshape(-1, fem.dim)
+    return fem.basis.nodal_dofs.T
+
+
 def vertex_displacement(result) -> np.ndarray:
-    """(nverts, d) displacement at the mesh vertices."""
-    return result.displacement[result.fem.basis.nodal_dofs].T
+    """(points, d) displacement at the mesh's points (:func:`point_dofs`)."""
+    return result.displacement[point_dofs(result.fem)]
 
 
 def vertex_of_dof(fem) -> np.ndarray:
-    """The mesh vertex of each DOF (−1 for mid-side nodes)."""
+    """The mesh point of each DOF (−1 for mid-side nodes of a linear mesh)."""
     vertex = np.full(fem.basis.N, -1)
-    vertex[fem.basis.nodal_dofs[0]] = np.arange(fem.mesh.p.shape[1])
+    points = point_dofs(fem)
+    vertex[points[:, 0]] = np.arange(points.shape[0])
     return vertex
 
 
