@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import itertools
 import logging
 import math
 import time
@@ -105,9 +106,13 @@ def containing(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
 
 
 def parent_facets(new: fe.Mesh, old: fe.Mesh, facets: np.ndarray, candidates: np.ndarray) -> np.ndarray:
-    """For each of ``new``'s boundary ``facets``, the one of ``old``'s ``candidates`` (boundary facets) it lies in."""
+    """For each of ``new``'s boundary ``facets``, the one of ``old``'s ``candidates`` (boundary facets) it lies in.
+    A quadrilateral facet (hexahedra) is the union of the triangles of any three of its corners (Carathéodory)."""
     midpoints = new.p[:, new.facets[:, facets]].mean(axis=1).T
-    return candidates[containing(midpoints, old.p[:, old.facets[:, candidates]].transpose(2, 1, 0))]
+    corners = old.p[:, old.facets[:, candidates]].transpose(2, 1, 0)  # (facets, vertices, d)
+    simplices = list(itertools.combinations(range(corners.shape[1]), new.dim()))
+    pieces = np.concatenate([corners[:, list(c)] for c in simplices])
+    return np.tile(candidates, len(simplices))[containing(midpoints, pieces)]
 
 
 def inherit_boundaries(new: fe.Mesh, old: fe.Mesh) -> fe.Mesh:
@@ -146,8 +151,8 @@ def refine(meshes: Sequence[fe.Mesh], indicators: np.ndarray, fraction: float, g
     triangles and tetrahedra the Dörfler cells of all bodies together refined locally, and more of the next largest
     indicators' cells while the ``element``'s DOFs would grow by less than ``growth`` (every cell at most); every
     cell otherwise. The marked set always holds Dörfler's, so each level keeps its error reduction."""
-    if not isinstance(meshes[0], LOCAL):
-        return [mesh.refined() for mesh in meshes]
+    if not isinstance(meshes[0], LOCAL):  # with their names: scikit-fem drops them on hexahedra too
+        return [refined_uniformly(mesh, 1) for mesh in meshes]
     order = np.argsort(indicators)[::-1]  # dorfler's order: its cells are the first ``count``
     first = np.cumsum([0] + [mesh.nelements for mesh in meshes])
     cells, before = first[-1], sum(dofs_of(mesh, element) for mesh in meshes)

@@ -55,33 +55,57 @@ def timed_solve(scene: Scene) -> tuple[ContactResult, float]:
 
 
 def locate(mesh: fe.Mesh, points: np.ndarray, candidates: int = 16) -> tuple[np.ndarray, np.ndarray]:
-    """The simplex (triangle, tetrahedron) of ``mesh`` holding each point (d, n) and the point's barycentric
-    coordinates (n, d + 1), among its nearest cells by centroid, more of them where a thin cell hides (scikit-fem's
-    finder tests every point against the union of all candidates: (points × cells) memory on a fine reference)."""
+    """The cell of ``mesh`` holding each point (d, n) and the point's reference coordinates (n, d) in it, among its
+    nearest cells by centroid, more of them where a thin cell hides (scikit-fem's finder tests every point against the
+    union of all candidates: (points × cells) memory on a fine reference). Simplices: the barycentric λ₁ … λ_d;
+    quadrilaterals and hexahedra: the (bi-, tri-)linear map's (ξ, η[, ζ]) ∈ [0, 1]^d."""
     tree = cKDTree(mesh.p[:, mesh.t].mean(axis=1).T)
+    simplex = mesh.t.shape[0] == mesh.dim() + 1
     cell = np.full(points.shape[1], -1)
-    weights = np.zeros((points.shape[1], mesh.t.shape[0]))
+    coordinates = np.zeros((points.shape[1], mesh.dim()))
     todo = np.arange(points.shape[1])
     while todo.size:
         k = min(candidates, mesh.nelements)
         _, near = tree.query(points[:, todo].T, k=k)
         near = near.reshape(todo.size, k)
-        corners = mesh.p[:, mesh.t[:, near]]  # (d, d + 1, points, k)
-        edges = np.moveaxis(corners[:, 1:] - corners[:, :1], (0, 1), (-2, -1))  # (points, k, d, d): edges as columns
-        offset = np.moveaxis(points[:, todo, None] - corners[:, 0], 0, -1)[..., None]  # (points, k, d, 1)
-        b = np.linalg.solve(edges, offset)[..., 0]  # the coordinates λ₁ … λ_d of each candidate
+        b = (barycentric if simplex else tensor_coordinates)(mesh, points[:, todo], near)  # (points, k, d)
         tol = 1e-10
-        inside = (b >= -tol).all(axis=-1) & (b.sum(axis=-1) <= 1 + tol)
+        inside = (b >= -tol).all(axis=-1) & ((b.sum(axis=-1) if simplex else b.max(axis=-1)) <= 1 + tol)
         found = inside.any(axis=1)
         column = inside.argmax(axis=1)[found]
         rows = np.flatnonzero(found)
         cell[todo[found]] = near[rows, column]
-        local = b[rows, column]
-        weights[todo[found]] = np.column_stack([1 - local.sum(axis=1), local])
+        coordinates[todo[found]] = b[rows, column]
         if k == mesh.nelements and not found.all():
             raise ValueError("a reference node lies in no cell of the coarse mesh: the meshes are not nested")
         todo, candidates = todo[~found], 4 * candidates
-    return cell, weights
+    return cell, coordinates
+
+
+def barycentric(mesh: fe.Mesh, points: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """The coordinates λ₁ … λ_d (points, k, d) of each point (d, points) in each of its candidate simplices ``near``."""
+    corners = mesh.p[:, mesh.t[:, near]]  # (d, d + 1, points, k)
+    edges = np.moveaxis(corners[:, 1:] - corners[:, :1], (0, 1), (-2, -1))  # (points, k, d, d): edges as columns
+    offset = np.moveaxis(points[:, :, None] - corners[:, 0], 0, -1)[..., None]  # (points, k, d, 1)
+    return np.linalg.solve(edges, offset)[..., 0]
+
+
+def tensor_coordinates(mesh: fe.Mesh, points: np.ndarray, near: np.ndarray, steps: int = 6) -> np.ndarray:
+    """The reference coordinates (points, k, d) of each point in each candidate quadrilateral or hexahedron ``near``
+    by Newton on its (bi-, tri-)linear map (exact in one step on a tensor grid's boxes); a candidate whose map misses
+    the point after ``steps`` (a point far outside it) gets NaN, which no inside-test accepts."""
+    mapping = fe.MappingIsoparametric(mesh, mesh.elem())
+    out = np.empty(near.shape + (mesh.dim(),))
+    x = points[:, :, None]
+    scale = np.ptp(mesh.p, axis=1).max()
+    for j in range(near.shape[1]):
+        X = np.full(x.shape, 0.5)
+        for _ in range(steps):
+            X = X + np.einsum("ijkl,jkl->ikl", mapping.invDF(X, near[:, j]), x - mapping.F(X, near[:, j]))
+        missed = np.abs(mapping.F(X, near[:, j]) - x).max(axis=(0, 2)) > 1e-10 * scale
+        X[:, missed] = np.nan
+        out[:, j] = X[:, :, 0].T
+    return out
 
 
 def bodies_of(mesh: fe.Mesh) -> np.ndarray:
@@ -99,9 +123,9 @@ def scalar_dofs(fem) -> tuple[np.ndarray, np.ndarray]:
 
 
 def prolong(result: ContactResult, points: np.ndarray, body: np.ndarray) -> np.ndarray:
-    """The P1 or P2 displacement of ``result`` (scaled) at ``points`` (d, n), each point looked for in the cells of
-    its own ``body`` (two bodies touch at their contact: a point there lies in both); the element's own shape
-    functions at the point's barycentric coordinates (exact for a finer nested mesh's nodes)."""
+    """The P1, P2, Q1 or Q2 displacement of ``result`` (scaled) at ``points`` (d, n), each point looked for in the
+    cells of its own ``body`` (two bodies touch at their contact: a point there lies in both); the element's own shape
+    functions at the point's reference coordinates (exact for a finer nested mesh's nodes)."""
     fem = result.fem
     mesh, element = fem.mesh, fem.basis.elem.elem
     label = bodies_of(mesh)
@@ -111,15 +135,15 @@ def prolong(result: ContactResult, points: np.ndarray, body: np.ndarray) -> np.n
     for b in np.unique(label):
         at = np.flatnonzero(body == b)
         cells = np.flatnonzero(label[mesh.t[0]] == b)
-        cell, weights = locate(type(mesh)(np.ascontiguousarray(mesh.p), mesh.t[:, cells]), points[:, at])
-        local = weights[:, 1:].T  # the reference simplex's coordinates (ξ, η[, ζ]) = (λ₁, λ₂[, λ₃])
+        cell, local = locate(type(mesh)(np.ascontiguousarray(mesh.p), mesh.t[:, cells]), points[:, at])
+        local = local.T
         dofs = cell_dofs[:, cells[cell]]  # (shape functions, points)
         out[at] = sum(element.lbasis(local, k)[0][:, None] * u[dofs[k]] for k in range(dofs.shape[0]))
     return out.ravel()
 
 
 def true_errors(results: Sequence[ContactResult], reference: ContactResult) -> list[float]:
-    """‖u_ref − u_h‖_E / ‖u_ref‖_E of each P1 or P2 result, u_h interpolated at the reference's nodes (exact on
+    """‖u_ref − u_h‖_E / ‖u_ref‖_E of each P1, P2, Q1 or Q2 result, u_h interpolated at the reference's nodes (exact on
     nested meshes; one body or several, each in its own cells)."""
     fine = reference.fem
     u_ref = reference.displacement / fine.scaling.displacement
