@@ -364,6 +364,12 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
     nodes, local, weights, normals = slave_nodes(slave)
     coords = basis.doflocs[:, dim * nodes].T
     transfer, masters, ok = transfer_matrix(pair, slave, master, local, weights, normals, coords)
+    # the slave's coefficients in its multipliers' basis (P2 facets in 3-D; the identity else), on the kept rows;
+    # an edge node's row holds its vertices too, so it is kept only with them: the forces its multiplier puts on
+    # the slave then land on kept nodes, which the results, the estimate and the pair's balance sum over
+    transformed = sp.identity(ok.size, format="csr") if not getattr(slave, "quadratic", False) else (
+        transformed_coefficients(mesh, nodes))
+    ok &= abs(transformed) @ (~ok).astype(float) == 0
     if not ok.any():
         raise SceneError("contact.master", f"no facet of {pair.master!r} faces {pair.boundary!r} (they lie side by "
                          "side, back to back, or beside each other along the interface: no slave facet's normal meets "
@@ -371,9 +377,6 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
                          "at the master, across from it")
     left_out = (f"{np.count_nonzero(~ok)} of {ok.size} nodes of {pair.boundary!r} have no master facet under their "
                 "whole support: they are left out of the contact (make the larger boundary the master)")
-    # the slave's coefficients in its multipliers' basis (P2 facets in 3-D; the identity else), on the kept rows
-    transformed = sp.identity(ok.size, format="csr") if not getattr(slave, "quadratic", False) else (
-        transformed_coefficients(mesh, nodes))
     transformed = sp.coo_matrix(transformed[ok])
     all_dofs = dim * nodes[:, None] + np.arange(dim)
     transfer, normals, weights, coords = sp.coo_matrix(transfer[ok]), normals[ok], weights[ok], coords[ok]
