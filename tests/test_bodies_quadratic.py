@@ -133,6 +133,32 @@ def test_a_straight_sided_quadratic_mesh_joins_and_a_curved_one_is_refused():
     assert error.value.field == "parts[upper].geometry"
 
 
+def quadratic_box(cells: int, z: float = 0.0, bend: float = 0.0) -> fe.MeshTet2:
+    """A unit box of P1 tetrahedra as a MeshTet2, its edge nodes moved up by ``bend`` · sin(πx) (0: straight)."""
+    linear = build_mesh(cc.Body(Box(size=(1, 1, 1), cells=(cells, cells, 2), origin=(0, 0, z)), "P2"))
+    doflocs = fe.MeshTet2.from_mesh(linear).doflocs.copy()
+    edges = np.arange(linear.nvertices, doflocs.shape[1])
+    doflocs[2, edges] += bend * np.sin(np.pi * doflocs[0, edges])
+    return fe.MeshTet2(doflocs, linear.t, _boundaries=linear.boundaries)
+
+
+def test_a_3d_pair_of_straight_quadratic_meshes_passes_the_patch_test_and_a_curved_one_is_refused():
+    """MeshTet2 boxes (as gmsh's second-order files are read) with straight edges: the P2 pair's patch test passes; edge
+    nodes off the midpoints are refused by name, as in 2-D."""
+    def scene(bend):
+        parts = [Part("upper", quadratic_box(3, 1.0, bend), STEEL, "P2"), Part("lower", quadratic_box(4), STEEL, "P2")]
+        return bodies_scene(parts, Pair("upper.bottom", master="lower.top"),
+                            dirichlet=[cc.Dirichlet("lower.bottom", uz=0.0),
+                                       *(cc.Dirichlet(f"{part}.{side}", **{axis: 0.0}) for part in ("upper", "lower")
+                                         for side, axis in (("left", "ux"), ("front", "uy")))],
+                            tractions=[cc.Traction("upper.top", pressure=0.01)])
+    result = cc.solve(scene(0.0))
+    assert np.abs(result.contact.pressure / 0.01 - 1).max() <= 1e-9 and result.certificate.passes(1e-9)
+    with pytest.raises(cc.SceneError, match="curved edges") as error:
+        scene(0.01)
+    assert error.value.field == "parts[upper].geometry"
+
+
 def test_3d_q2_pairs_are_refused_with_the_reason():
     """Q2 hexahedra's 9-node faces have a dual basis, but their clipping and integration are not built (P2
     tetrahedra are: tests/test_bodies.py, the 3-D patch test)."""
