@@ -10,6 +10,7 @@ import pytest
 import skfem as fe
 
 import convexcontact as cc
+from convexcontact.drivers.adapt import refined_uniformly
 from convexcontact.fem.estimate import TERMS, estimate
 from convexcontact.results.result import EFFECTIVITY, contact_state, effectivity
 from convexcontact.scene.bodies import Pair, Part, bodies_scene, facet_index
@@ -128,3 +129,16 @@ def test_the_budget_is_in_the_summary_of_a_3d_and_a_p2_pair(p2_cylinders):
         assert budget["estimator"] == "residual (calibrated)" and budget["calibration"] == calibration
         assert budget["discretization"] == pytest.approx(estimated.relative / calibration)
         assert 0 < budget["discretization"] < np.inf and estimated.terms["contact"] > 0
+
+
+def test_a_pairs_left_out_nodes_are_no_penetration_on_p2_spheres():
+    """Two P2 spheres with Tresca (27,744 DOFs): the master covers 157 of the slave's 289 nodes, the others hold no
+    row. The gap's interpolant took their zeros, and between two open P2 vertices a left-out edge node read as a
+    penetration: 94 % of η² (η 2.56, 13 × the true error). The terms on Γ_C now run over the facets whose nodes all hold
+    rows: the penetration term falls to 3·10⁻⁶ of η² and η to 0.64."""
+    base = two_spheres(cells=2, law=cc.Tresca(slip_bound=0.005))
+    parts = tuple(dataclasses.replace(p, geometry=refined_uniformly(p.geometry, 2), element="P2") for p in base.body.parts)
+    result = cc.solve(bodies_scene(parts, base.contact, dirichlet=list(base.dirichlet)))
+    assert "left out" in result.fem.warnings[0]
+    estimate = result.residual_estimate
+    assert estimate.terms["penetration"] < 1e-4 * estimate.eta**2 and estimate.terms["complementarity"] > 0
