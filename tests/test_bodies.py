@@ -238,7 +238,8 @@ def boxes(law=None, cells=(3, 4), element="P1"):
 
 
 @pytest.mark.parametrize("law, element", [(cc.Signorini(), "P1"), (cc.Tresca(0.001), "P1"), (cc.Signorini(), "Q1"),
-                                          (cc.Tresca(0.001), "Q1"), (cc.Signorini(), "P2"), (cc.Tresca(0.001), "P2")])
+                                          (cc.Tresca(0.001), "Q1"), (cc.Signorini(), "P2"), (cc.Tresca(0.001), "P2"),
+                                          (cc.Signorini(), "Q2"), (cc.Tresca(0.001), "Q2")])
 def test_mortar_passes_the_patch_test_in_3d(law, element):
     """Non-matching triangles or quadrilaterals (the master clipped on each slave facet) carry the uniform
     pressure exactly; P2 triangles with the dual basis of the transformed ψ̃ (mortar3d.transformed_dual)."""
