@@ -9,7 +9,6 @@ from convexcontact import Pair, Part, bodies_scene
 from convexcontact.fem.assembly import assemble
 from convexcontact.fem.mortar import dual_coefficients, gauss, lagrange
 from convexcontact.scene.bodies_library import patch_pair, two_cylinders
-from convexcontact.scene.description import Box
 from convexcontact.scene.meshing import build_mesh
 
 STEEL = cc.Material(1.0, 0.3)
@@ -131,16 +130,3 @@ def test_a_straight_sided_quadratic_mesh_joins_and_a_curved_one_is_refused():
     with pytest.raises(cc.SceneError, match="curved edges") as error:
         quadratic_patch(0.01)
     assert error.value.field == "parts[upper].geometry"
-
-
-def test_3d_q2_pairs_are_refused_with_the_reason():
-    """Q2 hexahedra's 9-node faces have a dual basis, but their clipping and integration are not built (P2
-    tetrahedra are: tests/test_bodies.py, the 3-D patch test)."""
-    parts = [Part("upper", Box(size=(1, 1, 1), cells=(1, 1, 1), origin=(0, 0, 1)), STEEL, "Q2"),
-             Part("lower", Box(size=(1, 1, 1), cells=(2, 2, 1)), STEEL, "Q2")]
-    scene = bodies_scene(parts, Pair("upper.bottom", master="lower.top"),
-                         dirichlet=[cc.Dirichlet("lower.bottom", ux=0.0, uy=0.0, uz=0.0),
-                                    cc.Dirichlet("upper.top", ux=0.0, uy=0.0, uz=-0.01)])
-    with pytest.raises(cc.SceneError, match="Q2 hexahedra are not built.*use P1/P2 tetrahedra") as error:
-        cc.solve(scene)
-    assert error.value.field == "parts.element"
