@@ -274,7 +274,7 @@ def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
     weight = (area[:, :, None] * fractions).reshape(len(e), fan.size * len(fractions))  # sizes given: e may be empty
     dual = shapes(flat, at, slave.quadratic)[1]
     shape = shapes(projected, at, master.quadratic)[0]
-    entries = [(e, np.full_like(e, a), f, np.full_like(f, b), (weight * dual[..., a] * shape[..., b]).sum(axis=1))
-               for a in range(slave.nodes.shape[1]) for b in range(master.nodes.shape[1])]
+    values = np.einsum("nq,nqa,nqb->abn", weight, dual, shape, optimize=True)
+    a, b, n = np.indices(values.shape).reshape(3, -1)
     covered = np.bincount(e, weights=area.sum(axis=1), minlength=slave.measure.size) / slave.measure
-    return [np.concatenate(parts) for parts in zip(*entries)], covered
+    return [e[n], a, f[n], b, values.ravel()], covered
