@@ -15,7 +15,6 @@ from hypothesis import strategies as st
 import convexcontact as cc
 from convexcontact import cli
 from convexcontact.drivers.adapt import adapt
-from convexcontact.scene.bodies import bodies_scene
 from convexcontact.scene.bodies_library import two_spheres
 from convexcontact.scene.description import SceneError
 
@@ -90,17 +89,6 @@ def test_a_curved_quadratic_mesh_is_refused_naming_the_geometry(folder):
 def test_run_adapt_refuses_a_curved_quadratic_mesh_file(capsys, folder):
     refused(capsys, folder, ["disc.toml", "--adapt"], "error: body.geometry: a MeshTri2 with curved edges",
             "gmsh: element order 1")
-
-
-def test_a_3d_pair_of_q2_hexahedra_is_refused_naming_the_element():
-    """3-D pairs are built for P1/P2 tetrahedra and Q1 hexahedra: a Q2 pair is refused by the element (its faces'
-    clipping and integration are not built), with the elements that work, before the first level is solved."""
-    parts = [cc.Part(name, cc.Box(size=(1, 1, 1), cells=(2, 2, 1), origin=(0, 0, z)), cc.Material(1.0, 0.3), "Q2")
-             for name, z in (("upper", 1), ("lower", 0))]
-    scene = bodies_scene(parts, cc.Pair("upper.bottom", master="lower.top"),
-                         dirichlet=[cc.Dirichlet("lower.bottom", uz=0.0), cc.Dirichlet("upper.top", uz=-0.01)])
-    with pytest.raises(SceneError, match="^parts.element: 3-D pairs of Q2 hexahedra are not built.*use P1/P2 tetrahedra"):
-        adapt(scene)
 
 
 @pytest.mark.parametrize("option, value", [("--target", "0"), ("--target", "1"), ("--target", "nan"),

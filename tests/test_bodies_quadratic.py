@@ -9,7 +9,6 @@ from convexcontact import Pair, Part, bodies_scene
 from convexcontact.fem.assembly import assemble
 from convexcontact.fem.mortar import dual_coefficients, gauss, lagrange
 from convexcontact.scene.bodies_library import patch_pair, two_cylinders
-from convexcontact.scene.description import Box
 from convexcontact.scene.meshing import build_mesh
 
 STEEL = cc.Material(1.0, 0.3)
@@ -135,7 +134,7 @@ def test_a_straight_sided_quadratic_mesh_joins_and_a_curved_one_is_refused():
 
 def quadratic_box(cells: int, z: float = 0.0, bend: float = 0.0) -> fe.MeshTet2:
     """A unit box of P1 tetrahedra as a MeshTet2, its edge nodes moved up by ``bend`` · sin(πx) (0: straight)."""
-    linear = build_mesh(cc.Body(Box(size=(1, 1, 1), cells=(cells, cells, 2), origin=(0, 0, z)), "P2"))
+    linear = build_mesh(cc.Body(cc.Box(size=(1, 1, 1), cells=(cells, cells, 2), origin=(0, 0, z)), "P2"))
     doflocs = fe.MeshTet2.from_mesh(linear).doflocs.copy()
     edges = np.arange(linear.nvertices, doflocs.shape[1])
     doflocs[2, edges] += bend * np.sin(np.pi * doflocs[0, edges])
@@ -157,16 +156,3 @@ def test_a_3d_pair_of_straight_quadratic_meshes_passes_the_patch_test_and_a_curv
     with pytest.raises(cc.SceneError, match="curved edges") as error:
         scene(0.01)
     assert error.value.field == "parts[upper].geometry"
-
-
-def test_3d_q2_pairs_are_refused_with_the_reason():
-    """Q2 hexahedra's 9-node faces have a dual basis, but their clipping and integration are not built (P2
-    tetrahedra are: tests/test_bodies.py, the 3-D patch test)."""
-    parts = [Part("upper", Box(size=(1, 1, 1), cells=(1, 1, 1), origin=(0, 0, 1)), STEEL, "Q2"),
-             Part("lower", Box(size=(1, 1, 1), cells=(2, 2, 1)), STEEL, "Q2")]
-    scene = bodies_scene(parts, Pair("upper.bottom", master="lower.top"),
-                         dirichlet=[cc.Dirichlet("lower.bottom", ux=0.0, uy=0.0, uz=0.0),
-                                    cc.Dirichlet("upper.top", ux=0.0, uy=0.0, uz=-0.01)])
-    with pytest.raises(cc.SceneError, match="Q2 hexahedra are not built.*use P1/P2 tetrahedra") as error:
-        cc.solve(scene)
-    assert error.value.field == "parts.element"

@@ -17,7 +17,7 @@ tangent t_i; master nodes k:
 - ``node_to_segment``: Π_ik = φ_k(π(x_i)), x_i projected on the master along n_i.
 
 Slave nodes whose facets are not all covered by the master are left out (with a warning). In 3-D
-(P1 tetrahedra, Q1 hexahedra with parallelogram faces) the multipliers are the dual basis of the slave facets
+(P1/P2 tetrahedra, Q1/Q2 hexahedra with parallelogram faces) the multipliers are the dual basis of the slave facets
 (:mod:`.mortar3d`), t_i and the second tangent b_i = n_i × t_i as
 :func:`~convexcontact.fem.contact.tangent_frame` chooses them.
 """
@@ -36,7 +36,7 @@ from ..scene.bodies import Pair, Pairs
 from ..scene.description import Contact, SceneError
 from ..scene.meshing import check_boundary
 from .contact import ContactTrace, contact_trace, multiplier_transform, tangent_frame
-from .mortar3d import Facets, facets_3d, mortar_3d
+from .mortar3d import Facets, dual_coefficients, facets_3d, gauss, lagrange, mortar_3d
 from .scaling import Scaling
 
 COVERED = 1e-9
@@ -48,30 +48,6 @@ def quadratic(basis: fe.Basis) -> bool:
     quadratic mesh's ``p`` holds its edge nodes too)."""
     element = basis.elem.elem
     return element.facet_dofs + getattr(element, "edge_dofs", 0) > 0
-
-
-def lagrange(degree: int, t: np.ndarray) -> np.ndarray:
-    """The Lagrange shape functions of a straight facet of ``degree`` 1 or 2 at ``t`` ∈ [0, 1] (start → end),
-    stacked last in the order of :attr:`Segments.nodes`: start, end[, middle]."""
-    if degree == 1:
-        return np.stack([1 - t, t], axis=-1)
-    return np.stack([(1 - t) * (1 - 2 * t), t * (2 * t - 1), 4 * t * (1 - t)], axis=-1)
-
-
-def gauss(points: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss–Legendre points on [0, 1] and weights summing to 1 (exact for degree 2·points − 1)."""
-    t, w = np.polynomial.legendre.leggauss(points)
-    return (t + 1) / 2, w / 2
-
-
-def dual_coefficients(degree: int) -> tuple[np.ndarray, np.ndarray]:
-    """A = D M⁻¹ of the reference facet (φ*_a = Σ_b A_ab ψ_b, so that ∫φ*_a ψ_b = δ_ab ∫ψ_b) and the
-    fractions ∫ψ_a / |e| (D's diagonal): [[2, −1], [−1, 2]] and ½, ½ for degree 1; 1/6, 1/6, 2/3 for 2."""
-    t, w = gauss(degree + 1)
-    psi = lagrange(degree, t)
-    mass = psi.T @ (w[:, None] * psi)
-    shares = mass.sum(axis=1)
-    return shares[:, None] * np.linalg.inv(mass), shares
 
 
 @dataclass
@@ -341,17 +317,10 @@ def transfer_matrix(pair: Pair, slave, master, local, weights, normals, coords):
     return sp.diags(1.0 / weights) @ mass, masters, ok
 
 
-QUADRATIC_3D = ("3-D pairs of Q2 hexahedra are not built: the 9-node faces have a dual basis (all ∫ψ_i > 0), but "
-                "their clipping and integration are not")
-
-
 def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray,
                prescribed: np.ndarray) -> PairTrace:
     """The trace of a contact pair: slave nodes, their normals and weights, N, T and the gap from geometry."""
     dim = mesh.dim()
-    if dim == 3 and quadratic(basis) and not isinstance(mesh, fe.MeshTet):
-        raise SceneError("parts.element", QUADRATIC_3D, "use P1/P2 tetrahedra or Q1 hexahedra for a 3-D pair "
-                         "(Q2 pairs are built in 2-D)")
     if dim == 3 and pair.method == "node_to_segment":
         raise SceneError("contact.method", "node-to-segment is built in 2-D", "use method = 'mortar'")
     facets = check_boundary(mesh, pair.boundary, "contact.boundary")
@@ -367,7 +336,7 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
     # the slave's coefficients in its multipliers' basis (P2 facets in 3-D; the identity else), on the kept rows;
     # an edge node's row holds its vertices too, so it is kept only with them: the forces its multiplier puts on
     # the slave then land on kept nodes, which the results, the estimate and the pair's balance sum over
-    transformed = sp.identity(ok.size, format="csr") if not getattr(slave, "quadratic", False) else (
+    transformed = sp.identity(ok.size, format="csr") if not getattr(slave, "transformed", False) else (
         transformed_coefficients(mesh, nodes))
     ok &= abs(transformed) @ (~ok).astype(float) == 0
     if not ok.any():

@@ -1,12 +1,14 @@
-"""The 3-D mortar integrals of a pair: flat facets, triangles (P1 and P2 tetrahedra) or parallelograms (Q1
-hexahedra).
+"""The 3-D mortar integrals of a pair: flat facets, triangles (P1 and P2 tetrahedra) or parallelograms (Q1 and
+Q2 hexahedra).
 
 Each master facet facing a slave facet is projected on the slave's plane along its normal and clipped by it
 (Sutherland–Hodgman, vectorized over all facet pairs at once: a quadrilateral clipped by four half-planes
 has at most eight vertices); the intersection is cut into a fan of triangles and integrated with a degree-4
-rule (exact for the product of two bilinear functions on parallelograms). The dual basis of a slave facet
+rule (exact for the product of two bilinear functions on parallelograms), or of degree 8 on Q2 faces (two
+biquadratic functions, the master's affine in the slave's coordinates on parallelograms). The dual basis of a slave facet
 makes D diagonal as in 2-D (see :mod:`.mortar`): φ*_a = 4λ_a − 1 on a triangle, the tensor product of the
-1-D duals 2 − 3t and 3t − 1 on a parallelogram (∫φ*_a ψ_b = δ_ab ∫ψ_b on both). A P2 triangle's vertex functions
+1-D duals 2 − 3t and 3t − 1 on a parallelogram (∫φ*_a ψ_b = δ_ab ∫ψ_b on both), on a Q2 face (9 nodes) the
+tensor product of the quadratic 1-D duals (:func:`dual_coefficients`: its ∫ψ_a are all positive). A P2 triangle's vertex functions
 integrate to zero, so no such dual exists for ψ: on P2 facets the slave's basis is the transformed ψ̃ = T ψ of
 :func:`~convexcontact.fem.contact.multiplier_transform` (every ∫ψ̃_a > 0), and φ* is biorthogonal to ψ̃, φ* = A ψ̃
 with A = D̃ M̃⁻¹ on each facet (Popp, Gitterle, Gee & Wall 2010, dual quadratic mortar in 3-D); the master keeps ψ.
@@ -38,7 +40,8 @@ class Facets:
     (B − A) × (C − A) is the outward normal; ``frame`` (facets, 2, 3) are two unit tangents of each facet's
     plane, the first along A→B."""
 
-    nodes: np.ndarray  # (facets, corners[ + 3]) the basis's nodes: the vertices, then (P2) the edges AB, BC, CA
+    nodes: np.ndarray  # (facets, corners[ + edges (+ 1)]) the basis's nodes: the vertices, then (P2, Q2) the
+    # edges AB, BC, …, then (Q2) the face's centre
     points: np.ndarray  # (facets, corners, 3) the vertices
     measure: np.ndarray  # areas
     size: np.ndarray  # longest edges
@@ -48,20 +51,28 @@ class Facets:
     @property
     def shares(self) -> np.ndarray:
         """∫ψ_a / |e| of each node: a third (triangle), a quarter (parallelogram); on P2 triangles ∫ψ̃_a / |e|,
-        2/15 at a vertex and 1/5 at an edge."""
-        if self.quadratic:
+        2/15 at a vertex and 1/5 at an edge; on Q2 faces 1/36 at a corner, 1/9 at an edge, 4/9 at the centre."""
+        if self.transformed:
             return np.repeat([2.0 * TRANSFORM / 3.0, (1.0 - 2.0 * TRANSFORM) / 3.0], 3)
+        if self.quadratic:
+            shares = dual_coefficients(2)[1]
+            return np.array([shares[i] * shares[j] for i, j in TENSOR])
         return np.full(self.nodes.shape[1], 1.0 / self.nodes.shape[1])
 
     @property
     def quadratic(self) -> bool:
         return self.nodes.shape[1] > self.points.shape[1]
 
+    @property
+    def transformed(self) -> bool:
+        """P2 triangles: the multipliers are dual to ψ̃ = T ψ, not ψ (:func:`transformed_dual`)."""
+        return self.quadratic and self.points.shape[1] == 3
+
 
 def facets_3d(mesh: fe.Mesh, facets: np.ndarray, field_name: str, basis: fe.Basis | None = None) -> Facets:
     """The ``facets`` of a tetrahedral or hexahedral mesh, numbered outwards; warped or non-parallelogram
-    quadrilaterals are refused (their bilinear map and dual basis are not built). With a P2 ``basis`` each facet
-    also holds its edges' nodes (a node is a DOF's index over 3)."""
+    quadrilaterals are refused (their bilinear map and dual basis are not built). With a P2 or Q2 ``basis`` each
+    facet also holds its edges' nodes, and on Q2 its own (centre) node (a node is a DOF's index over 3)."""
     nodes = mesh.facets[:, facets].T.copy()  # scikit-fem keeps a quadrilateral's vertices in cyclic order
     centroid = mesh.p[:, mesh.t[:, mesh.f2t[0, facets]]].mean(axis=1).T
     points = mesh.p[:, nodes].transpose(1, 2, 0)
@@ -84,12 +95,14 @@ def facets_3d(mesh: fe.Mesh, facets: np.ndarray, field_name: str, basis: fe.Basi
     measure = doubled / 2 if nodes.shape[1] == 3 else doubled
     if basis is not None and basis.elem.elem.edge_dofs > 0:
         nodes = np.column_stack([nodes, edge_nodes(mesh, nodes)])
+    if basis is not None and basis.elem.elem.facet_dofs > 0:
+        nodes = np.column_stack([nodes, basis.facet_dofs[0, facets] // mesh.dim()])
     return Facets(nodes, points, measure, edges, normal, np.stack([first, np.cross(normal, first)], axis=1))
 
 
 def edge_nodes(mesh: fe.Mesh, corners: np.ndarray) -> np.ndarray:
-    """The P2 nodes of the edges AB, BC, CA of triangles with ``corners`` A, B, C: the mesh's vertex count + the
-    edge's index (scikit-fem numbers a P2 basis's edge DOFs after the vertices'). The bodies of a pair are joined as
+    """The P2/Q2 nodes of the edges AB, BC, … of facets with ``corners`` A, B, … in cyclic order: the mesh's vertex
+    count + the edge's index (scikit-fem numbers a P2 or Q2 basis's edge DOFs after the vertices'). The bodies of a pair are joined as
     straight-sided meshes (``scene.bodies.straight_sided``), so these nodes are the edges' midpoints."""
     ends = np.sort(np.stack([corners, np.roll(corners, -1, axis=1)], axis=-1), axis=-1).reshape(-1, 2)
     n = mesh.nvertices
@@ -152,6 +165,47 @@ DUNAVANT = (np.array([[0.445948490915965, 0.445948490915965, 0.108103018168070],
 """Points (barycentric) and weights (fractions of the area) of Dunavant's degree-4 rule on a triangle."""
 
 
+def lagrange(degree: int, t: np.ndarray) -> np.ndarray:
+    """The Lagrange shape functions of a straight facet of ``degree`` 1 or 2 at ``t`` ∈ [0, 1] (start → end),
+    stacked last in the order of :attr:`.mortar.Segments.nodes`: start, end[, middle]."""
+    if degree == 1:
+        return np.stack([1 - t, t], axis=-1)
+    return np.stack([(1 - t) * (1 - 2 * t), t * (2 * t - 1), 4 * t * (1 - t)], axis=-1)
+
+
+def gauss(points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Legendre points on [0, 1] and weights summing to 1 (exact for degree 2·points − 1)."""
+    t, w = np.polynomial.legendre.leggauss(points)
+    return (t + 1) / 2, w / 2
+
+
+def dual_coefficients(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """A = D M⁻¹ of the reference facet (φ*_a = Σ_b A_ab ψ_b, so that ∫φ*_a ψ_b = δ_ab ∫ψ_b) and the
+    fractions ∫ψ_a / |e| (D's diagonal): [[2, −1], [−1, 2]] and ½, ½ for degree 1; 1/6, 1/6, 2/3 for 2."""
+    t, w = gauss(degree + 1)
+    psi = lagrange(degree, t)
+    mass = psi.T @ (w[:, None] * psi)
+    shares = mass.sum(axis=1)
+    return shares[:, None] * np.linalg.inv(mass), shares
+
+
+def collapsed(points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Legendre squared and collapsed onto a triangle (Duffy: L₁ = u, L₂ = (1 − u) v, Jacobian 1 − u), as
+    barycentric points and fractions of the area: exact to degree 2·points − 2."""
+    t, w = gauss(points)
+    u, v = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
+    L = np.column_stack([(1 - u) * (1 - v), u, (1 - u) * v])
+    return L, 2 * np.outer(w, w).ravel() * (1 - u)
+
+
+DEGREE_8 = collapsed(5)
+"""The rule of Q2 faces: 25 points, exact for the degree-8 product of two biquadratic functions."""
+
+TENSOR = ((0, 0), (1, 0), (1, 1), (0, 1), (2, 0), (1, 2), (2, 1), (0, 2), (2, 2))
+"""A parallelogram's nodes as pairs of 1-D nodes (0: start, 1: end, 2: middle; along A→B, then A→D): the corners
+A, B, C, D, then (Q2) the edges' middles AB, BC, CD, DA, then the centre."""
+
+
 def quadratic_shapes(L: np.ndarray) -> np.ndarray:
     """P2 shape functions (..., 6) of barycentric coordinates L (..., 3): the vertices, then the edges AB, BC, CA."""
     return np.concatenate([L * (2 * L - 1), 4 * L * np.roll(L, -1, axis=-1)], axis=-1)
@@ -174,7 +228,8 @@ TRANSFORMED, DUAL_P2 = transformed_dual()
 
 def shapes(polygon: np.ndarray, points: np.ndarray, quadratic: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(shape functions, dual basis) (n, q, nodes) at ``points`` (n, q, 2) of the 2-D triangle or parallelogram
-    ``polygon`` (n, corners, 2); ``quadratic``: P2 on the triangle, the dual that of ψ̃ (:func:`transformed_dual`)."""
+    ``polygon`` (n, corners, 2); ``quadratic``: P2 on the triangle, the dual that of ψ̃ (:func:`transformed_dual`),
+    Q2 on the parallelogram (the nodes of :data:`TENSOR`)."""
     origin, first, last = polygon[:, 0][:, None], polygon[:, 1][:, None], polygon[:, -1][:, None]
     area = cross2(first - origin, last - origin)
     xi = cross2(points - origin, last - origin) / area
@@ -185,10 +240,11 @@ def shapes(polygon: np.ndarray, points: np.ndarray, quadratic: bool = False) -> 
             psi = quadratic_shapes(shape)
             return psi, psi @ (DUAL_P2 @ TRANSFORMED).T
         return shape, 4 * shape - 1
-    one = [(1 - xi, 2 - 3 * xi), (xi, 3 * xi - 1)]  # along A→B: (shape, dual) of the nodes at 0 and 1
-    two = [(1 - eta, 2 - 3 * eta), (eta, 3 * eta - 1)]  # along A→D
-    corners = ((0, 0), (1, 0), (1, 1), (0, 1))  # A, B, C, D
-    return tuple(np.stack([one[i][k] * two[j][k] for i, j in corners], axis=-1) for k in (0, 1))
+    degree = 2 if quadratic else 1
+    coefficients = dual_coefficients(degree)[0]
+    one, two = ((psi, psi @ coefficients.T) for psi in (lagrange(degree, xi), lagrange(degree, eta)))
+    nodes = TENSOR[:(degree + 1) ** 2]
+    return tuple(np.stack([one[k][..., i] * two[k][..., j] for i, j in nodes], axis=-1) for k in (0, 1))
 
 
 def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
@@ -212,12 +268,12 @@ def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
                         axis=2)  # (n, fan, 3, 2)
     area = np.where(fan + 1 < count[:, None], cross2(vertices[:, :, 1] - vertices[:, :, 0],
                                                      vertices[:, :, 2] - vertices[:, :, 0]) / 2, 0.0)
-    points, fractions = DUNAVANT
+    points, fractions = DEGREE_8 if slave.quadratic and corners == 4 else DUNAVANT
     at = np.einsum("qk,nfkc->nfqc", points, vertices).reshape(len(e), fan.size * len(fractions), 2)
     weight = (area[:, :, None] * fractions).reshape(len(e), fan.size * len(fractions))  # sizes given: e may be empty
     dual = shapes(flat, at, slave.quadratic)[1]
     shape = shapes(projected, at, master.quadratic)[0]
-    entries = [(e, np.full_like(e, a), f, np.full_like(f, b), (weight * dual[..., a] * shape[..., b]).sum(axis=1))
-               for a in range(slave.nodes.shape[1]) for b in range(master.nodes.shape[1])]
+    values = np.einsum("nq,nqa,nqb->abn", weight, dual, shape, optimize=True)
+    a, b, n = np.indices(values.shape).reshape(3, -1)
     covered = np.bincount(e, weights=area.sum(axis=1), minlength=slave.measure.size) / slave.measure
-    return [np.concatenate(parts) for parts in zip(*entries)], covered
+    return [e[n], a, f[n], b, values.ravel()], covered
