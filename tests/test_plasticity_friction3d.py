@@ -72,8 +72,11 @@ def test_a_3d_coulomb_step_on_a_plastic_block_is_certified(depths):
 def test_normal_compliance_on_a_plastic_punch_is_certified_by_newton(monkeypatch):
     """Normal compliance (c_N = 100 E/L, p = 1) under Prandtl's punch (nx = 8, the bench's ten steps to the limit
     load), and the 3-D stacked blocks with a compliant interface: every step by Newton (compliance's energy in Φ),
-    certified to 1e-10, where the interior point alone left 5e-10 to 6e-8 on the punch (3e-7 on the blocks); the
-    conic program's answers agree to its own accuracy (1e-6 of the displacement)."""
+    certified to 1e-10, where the interior point alone left 5e-10 to 6e-8 on the punch (1e-7 to 4e-7 on the blocks);
+    the conic program's answers agree to its own accuracy: within 10 × the largest certificate of its steps so far,
+    relative to the displacement (a history carries each step's error on; measured 0.09–2.7 ×, the interior point's
+    stopping point moving with the mortar integrals' rounding: the blocks' last step 1.1e-6 or 2.6e-7 of the
+    displacement, its certificate 4.2e-7 or 1.0e-7)."""
     for scene in (plastic_bench.punch_scene(256, "signorini").with_law(cc.NormalCompliance(100.0)),
                   stacked(DEPTHS, dim=3, law=cc.NormalCompliance(1.0))):
         fast, conic = cc.run_history(scene), conic_only(scene, monkeypatch)
@@ -82,5 +85,6 @@ def test_normal_compliance_on_a_plastic_punch_is_certified_by_newton(monkeypatch
         assert max(step.certificate.worst for step in conic.steps) > 1e-8
         assert fast.steps[-1].max_equivalent_plastic_strain > 0
         scale = np.abs(conic.steps[-1].displacement).max()
-        for a, b in zip(fast.steps, conic.steps, strict=True):
-            assert np.abs(a.displacement - b.displacement).max() < 1e-6 * scale
+        accuracy = np.maximum.accumulate([step.certificate.worst for step in conic.steps])
+        for a, b, bound in zip(fast.steps, conic.steps, accuracy, strict=True):
+            assert np.abs(a.displacement - b.displacement).max() < 10 * bound * scale
