@@ -143,6 +143,26 @@ def test_auto_limits_the_saddles_rows_not_its_columns(monkeypatch):
     assert solvers.matrix_free(model.program) and f"{rows} contact unknowns exceed {rows - 1}" in model.reason
 
 
+def test_a_large_3d_pair_keeps_its_dense_w_from_the_saddle(monkeypatch):
+    """DENSE_DOFS_3D sends a large 3-D body matrix-free because condensing it onto the contact DOFs costs more than a
+    factorization; where the saddle forms W (fewer rows than the DOFs they touch: a pair's slave rows on both bodies'
+    DOFs) there is no such condensation, and the pair keeps its dense W, certified. One body (its rows on its own
+    nodes' DOFs) keeps the rule, and so does the pair without the saddle, saying why (docs/performance.md, "The 3-D pair of spheres at 3·10⁵ DOFs")."""
+    scene = two_body_scene("tresca", 2e3, dim=3)
+    monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 0)
+    monkeypatch.setattr(rules, "DENSE_DOFS_3D", 10)
+    model = cc.prepare(scene)
+    assert model.fem.dim == 3 and model.program.P.shape[0] < contact_columns(model.fem).size
+    assert model.formulation == "dual" and isinstance(model.condensation.factorization, Saddle)
+    result = model.solve()
+    assert result.status == "solved" and result.certificate.worst < 1e-10
+    one_body = cc.prepare(punch_scene(3, "signorini", 3000))  # its rows on its own nodes' DOFs: the rule holds
+    assert one_body.program.P.shape[0] < contact_columns(one_body.fem).size and solvers.matrix_free(one_body.program)
+    monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 10**9)
+    model = cc.prepare(scene)
+    assert solvers.matrix_free(model.program) and "costs more to condense than to factorize" in model.reason
+
+
 def tilted_pair(seed: int, tilt: float = 1e-6, normals: int = 20) -> ConicProgram:
     """The dual of a pair's axis node in miniature: W = R Rᵀ over ``normals`` bound rows (near the identity) and one
     disc whose two rows are ``tilt`` × differences of normal rows (the axis node's tangential rows on the free DOFs:
