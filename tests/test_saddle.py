@@ -147,7 +147,8 @@ def test_a_large_3d_pair_keeps_its_dense_w_from_the_saddle(monkeypatch):
     """DENSE_DOFS_3D sends a large 3-D body matrix-free because condensing it onto the contact DOFs costs more than a
     factorization; where the saddle forms W (fewer rows than the DOFs they touch: a pair's slave rows on both bodies'
     DOFs) there is no such condensation, and the pair keeps its dense W, certified. One body (its rows on its own
-    nodes' DOFs) keeps the rule, and so does the pair without the saddle, saying why (docs/performance.md, "The 3-D pair of spheres at 3·10⁵ DOFs")."""
+    nodes' DOFs) keeps the rule, and so does the pair without the saddle, saying why (docs/performance.md, "The 3-D
+    pair of spheres through the saddle's W")."""
     scene = two_body_scene("tresca", 2e3, dim=3)
     monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 0)
     monkeypatch.setattr(rules, "DENSE_DOFS_3D", 10)
