@@ -54,8 +54,10 @@ rows touch more DOFs than the contact nodes carry, the other body's): there is n
 that factorization forms W itself at ~1.6× K's flops, and the pair's matrix-free dual is the family's costliest (with
 friction a K-sized slab refactorized at nearly every Newton system, ~250 products with W). The 3-D pair of spheres
 (contact ratio / end to end, loaded, matrix-free → the saddle): 1.0·10⁵ DOFs, Signorini 2.53 / 2.12 → 1.59 / 1.41,
-Tresca 14.2 → 1.69 / 1.50 (201 products, 18 factorizations → 6 dense Newton steps); at 3·10⁵ see docs/performance.md,
-"The 3-D pair of spheres at 3·10⁵ DOFs". One body keeps the rule: the tall block's Signorini at 3.2·10⁵ DOFs (900
+Tresca 14.2 → 1.69 / 1.50 (201 products, 18 factorizations → 6 dense Newton steps); 3·10⁵ DOFs (end to end, loaded,
+one run each): Tresca 6.02 → 1.81, Coulomb 5.72 → 1.24, Signorini 1.53 / 1.58 → 1.90 / 1.42 (two pairs of runs:
+a wash, its matrix-free dual factorizes one slab per session; memory 1.26 → 1.10×); docs/performance.md, "The 3-D
+pair of spheres through the saddle's W". One body keeps the rule: the tall block's Signorini at 3.2·10⁵ DOFs (900
 rows on 2700 DOFs) is 1.25 end to end matrix-free (2 Newton steps, 16 products), below the saddle's ~1.6×."""
 
 COLUMN_LIMIT = 15000
