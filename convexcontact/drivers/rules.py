@@ -48,7 +48,17 @@ DOFs) costs 1.6–1.8× a factorization and forming W |C|³ more, while the matr
 its products. Measured on the 3-D punch (ratios to one linear solve, dense / matrix-free; Signorini, Tresca,
 Coulomb): 9.0·10³ DOFs 1.64 / 2.25, 2.47 / 4.51, 2.30 / 4.17; 3.0·10⁴ DOFs 1.53 / 2.22, 2.80 / 3.17, 2.59 / 3.48;
 8.5·10⁴ DOFs 1.86 / 1.59, 2.83 / 2.27, 2.63 / 2.70; 2.8·10⁵ DOFs 1.71 / 1.27, 2.47 / 1.48, 2.51 / 1.52 (peak memory 1.1–1.4×
-the linear solve's against 1.5–1.9×)."""
+the linear solve's against 1.5–1.9×).
+Not on a pair whose W comes from K's factors with B's rows appended (``factorization.saddle_applies``; a pair: the
+rows touch more DOFs than the contact nodes carry, the other body's): there is no Schur complement onto the columns,
+that factorization forms W itself at ~1.6× K's flops, and the pair's matrix-free dual is the family's costliest (with
+friction a K-sized slab refactorized at nearly every Newton system, ~250 products with W). The 3-D pair of spheres
+(contact ratio / end to end, loaded, matrix-free → the saddle): 1.0·10⁵ DOFs, Signorini 2.53 / 2.12 → 1.59 / 1.41,
+Tresca 14.2 → 1.69 / 1.50 (201 products, 18 factorizations → 6 dense Newton steps); 3·10⁵ DOFs (end to end, loaded,
+one run each): Tresca 6.02 → 1.81, Coulomb 5.72 → 1.24, Signorini 1.53 / 1.58 → 1.90 / 1.42 (two pairs of runs:
+a wash, its matrix-free dual factorizes one slab per session; memory 1.26 → 1.10×); docs/performance.md, "The 3-D
+pair of spheres through the saddle's W". One body keeps the rule: the tall block's Signorini at 3.2·10⁵ DOFs (900
+rows on 2700 DOFs) is 1.25 end to end matrix-free (2 Newton steps, 16 products), below the saddle's ~1.6×."""
 
 COLUMN_LIMIT = 15000
 """Most columns K is condensed onto for a dense W (the contact DOFs; a pair's slave and master DOFs): the
@@ -91,6 +101,7 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
     reuse = " and is reused by every Picard step" if isinstance(law, Coulomb) else ""
     closed = round(unknowns * np.count_nonzero(fem.contact.gap <= TOUCHING) / fem.contact.m)
     saddle = saddle_applies(columns, unknowns)  # W from K's factors with its rows: no dense S onto the columns
+    pair = columns > fem.dim * fem.contact.m  # the rows touch DOFs beyond their nodes': a pair's other body
     # what a dense W's cost grows with (MATRIX_FREE_COLUMNS): its rows by the saddle, else the columns condensed onto
     size, what = (unknowns, f"{unknowns} contact unknowns") if saddle else (columns, f"the {columns} DOFs to condense onto")
     too_large = (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}" if unknowns > DENSE_LIMIT else
@@ -99,7 +110,7 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
                  else f"{what} exceed {MATRIX_FREE_COLUMNS}" if size > MATRIX_FREE_COLUMNS and matrix_free_applies(fem, law)
                  else
                  f"a 3-D body of {fem.n_free} DOFs (over {DENSE_DOFS_3D}) costs more to condense than to factorize"
-                 if fem.dim == 3 and fem.n_free > DENSE_DOFS_3D else None)
+                 if fem.dim == 3 and fem.n_free > DENSE_DOFS_3D and not (saddle and pair) else None)
     if too_large and matrix_free_applies(fem, law):
         return MATRIX_FREE, (f"{too_large}: W = B K⁻¹ Bᵀ is applied through one factorization of K{reuse}, never "
                              "formed (a dense W would cost more), and newton-cg solves the dual")

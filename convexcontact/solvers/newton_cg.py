@@ -213,11 +213,15 @@ INERT = 1.0
 """A set (a bound, or a ball: all its rows) is inert where P̃_jj < ε max P̃ on each of its rows, ε = INERT · EPS / tol:
 its step length c_j = 0.1 / P̃_jj turns ∇f's rounding (≥ EPS · max P̃ · ‖v‖, the product's) into more than a tenth of
 the stopping test's tol · ‖v‖ on its natural residual, a floor no step lowers (and c_j |q_j| inflates the answer's
-scale). Where Newton's method with moving radii (:func:`coupled`) stalls, from then on the residual measures those sets
-with the least step length of all, 0.1 / max P̃ (their rounding then weighs as little as the stiffest row's), and their
-rows of the Newton systems gain ε max P̃ (a proximal term). Both are sound: the natural map's zeros do not depend on
-the step lengths (for each set, Π(v − c g) = v says that −g is normal to it at v, whatever c > 0), Newton's point is
-only a trial of the step rules, and the certificate, computed on the whole problem, still judges the answer.
+scale). Where Newton's method with moving radii (:func:`coupled`) stalls, or with fixed radii a step to the segment's
+or the projected gradient's point leaves the natural residual above STALL × its value even after the projected
+gradient's step and that residual is at their rounding's level (FLOOR), from then on the residual measures those sets with the least step length of all,
+0.1 / max P̃ (their rounding then weighs as little as the stiffest row's), and their rows of the Newton systems gain
+ε max P̃ (a proximal term). Both are sound: the natural map's zeros do not depend on the step lengths (for each set,
+Π(v − c g) = v says that −g is normal to it at v, whatever c > 0), Newton's point is only a trial of the step rules,
+and the certificate, computed on the whole problem, still judges the answer. With fixed radii "Convergence" holds as
+it is: the switch happens once, the steps (b) keep c, and a residual under the smaller step lengths is at most the one
+under c (‖v − Π(v − t g)‖ grows with t), so the least residual so far bounds the new ones as it did.
 
 The 3-D pair of spheres (mortar, quarter model), its node on both symmetry planes: on the free DOFs its two
 tangential rows are its normal row (the mortar normal's tilt), W is singular on its three multipliers, P̃_jj is
@@ -228,7 +232,19 @@ certificate 7e-12; at 1.9·10⁴ DOFs, where Newton stalled at once and the Pica
 Only from a stall: from the start, step lengths capped at 0.1 / (ε max P̃) stalled the same
 solve after 3 steps at 8e-5 and the proximal term after 4 at 1e-1 (the large c_j is what puts such a ball on its
 sphere in the first steps); the Tresca dual under the answer's radii from the stick start, capped, failed after 100
-steps (3.3e-5) where it takes 8 (docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs")."""
+steps (3.3e-5) where it takes 8 (docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs").
+
+The same pair's Tresca dual at 3·10⁵ DOFs, W formed (3153 unknowns, fixed radii): the axis node's ball, P̃_jj 2.0e-9
+max P̃ and c_j 3.4·10¹¹, held the natural residual at 2.48e-11 (∇f there 2.5e-19, the sum's rounding) for 55 segment
+steps, `inaccurate` (certificate 3.3e-11); from the stall on, 2 more steps: 6e-17, solved (docs/performance.md, "The
+3-D pair of spheres through the saddle's W")."""
+FLOOR = 100.0
+"""A stall with fixed radii is the inert sets' (INERT) where the natural residual is within FLOOR × the level ∇f's
+rounding takes it to there, EPS max P̃ ‖v‖∞ times their largest step length (relative to the answer's scale as the
+residual is). Not at any stall: the 2-D pair's Tresca dual at 7·10⁴ DOFs (978 unknowns, 912 of them inert: P̃_jj down
+to 3.7e-6 max P̃) stalled at 2.3e-3 on its way (grown faces off, tests/test_scalable.py), against a level of 8e-13,
+and under the inert metric from there it failed after 50 steps where it takes 23; the pair of spheres at 3·10⁵
+stalled at 2.48e-11 against 8.0e-12."""
 REUSE = 4.0
 """Where a Newton system's preconditioner (:class:`_Preconditioner`, with balls) keeps its factors instead of a
 numeric refactorization of H + Gᵀ D⁻¹ G, where that is K-sized: a body that is its own approximation, H = K on its
@@ -600,7 +616,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             if not moved:  # a projected-gradient segment, as for a fixed f: Newton stalled on a punch with F = 2
                 v, g, moved = backtrack(v, g, _project(v - c * g, sets), residual, GRADIENT_LENGTHS)
             if not moved and inert is not None:  # the inert sets' rounding may be what stalls it: see INERT
-                (metric, proximal), inert = inert, None
+                (metric, proximal, _), inert = inert, None
                 continue
             if not moved and fixed_steps < FIXED_STEPS:  # the fixed-point map's step (see FIXED_STEPS)
                 fixed_steps += 1
@@ -625,6 +641,9 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if kind in ("segment", "gradient") and natural(v, g)[0] > STALL * residual:
             v, g, more = gradient_step(v, g)
             change += more
+            if (inert is not None and natural(v, g)[0] > STALL * residual
+                    and residual * size <= FLOOR * inert[2] * np.abs(v).max(initial=0.0)):  # their rounding: INERT
+                (metric, proximal, _), inert = inert, None
         risen += change
         kinds[kind] += 1
         descent.append((kind, change, cauchy))
@@ -867,13 +886,16 @@ def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
 
 
 def _inert(c, tol: float):
-    """The residual's step lengths, the least c on the inert sets (see INERT), and the proximal term of each variable,
-    ε max P̃ on those sets and 0 elsewhere; None where no set is inert or c is one number."""
+    """The residual's step lengths, the least c on the inert sets (see INERT), the proximal term of each variable,
+    ε max P̃ on those sets and 0 elsewhere, and EPS max P̃ max c_inert (∇f's rounding on the inert sets through their
+    largest step length, per unit of ‖v‖∞; see FLOOR); None where no set is inert or c is one number."""
     if np.ndim(c) == 0:
         return None
     floor = INERT * EPS / tol * 0.1 / np.min(c)  # P̃_jj = 0.1 / c_j (:func:`_step_lengths`)
     inert = c > 0.1 / floor
-    return (np.where(inert, np.min(c), c), np.where(inert, floor, 0.0)) if inert.any() else None
+    if not inert.any():
+        return None
+    return np.where(inert, np.min(c), c), np.where(inert, floor, 0.0), EPS * 0.1 / np.min(c) * np.max(c[inert])
 
 
 def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds, radius: np.ndarray) -> np.ndarray | None:
