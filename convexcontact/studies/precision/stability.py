@@ -391,7 +391,7 @@ def spheres_error(result) -> float:
 
 def p2_spheres(quick: bool):
     """Two P2 spheres in mortar contact (3-D pairs of P2 tetrahedra: the dual basis of the transformed ψ̃; measured
-    6.4 % at 4 cells, 2.4 % at 6; the caps' own limit lies 1–4 % over Hertz's half-spaces: docs/bodies.md)."""
+    6.2 % at 4 cells, 2.6 % at 6; the caps' own limit lies 1–4 % over Hertz's half-spaces: docs/bodies.md)."""
     scene = two_spheres(4 if quick else 6)
     parts = tuple(dataclasses.replace(part, element="P2") for part in scene.body.parts)
     return (bodies_scene(parts, scene.contact, dirichlet=list(scene.dirichlet), name="two P2 spheres"),
