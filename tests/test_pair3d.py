@@ -48,10 +48,11 @@ def test_the_pairs_tresca_dual_is_solved_from_the_stick_start_as_clarabel_solves
 
 
 def test_the_check_catches_newton_cg_without_the_damping(monkeypatch):
-    """Without the damping (no Newton point is ever far) and with a step's faces only grown by the sets Newton's point
-    leaves (newton_cg.GROW, before the face at Newton's point) the same solve takes no Newton point and fails. The
-    face at Newton's point alone solves it too (6 steps, 26 products; with the damping 6 and 28)."""
-    monkeypatch.setattr(newton_cg, "FAR", np.inf)
+    """Without the damping (neither after a far Newton point nor after a projected-gradient step) and with a step's
+    faces only grown by the sets Newton's point leaves (newton_cg.GROW, before the face at Newton's point) the same
+    solve takes no Newton point and fails. The face at Newton's point alone solves it too (6 steps, 26 products; with
+    the damping 6 and 28)."""
+    monkeypatch.setattr(newton_cg, "_damped", lambda damping, far, refused, residual: 0.0)
     monkeypatch.setattr(newton_cg, "_released", lambda y, newton, g, c, sets, released: (
         newton_cg._grown(y, newton, sets, sets.radius), False))
     _, solution = solve_from_the_stick_start()
@@ -117,17 +118,19 @@ def test_the_check_catches_newton_cg_without_the_inert_sets(monkeypatch):
     assert coulomb_residual(model, solution) > 1e-8
 
 
-@pytest.mark.xfail(strict=True, reason="newton-cg crawls along W's null directions there: 1 Newton point, then "
-                   "projected-gradient steps, natural residual ~1e-6 after 100 steps (f 1.2e-10 above the optimum); "
-                   "`auto` falls back to Clarabel on the same dense dual (certificate 1e-14). Issue 25, open.")
-def test_newton_cg_solves_the_dense_dual_of_two_p2_spheres_with_tresca():
+def test_newton_cg_solves_the_dense_dual_of_two_p2_spheres_with_tresca(monkeypatch):
     """Two P2 spheres of 4 cells, Tresca s = 0.0005 (75 unknowns, W singular on the axis node's multipliers, its
-    least diagonal 4e-7 of the largest): the same dual at s = 0.005, at 6 cells, and the P1 pair of 75 unknowns are
-    solved in 5–13 Newton steps. When this passes, newton-cg has learned it: drop the mark."""
+    least diagonal 4e-7 of the largest): solved in 7 Newton steps, the Newton systems damped after a projected-gradient
+    step (newton_cg.DAMPING). Damped after far points only, it took one Newton point and then crawled along W's null
+    directions by gradient steps, natural residual 1e-6 after 100 (f 1.2e-10 above the optimum): checked below."""
     scene = two_spheres(4, law=cc.Tresca(slip_bound=0.0005))
     parts = tuple(replace(part, element="P2") for part in scene.body.parts)
     program = cc.prepare(cc.bodies_scene(parts, scene.contact, dirichlet=list(scene.dirichlet)), "dual").program
     solution = newton_cg.solve(program, max_iter=100)
     reference = cc.solvers.solve(program, "clarabel")
-    assert solution.status == "solved"
+    assert solution.status == "solved" and solution.iterations <= 10
     assert objective(program, solution.x) == pytest.approx(objective(program, reference.x), rel=1e-10)
+    far_only = newton_cg._damped
+    monkeypatch.setattr(newton_cg, "_damped", lambda damping, far, refused, residual: far_only(damping, far, False,
+                                                                                              residual))
+    assert newton_cg.solve(program, max_iter=100).status == "failed"

@@ -208,7 +208,13 @@ The point is only a trial of the step rules ("Convergence"), so the argument is 
 keeps Newton's local rate. The pair's Tresca dual from the stick start: 100 steps without a Newton point → 6; at
 10⁵ DOFs, matrix-free from its own start: stuck at 4e-11 after 62 steps and 3197 products → 6 and 123; every
 row of the 2-D family at 2·10⁴ DOFs, matrix-free, the same steps and products (none far). μ = the natural residual at
-every step instead damped the 2-D block's Tresca dual into 100 projected-gradient steps (its residual starts at ~1)."""
+every step instead damped the 2-D block's Tresca dual into 100 projected-gradient steps (its residual starts at ~1).
+Also after a projected-gradient step (Newton's point and its segment refused, the point not far): the dense dual of
+two P2 spheres of 4 cells with Tresca (75 unknowns, W singular on the axis node's multipliers, its least diagonal 4e-7
+of the largest) took one Newton point, then 99 gradient steps at a natural residual of 1e-6; now 7 steps (the 6-cell
+dual 13 → 9). The family's pinned rows keep their counts; the checks that newton-cg fails without FAR, GROW or ARC
+turn this trigger off too, since it rescues them (docs/performance.md, "The 3-D pair of spheres through the saddle's
+W", its last paragraph)."""
 INERT = 1.0
 """A set (a bound, or a ball: all its rows) is inert where P̃_jj < ε max P̃ on each of its rows, ε = INERT · EPS / tol:
 its step length c_j = 0.1 / P̃_jj turns ∇f's rounding (≥ EPS · max P̃ · ‖v‖, the product's) into more than a tenth of
@@ -573,6 +579,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     risen, kinds, descent = 0.0, dict.fromkeys(("residual", "segment", "arc", "gradient"), 0), []
     steps = cg_total = 0
     faces = [0]  # the faces grown (see GROW)
+    refused = False  # whether the last step was the projected gradient's (see DAMPING)
     fixed_steps = 0  # the fixed-point map's steps taken where radii move (see FIXED_STEPS)
     damping = 0.0  # μ of the Newton systems (see DAMPING)
     status, word = "failed", "max_iter"
@@ -603,7 +610,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         newton, iterations, reach, known = newton_point(v, np.zeros_like(y) if empty else y, target, damping, empty)
         cg_total += iterations
         best = min(best, residual)
-        damping = _damped(damping, reach > FAR * size, residual)
+        damping = _damped(damping, reach > FAR * size, refused, residual)
         if sets.coupling is not None:
             v, g, moved = backtrack(v, g, newton, residual, (1.0,))
             if not moved:  # Newton's point refused: first on the face grown by the sets it leaves (see GROW)
@@ -646,6 +653,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
                 (metric, proximal, _), inert = inert, None
         risen += change
         kinds[kind] += 1
+        refused = kind == "gradient"  # Newton's point and its segment refused (see DAMPING)
         descent.append((kind, change, cauchy))
     x = sets.shift + sets.scale * v
     info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history,
@@ -666,10 +674,11 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
                          solve_time=time.perf_counter() - began, solver="newton-cg", info=info)
 
 
-def _damped(damping: float, far: bool, residual: float) -> float:
-    """μ for the next step: where Newton's point was ``far`` (see FAR) DAMPING times more and at least the natural
-    residual (Levenberg–Marquardt's choice), else DAMPING times less."""
-    return max(DAMPING * damping, residual) if far else damping / DAMPING
+def _damped(damping: float, far: bool, refused: bool, residual: float) -> float:
+    """μ for the next step: where Newton's point was ``far`` (see FAR), or the last step was a projected-gradient one
+    (Newton's point and its segment ``refused``), DAMPING times more and at least the natural residual
+    (Levenberg–Marquardt's choice), else DAMPING times less."""
+    return max(DAMPING * damping, residual) if far or refused else damping / DAMPING
 
 
 class _Preconditioner:
