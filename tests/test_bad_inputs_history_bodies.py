@@ -335,6 +335,9 @@ def test_an_error_of_one_pair_among_several_names_it():
     (lambda: cc.bodies_library.two_spheres(cells=0), "cells", "e.g. 12"),
     (lambda: cc.bodies_library.two_spheres(cells=2, radii=(1.0, 2.0)), "radii[0]", "above 1.42"),
     (lambda: cc.bodies_library.two_spheres(cells=2, approach=float("nan")), "approach", "e.g. 0.012"),
+    (lambda: cc.bodies_library.two_spheres(cells=2, element="Q1"), "element", "element='P1' or 'P2'"),
+    (lambda: cc.bodies_library.two_spheres(cells=2, element="P3"), "element", "element='P1' or 'P2'"),
+    (lambda: cc.bodies_library.two_spheres(cells=2, element=2), "element", "element='P1' or 'P2'"),
 ])
 def test_the_bodies_library_checks_its_arguments_before_building_a_mesh(build, field, fix):
     raises(build, field, fix)

@@ -264,9 +264,7 @@ def test_hertz_two_spheres_of_p2_tetrahedra():
     F = (4/3) E* √R δ^{3/2} / 4, within 5 % and the fitted p₀ within 3 % (measured F +2.6 %, p₀ −2.5 %; P1 on as many
     DOFs, 12 cells, F +11 %; the caps' own limit lies 1–4 % over Hertz's half-spaces, docs/bodies.md), and no
     negative pressure."""
-    scene = two_spheres(6)
-    parts = tuple(dataclasses.replace(part, element="P2") for part in scene.body.parts)
-    result = cc.solve(bodies_scene(parts, scene.contact, dirichlet=list(scene.dirichlet)))
+    result = cc.solve(two_spheres(6, element="P2"))
     assert result.certificate.passes(1e-9)
     assert result.normal_force == pytest.approx(4 / 3 * (0.5 / (1 - 0.3**2)) * 0.012**1.5 / 4, rel=0.05)
     _, p0 = hertz_sphere(4 * result.normal_force, 1.0, 0.5, 0.3)
@@ -280,9 +278,7 @@ def test_a_p2_pair_with_nodes_left_out_balances_its_forces():
     """Two P2 spheres of 2 cells: the master covers the whole support of few slave nodes. An edge node's row holds its
     vertices' displacements (ũ_e), so it is left out with them: kept alone, its multiplier's forces landed on vertices
     outside the contact's nodes, and the pair's balance over those read 0.19 (`inaccurate`)."""
-    scene = two_spheres(2)
-    parts = tuple(dataclasses.replace(part, element="P2") for part in scene.body.parts)
-    result = cc.solve(bodies_scene(parts, scene.contact, dirichlet=list(scene.dirichlet)))
+    result = cc.solve(two_spheres(2, element="P2"))
     assert result.fem.warnings and "left out of the contact" in result.fem.warnings[0]
     assert result.solved and result.certificate.residuals["pair_balance"] < 1e-12
 

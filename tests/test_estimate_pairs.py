@@ -136,8 +136,8 @@ def test_a_pairs_left_out_nodes_are_no_penetration_on_p2_spheres():
     row. The gap's interpolant took their zeros, and between two open P2 vertices a left-out edge node read as a
     penetration: 94 % of η² (η 2.56, 13 × the true error). The terms on Γ_C now run over the facets whose nodes all hold
     rows: the penetration term falls to 3·10⁻⁶ of η² and η to 0.64."""
-    base = two_spheres(cells=2, law=cc.Tresca(slip_bound=0.005))
-    parts = tuple(dataclasses.replace(p, geometry=refined_uniformly(p.geometry, 2), element="P2") for p in base.body.parts)
+    base = two_spheres(cells=2, law=cc.Tresca(slip_bound=0.005), element="P2")
+    parts = tuple(dataclasses.replace(p, geometry=refined_uniformly(p.geometry, 2)) for p in base.body.parts)
     result = cc.solve(bodies_scene(parts, base.contact, dirichlet=list(base.dirichlet)))
     assert "left out" in result.fem.warnings[0]
     estimate = result.residual_estimate

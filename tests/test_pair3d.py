@@ -123,9 +123,7 @@ def test_newton_cg_solves_the_dense_dual_of_two_p2_spheres_with_tresca(monkeypat
     least diagonal 4e-7 of the largest): solved in 7 Newton steps, the Newton systems damped after a projected-gradient
     step (newton_cg.DAMPING). Damped after far points only, it took one Newton point and then crawled along W's null
     directions by gradient steps, natural residual 1e-6 after 100 (f 1.2e-10 above the optimum): checked below."""
-    scene = two_spheres(4, law=cc.Tresca(slip_bound=0.0005))
-    parts = tuple(replace(part, element="P2") for part in scene.body.parts)
-    program = cc.prepare(cc.bodies_scene(parts, scene.contact, dirichlet=list(scene.dirichlet)), "dual").program
+    program = cc.prepare(two_spheres(4, law=cc.Tresca(slip_bound=0.0005), element="P2"), "dual").program
     solution = newton_cg.solve(program, max_iter=100)
     reference = cc.solvers.solve(program, "clarabel")
     assert solution.status == "solved" and solution.iterations <= 10

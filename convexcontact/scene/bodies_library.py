@@ -130,9 +130,10 @@ def sphere_cap_mesh(cells: int, radius: float, upper: bool, grading: float = 12.
 
 
 def two_spheres(cells: int = 12, radii=(2.0, 2.0), moduli=(1.0, 1.0), nu=(0.3, 0.3), approach: float = 0.012,
-                law=None, master_cells: int | None = None) -> Scene:
+                law=None, master_cells: int | None = None, element: str = "P1") -> Scene:
     """A quarter of two spheres' caps (R₁ above, the slave; R₂ below) pressed together by ``approach`` (3-D
-    Hertz), symmetry rollers on x = 0 (``left``) and y = 0 (``front``), the backs moved by half the approach."""
+    Hertz), symmetry rollers on x = 0 (``left``) and y = 0 (``front``), the backs moved by half the approach; tetrahedra
+    of ``element`` P1 or P2."""
     for name, value in (("cells", cells), ("master_cells", master_cells)):
         if value is not None:
             positive_integer(value, name, "give the cells along each side, e.g. 12")
@@ -143,8 +144,11 @@ def two_spheres(cells: int = 12, radii=(2.0, 2.0), moduli=(1.0, 1.0), nu=(0.3, 0
             raise SceneError(f"radii[{k}]", f"{radius:g} does not span the unit quarter (its corner lies √2 from the "
                              "axis)", "give a radius above 1.42")
     finite(approach, "approach", "give the approach of the two backs, e.g. 0.012")
-    parts = [Part("upper", sphere_cap_mesh(cells, radii[0], True), Material(E=moduli[0], nu=nu[0])),
-             Part("lower", sphere_cap_mesh(master_cells or cells, radii[1], False), Material(E=moduli[1], nu=nu[1]))]
+    if element not in ("P1", "P2"):
+        raise SceneError("element", f"the caps are tetrahedra, {element!r:.30} is not their element", "element='P1' or 'P2'")
+    parts = [Part("upper", sphere_cap_mesh(cells, radii[0], True), Material(E=moduli[0], nu=nu[0]), element),
+             Part("lower", sphere_cap_mesh(master_cells or cells, radii[1], False), Material(E=moduli[1], nu=nu[1]),
+                  element)]
     rollers = [Dirichlet(f"{part}.{side}", **{axis: 0.0}) for part in ("upper", "lower")
                for side, axis in (("left", "ux"), ("front", "uy"))]
     return bodies_scene(

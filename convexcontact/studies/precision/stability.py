@@ -34,7 +34,6 @@ from scipy.optimize import brentq
 import convexcontact as cc
 from convexcontact.analytic import hertz_plane_strain, hertz_sphere, hild_one_triangle_solutions
 from convexcontact.results.output import check_new_file
-from convexcontact.scene.bodies import bodies_scene
 from convexcontact.scene.bodies_library import two_spheres
 from convexcontact.scene.description import Coulomb, SceneError
 from convexcontact.scene.library import HERTZ_FORCE, frictional_punch, punch_mesh
@@ -392,9 +391,7 @@ def spheres_error(result) -> float:
 def p2_spheres(quick: bool):
     """Two P2 spheres in mortar contact (3-D pairs of P2 tetrahedra: the dual basis of the transformed ψ̃; measured
     6.2 % at 4 cells, 2.6 % at 6; the caps' own limit lies 1–4 % over Hertz's half-spaces: docs/bodies.md)."""
-    scene = two_spheres(4 if quick else 6)
-    parts = tuple(dataclasses.replace(part, element="P2") for part in scene.body.parts)
-    return (bodies_scene(parts, scene.contact, dirichlet=list(scene.dirichlet), name="two P2 spheres"),
+    return (two_spheres(4 if quick else 6, element="P2"),
             Check(spheres_error, 0.08 if quick else 0.04, "Hertz 3-D force of the approach, fitted p₀"))
 
 
