@@ -333,7 +333,10 @@ def test_an_error_of_one_pair_among_several_names_it():
     (lambda: cc.bodies_library.two_cylinders(h=0.05, approach=float("inf")), "approach", "e.g. 0.01"),
     (lambda: cc.bodies_library.punch_on_foundation(h=0.0), "h", "e.g. 0.01"),
     (lambda: cc.bodies_library.two_spheres(cells=0), "cells", "e.g. 12"),
-    (lambda: cc.bodies_library.two_spheres(cells=2, radii=(1.0, 2.0)), "radii[0]", "above 1.42"),
+    (lambda: cc.bodies_library.two_spheres(cells=2, radii=(1.0, 2.0)), "radii[0]", "at least 1.57"),
+    (lambda: cc.bodies_library.two_spheres(cells=2, radii=(2.0, 1.5)), "radii[1]", "at least 1.57"),  # folded corner
+    (lambda: cc.bodies_library.two_spheres(cells=2, radii=(-8.0, 2.0)), "radii[0]", "at least 1.57"),
+    (lambda: cc.bodies_library.two_cylinders(h=0.05, radii=(1.0, -5.0)), "radii[1]", "inf for a flat face"),
     (lambda: cc.bodies_library.two_spheres(cells=2, approach=float("nan")), "approach", "e.g. 0.012"),
     (lambda: cc.bodies_library.two_spheres(cells=2, element="Q1"), "element", "element='P1' or 'P2'"),
     (lambda: cc.bodies_library.two_spheres(cells=2, element="P3"), "element", "element='P1' or 'P2'"),

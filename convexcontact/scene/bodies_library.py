@@ -42,6 +42,9 @@ def check_cylinders(h: float, radii, width: float, height: float, master_h: floa
         raise SceneError("radii", f"expected two radii (R₁ above, R₂ below), got {radii!r:.60}", "e.g. radii=(1.0, 1.0)")
     for k, radius in enumerate(radii):
         radius = finite(radius, f"radii[{k}]", "give a radius, or inf for a flat face") if radius != np.inf else radius
+        if radius <= 0:
+            raise SceneError(f"radii[{k}]", f"must be positive (the faces are convex), got {radius:g}",
+                             f"give a radius above {width / 2:g}, or inf for a flat face")
         if radius <= width / 2:
             raise SceneError(f"radii[{k}]", f"{radius:g} does not span the face of width {width:g} (the circle's arc "
                              "must cover it)", f"give a radius above {width / 2:g}, or a narrower width")
@@ -115,6 +118,13 @@ def punch_on_foundation(h: float = 0.01, law=None, approach: float = 0.01, modul
 
 
 
+CAP_SAG = 0.9
+"""The most a cap's face may sag at its corner, as a fraction of the cap's height: corner cells keep a tenth of it."""
+
+CAP_RADIUS = 1.57
+"""The least radius whose sag at the corner, R − √(R² − 2), is at most :data:`CAP_SAG` (1.5611…, rounded up)."""
+
+
 def sphere_cap_mesh(cells: int, radius: float, upper: bool, grading: float = 12.0) -> fe.Mesh:
     """A quarter [0, 1]² × [0, 1] (``upper``) or × [−1, 0] of P1 tetrahedra whose face on z = 0 is bent into the
     sphere of ``radius`` touching the origin; cells graded ``grading``:1 towards the origin. Boundaries as
@@ -133,16 +143,21 @@ def two_spheres(cells: int = 12, radii=(2.0, 2.0), moduli=(1.0, 1.0), nu=(0.3, 0
                 law=None, master_cells: int | None = None, element: str = "P1") -> Scene:
     """A quarter of two spheres' caps (R₁ above, the slave; R₂ below) pressed together by ``approach`` (3-D
     Hertz), symmetry rollers on x = 0 (``left``) and y = 0 (``front``), the backs moved by half the approach; tetrahedra
-    of ``element`` P1 or P2."""
+    of ``element`` P1 or P2. Radii from :data:`CAP_RADIUS` (below it the quarter's corner cells flatten)."""
     for name, value in (("cells", cells), ("master_cells", master_cells)):
         if value is not None:
             positive_integer(value, name, "give the cells along each side, e.g. 12")
     if np.ndim(radii) != 1 or len(radii) != 2:
         raise SceneError("radii", f"expected two radii (R₁ above, R₂ below), got {radii!r:.60}", "e.g. radii=(2.0, 2.0)")
     for k, radius in enumerate(radii):
-        if finite(radius, f"radii[{k}]") <= np.sqrt(2):
-            raise SceneError(f"radii[{k}]", f"{radius:g} does not span the unit quarter (its corner lies √2 from the "
-                             "axis)", "give a radius above 1.42")
+        if finite(radius, f"radii[{k}]") <= 0:
+            raise SceneError(f"radii[{k}]", f"must be positive (the caps are convex), got {radius:g}",
+                             f"give a radius of at least {CAP_RADIUS}")
+        if radius < CAP_RADIUS:  # sag R − √(R² − 2) at the corner, √2 from the axis: 1 (a flat corner cell) at R = 1.5
+            sag = radius - np.sqrt(max(radius**2 - 2.0, 0.0)) if radius > np.sqrt(2) else np.inf
+            raise SceneError(f"radii[{k}]", f"{radius:g} bends the quarter's corner (√2 from the axis) by {sag:.3g}, "
+                             f"more than {CAP_SAG} of the cap's height 1 (its corner cells flatten or fold)",
+                             f"give a radius of at least {CAP_RADIUS}")
     finite(approach, "approach", "give the approach of the two backs, e.g. 0.012")
     if element not in ("P1", "P2"):
         raise SceneError("element", f"the caps are tetrahedra, {element!r:.30} is not their element", "element='P1' or 'P2'")
