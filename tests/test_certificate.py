@@ -136,3 +136,20 @@ def test_weak_friction_on_p2_tetrahedra_measures_slips_as_lengths():
     slips = friction.components(friction.slip(u)) / friction.weights[:, None]
     assert np.all(np.abs(slips).max(axis=1) <= np.abs(nodal).max() * spread * (1 + 1e-12))
     assert result.certificate.residuals["friction_law"] < 1e-9
+
+
+@pytest.mark.parametrize("status, worst, expected, said", [
+    ("inaccurate", 8.5e-13, "inaccurate", "certificate passes (worst 8.5e-13"),  # was an empty message
+    ("inaccurate", 1e-3, "inaccurate", "worst residual is 1.0e-03"),
+    ("solved", 1e-3, "inaccurate", "worst residual is 1.0e-03"),
+    ("solved", 1e-12, "solved", ""),
+])
+def test_a_result_s_status_says_why_it_is_inaccurate(status, worst, expected, said):
+    from convexcontact.conic import ConicSolution
+    from convexcontact.drivers.prepared import judge
+    from convexcontact.results.certificate import Certificate
+
+    solution = ConicSolution(x=np.zeros(1), z=np.zeros(1), s=np.zeros(1), status=status, solver_status="max_iter",
+                             iterations=30, solve_time=0.0, solver="newton-cg")
+    verdict, message = judge(solution, Certificate({"complementarity": worst}), extended=False)
+    assert verdict == expected and said in message and (said or not message)

@@ -157,6 +157,29 @@ def test_a_step_towards_the_projected_gradient_gets_newton_past_a_stall():
     assert np.abs(newton.contact.friction - picard.contact.friction).max() < 1e-8 * scale
 
 
+def stiff_on_soft_spheres() -> cc.Scene:
+    """Two P1 caps (12 cells, radii 5) of moduli 34.8 and 1.1, ν 0.3 and 0.45, F = 0.6: found by a sweep of random
+    pairs, where Newton's Coulomb solve crawled."""
+    from convexcontact.scene.bodies_library import two_spheres
+
+    return two_spheres(cells=12, radii=(5.0, 5.0), moduli=(34.8, 1.1), nu=(0.3, 0.45), approach=0.0309,
+                       law=Coulomb(friction=0.6))
+
+
+def test_a_crawl_at_the_inert_sets_rounding_switches_their_metric(monkeypatch):
+    """The axis node's slip is held by both symmetry planes: its ∇f is rounding (5e-20) times a step length of ~5e9.
+    Newton on the Coulomb problem lowered that residual by under a tenth a step from 7.6e-13 for 30 steps (max_iter:
+    "inaccurate", certificate 1.9e-12); at a crawl at their rounding's level (FLOOR) the inert sets are measured with
+    the least step length, as at a stall, and Newton converges."""
+    result = cc.solve(stiff_on_soft_spheres())
+    steps = result.extra["history"][0]["inner_iterations"]
+    assert result.status == "solved" and result.extra["history"][0]["coulomb_newton"]
+    assert result.certificate.worst <= 1e-12 and steps < 20
+    monkeypatch.setattr(newton_cg, "FLOOR", 0.0)  # no switch at the rounding's level: the crawl
+    crawled = cc.solve(stiff_on_soft_spheres())
+    assert crawled.extra["history"][0]["inner_iterations"] > steps
+
+
 @pytest.mark.parametrize("newton", [True, False])
 def test_a_coulomb_solve_whose_inner_solves_all_fail_is_reported(newton):
     """newton-cg held to one step (the user's max_iter, which bounds Newton's Coulomb solve too): every solve

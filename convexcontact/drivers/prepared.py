@@ -248,6 +248,10 @@ def judge(solution: ConicSolution, certificate, extended: bool) -> tuple[str | N
                               f"the certificate (worst {certificate.worst:.1e} ≤ {CERTIFIED:g})")
     if extended:
         return solution.status, "solved a user-extended cvxpy model: the certificate checks the scene's own conditions"
+    if solution.status == "inaccurate" and passes:
+        return "inaccurate", (f"{solution.solver} stopped short of its own tolerance ({solution.solver_status} after "
+                              f"{solution.iterations} iterations); the certificate passes (worst "
+                              f"{certificate.worst:.1e} ≤ {CERTIFIED:g})")
     if not passes:
         return "inaccurate", (f"{solution.solver} reported {solution.solver_status}, but the certificate's worst "
                               f"residual is {certificate.worst:.1e} > {CERTIFIED:g}: tighten tol, raise max_iter "

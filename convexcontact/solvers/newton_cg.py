@@ -219,7 +219,9 @@ INERT = 1.0
 """A set (a bound, or a ball: all its rows) is inert where P̃_jj < ε max P̃ on each of its rows, ε = INERT · EPS / tol:
 its step length c_j = 0.1 / P̃_jj turns ∇f's rounding (≥ EPS · max P̃ · ‖v‖, the product's) into more than a tenth of
 the stopping test's tol · ‖v‖ on its natural residual, a floor no step lowers (and c_j |q_j| inflates the answer's
-scale). Where Newton's method with moving radii (:func:`coupled`) stalls, or with fixed radii a step to the segment's
+scale). Where Newton's method with moving radii (:func:`coupled`) stalls, or crawls at their rounding's level (a
+step leaves the residual above STALL × its value there, FLOOR; two stiff-on-soft P1 spheres with Coulomb crawled 30 steps from
+7.6e-13 at the axis node, whose slip both symmetry planes hold), or with fixed radii a step to the segment's
 or the projected gradient's point leaves the natural residual above STALL × its value even after the projected
 gradient's step and that residual is at their rounding's level (FLOOR), from then on the residual measures those sets with the least step length of all,
 0.1 / max P̃ (their rounding then weighs as little as the stiffest row's), and their rows of the Newton systems gain
@@ -639,6 +641,9 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             if not moved:
                 word = "stalled"
                 break
+            if (inert is not None and natural(v, g)[0] > STALL * residual
+                    and residual * size <= FLOOR * inert[2] * np.abs(v).max(initial=0.0)):  # a crawl at their rounding
+                (metric, proximal, _), inert = inert, None
             continue
         # Newton's point, projected, where it halves the least natural residual so far (so those steps cannot cycle;
         # near the answer f's changes are round-off, and the segment alone stalled a 3-D Tresca dual at 2e-10), else a
