@@ -287,6 +287,30 @@ def test_where_most_points_slip_at_the_stick_start_newton_starts_from_the_tresca
     assert tresca < newton_steps(cc.prepare(scene, "dual-matrix-free")) and len(bounds) == 1
 
 
+def test_the_tresca_start_is_solved_only_to_a_start_s_tolerance(monkeypatch):
+    """The Tresca start only places Newton's Coulomb solve, whose first residual is the pressure's change (the pair:
+    1e-3 at 3.2·10⁵ DOFs): solved to START_TOL, not to the session's 1e-12, on the 2-D pair at 1.1·10⁴ DOFs (W an
+    operator) it takes one Newton step fewer (3 → 2) and Newton's Coulomb solve from it the same steps and
+    certificate."""
+    solves = []
+    solve = newton_cg.Session.solve
+    monkeypatch.setattr(newton_cg.Session, "solve", lambda self, *tol: solves.append(answer := solve(self, *tol)) or
+                        answer)
+    scene = two_body_scene("coulomb", 6e3)
+
+    def run():
+        solves.clear()
+        result = cc.prepare(scene, "dual-matrix-free").solve()
+        assert result.status == "solved" and result.certificate.worst <= 1e-10
+        assert len(solves) == 1 and solves[0].solved  # the Tresca start, the session's one solve
+        return solves[0].iterations, len(result.extra["history"][0]["newton_residuals"]) - 1
+
+    start, coulomb = run()
+    monkeypatch.setattr(picard, "START_TOL", newton_cg.TOL)  # to the session's tolerance
+    tight = run()
+    assert start < tight[0] and coulomb == tight[1]
+
+
 def test_a_stall_is_left_by_the_fixed_point_map_s_step(monkeypatch):
     """Discs, F = 4 (seed 6): Newton on the Coulomb problem stalls at a natural residual of 2.6e-3 where no step may
     raise it (FIXED_STEPS = 0); one step to the Tresca answer under the radii reached (Picard's, from there) gets it

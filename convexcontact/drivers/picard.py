@@ -376,7 +376,7 @@ def tresca_start(model: Model, newton, radii: np.ndarray):
     pressure; TRESCA_SLIP): its answer, if solved, becomes the start of Newton's Coulomb solve, whose coupling
     replaces these bounds."""
     newton.update(b=model.bound_update(radii)["b"])
-    newton.solve()
+    newton.solve(START_TOL)
 
 
 def radius_coupling(model: Model, linear: sp.spmatrix) -> sp.csr_matrix:

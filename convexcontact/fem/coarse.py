@@ -127,9 +127,10 @@ def graded_grids(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, 
         peak = np.zeros(int(shape.prod()) * dim)
         np.maximum.at(peak, hats.ravel(), weights.ravel())
         keep = peak >= KEEP
-        if k < top:
-            nodes = np.unravel_index(np.arange(peak.size) // dim, tuple(shape))
-            keep &= (np.stack(nodes) % 2).any(axis=0)
+        if k < top:  # the nodes of the kept columns only: on a graded body a fine grid's box holds far more
+            # nodes than its points reach (the pair at 3.2·10⁵ DOFs: 766,480 columns for 34,508 points)
+            kept = np.flatnonzero(keep)
+            keep[kept[~(np.stack(np.unravel_index(kept // dim, tuple(shape))) % 2).any(axis=0)]] = False
         keeps.append(keep)
     return box, spacings, keeps
 

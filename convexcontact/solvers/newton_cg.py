@@ -403,9 +403,10 @@ class Session:
             self._start = solution.x
         return solution
 
-    def solve(self) -> ConicSolution:
-        solution = newton_cg(self.program, self._form, self._start, self._tol, self._max_iter, self._verbose,
-                             self._progress, self._cache)
+    def solve(self, tol: float | None = None) -> ConicSolution:
+        """From the last answer (or the seed) to this session's tolerance, or to a looser ``tol`` (a start's)."""
+        solution = newton_cg(self.program, self._form, self._start, max(self._tol, tol or 0.0), self._max_iter,
+                             self._verbose, self._progress, self._cache)
         if solution.solved:
             self._start = solution.x
         return solution
