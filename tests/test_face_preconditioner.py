@@ -83,13 +83,11 @@ def signorini(shape, dim, size, restricted, monkeypatch):
 
 @pytest.mark.skipif(factorization._pardiso() is None, reason="the costs come from PARDISO's flops")
 def test_signorini_faces_exact_where_the_restriction_costs_more(monkeypatch):
-    """The 2-D pair (3·10⁴ DOFs): a refactorization costs ~12 products, the restriction's first system more CG
-    iterations than that, so the session switches: fewer products (81 → 54; Newton steps no more). The 3-D pair (10⁴
-    DOFs): a refactorization costs ~37 products, more than any system's CG, so nothing changes. (At 2·10⁴ DOFs it
-    switched, 75 → 51 products, until the slave's partly covered end nodes held rows: a refactorization then costs
-    17 products there and nothing switches, 72 and 72.)"""
-    before, _ = signorini("two-body", 2, 3e4, True, monkeypatch)
-    after, cost = signorini("two-body", 2, 3e4, False, monkeypatch)
+    """The 2-D pair (2·10⁴ DOFs): a refactorization costs ~8 products, the restriction's first system more CG
+    iterations than that, so the session switches: fewer products (and Newton steps no more). The 3-D pair (10⁴
+    DOFs): a refactorization costs ~37 products, more than any system's CG, so nothing changes."""
+    before, _ = signorini("two-body", 2, 2e4, True, monkeypatch)
+    after, cost = signorini("two-body", 2, 2e4, False, monkeypatch)
     assert 1 < cost < 20 and after["products"] < before["products"]
     assert sum(after["steps"].values()) <= sum(before["steps"].values())
     before, _ = signorini("two-body", 3, 1e4, True, monkeypatch)

@@ -189,16 +189,15 @@ def test_an_open_pair_bounds_as_its_two_bodies_alone():
 
 def test_the_bound_is_above_the_true_error_on_a_pair_of_spheres():
     """The two spheres (108 and 600 DOFs) against the 3,888-DOF level: η ≥ ‖u_ref − u_h‖_E on both bodies together
-    (measured η / error 8.58, 8.11), each from ``result.equilibrated_bound`` with the budget on the calibrated
-    residual, and σ̂ equilibrated to round-off. The complementarity term carries 75 % and 57 % of η² (coarse curved
-    facets, docs/estimate.md "Tresca on the curved pair: the complementarity term over-reads"); before the pair's
-    partly covered slave nodes held rows (1 and 9 of them then, 9 and 25 now), η / error read 1.76, 3.49."""
+    (measured η / error 1.76, 3.49; against the next level, 27,744 DOFs, 1.93, 2.82: one level finer reads the error
+    low), each from ``result.equilibrated_bound`` with the budget on the calibrated residual, and σ̂ equilibrated to
+    round-off."""
     runs = [cc.solve(spheres(level)) for level in range(3)]
     u = runs[-1].displacement / runs[-1].fem.scaling.displacement
     error = np.array(true_errors(runs[:-1], runs[-1])) * np.sqrt(u @ runs[-1].fem.K_full @ u)
     bounds = [bound_of(r) for r in runs[:-1]]
     eta = np.array([b.eta for b in bounds])
-    assert np.all(error <= eta) and np.all(eta <= 10 * error)
+    assert np.all(error <= eta) and np.all(eta <= 4 * error)
     assert all(b.defect < 1e-11 for b in bounds)
 
 

@@ -286,12 +286,10 @@ def boundary_terms(fem: FEModel, space: dict, u_components: np.ndarray, state: C
 
     facets = fe.FacetBasis(fem.mesh, facets=contact.facets, **space)
     cell, n, h = facets.tind, np.asarray(facets.normals), np.asarray(facets.mesh_parameters())
-    # only on the facets whose nodes all carry contact rows: a pair leaves out the slave nodes the master covers under
-    # less than mortar.KEPT of their weight, and their zeros in the gap's and slip's interpolants are no discrete gap
-    # or slip (between two open P2 vertices a left-out edge node read as a penetration: 94 % of η² on two P2 spheres
-    # with Tresca). Where every node of a facet holds a row, the interpolant of their 1s is 1 at every point (a
-    # partition of unity). A partly covered facet whose nodes all hold rows is kept whole: its uncovered part reads
-    # the rows' gap, extrapolated from the covered part (measured: the penetration term 0, docs/estimate.md).
+    # only on the facets whose nodes all carry contact rows: a pair leaves out the slave nodes the master does not
+    # cover, and their zeros in the gap's and slip's interpolants are no discrete gap or slip (between two open P2
+    # vertices a left-out edge node read as a penetration: 94 % of η² on two P2 spheres with Tresca). Where every
+    # node of a facet holds a row, the interpolant of their 1s is 1 at every point (a partition of unity).
     rows = interpolate(facets, trace_field(fem, np.ones(contact.m)))
     dx = np.where(np.abs(rows - 1.0).max(axis=1, keepdims=True) < 1e-9, facets.dx, 0.0)
     traction = interpolate(facets, tau)

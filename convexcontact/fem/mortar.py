@@ -16,9 +16,7 @@ tangent t_i; master nodes k:
   balance, and a linear field is reproduced exactly: the contact patch test passes.
 - ``node_to_segment``: Π_ik = φ_k(π(x_i)), x_i projected on the master along n_i.
 
-On a partly covered slave facet φ* is the dual basis of its covered part and w_i sums the covered parts
-(:func:`~.mortar3d.on_covered_parts`); slave nodes the master covers under less than :data:`KEPT` of their weight
-are left out (with a warning). In 3-D
+Slave nodes whose facets are not all covered by the master are left out (with a warning). In 3-D
 (P1/P2 tetrahedra, Q1/Q2 hexahedra with parallelogram faces) the multipliers are the dual basis of the slave facets
 (:mod:`.mortar3d`), t_i and the second tangent b_i = n_i × t_i as
 :func:`~convexcontact.fem.contact.tangent_frame` chooses them.
@@ -38,8 +36,11 @@ from ..scene.bodies import Pair, Pairs
 from ..scene.description import Contact, SceneError
 from ..scene.meshing import check_boundary
 from .contact import ContactTrace, contact_trace, multiplier_transform, tangent_frame
-from .mortar3d import COVERED, Facets, dual_coefficients, facets_3d, gauss, lagrange, mortar_3d, on_covered_parts
+from .mortar3d import Facets, dual_coefficients, facets_3d, gauss, lagrange, mortar_3d
 from .scaling import Scaling
+
+COVERED = 1e-9
+"""Relative round-off by which the master's projections may fall short of (or exceed) a slave facet."""
 
 
 def quadratic(basis: fe.Basis) -> bool:
@@ -204,10 +205,9 @@ def clipped(slave: Segments, master: Segments, e: np.ndarray, f: np.ndarray) -> 
 
 
 def mortar(slave: Segments, master: Segments, along: np.ndarray, margin: float):
-    """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a φ_b), each slave facet's covered
-    fraction and its nodes' ∫_cov ψ_a (on partly covered facets φ* is the dual basis of the covered part,
-    :func:`~.mortar3d.on_covered_parts`): one Gauss rule on every intersection, exact for the product of the
-    slave's dual and the master's shape functions (degree 2 for P1/Q1, 4 for P2/Q2).
+    """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a φ_b) and each slave facet's covered
+    fraction: one Gauss rule on every intersection, exact for the product of the slave's dual and the master's
+    shape functions (degree 2 for P1/Q1, 4 for P2/Q2).
 
     Clipped by hand rather than by scikit-fem's ``skfem.supermeshing.intersect`` (measured, docs/bodies.md): that
     one intersects 1-D meshes of one common coordinate (no projection along each slave facet's normal, so no
@@ -221,15 +221,11 @@ def mortar(slave: Segments, master: Segments, along: np.ndarray, margin: float):
     xi = lo[:, None] + np.outer(hi - lo, points)
     eta = (xi - xi_start[:, None]) / (xi_end - xi_start)[:, None]
     weight = np.outer((hi - lo) * length, fractions)
-    psi, shape = lagrange(slave.degree, xi), lagrange(master.degree, eta)
-    dual = psi @ dual_coefficients(slave.degree)[0].T  # (pairs, points, slave nodes)
-    values = np.einsum("nq,nqa,nqb->nab", weight, dual, shape)
-    covered = np.bincount(e, weights=hi - lo, minlength=slave.measure.size)
-    partial, entries, integrals = on_covered_parts(slave, e, weight, psi, shape, covered)
-    values[partial] = entries
+    dual = lagrange(slave.degree, xi) @ dual_coefficients(slave.degree)[0].T  # (pairs, points, slave nodes)
+    values = np.einsum("nq,nqa,nqb->nab", weight, dual, lagrange(master.degree, eta))
     a, b = np.indices(values.shape[1:]).reshape(2, -1)
-    entries = [np.repeat(e, a.size), np.tile(a, e.size), np.repeat(f, a.size), np.tile(b, e.size), values.ravel()]
-    return entries, covered, integrals
+    covered = np.bincount(e, weights=hi - lo, minlength=slave.measure.size)
+    return [np.repeat(e, a.size), np.tile(a, e.size), np.repeat(f, a.size), np.tile(b, e.size), values.ravel()], covered
 
 
 def node_to_segment(coords, normals, master: Segments, along: np.ndarray, margin: float):
@@ -295,16 +291,9 @@ def slave_nodes(slave: Segments | Facets) -> tuple[np.ndarray, np.ndarray, np.nd
     return nodes, local, weights, summed / np.linalg.norm(summed, axis=1, keepdims=True)
 
 
-KEPT = 0.01
-"""A slave node keeps its row when the master covers at least this fraction of its weight: w_i = Σ_e ∫_cov ψ_i
-against ∫ψ_i. Below it the row Π_i = M_i / w_i extrapolates the master from a small covered part (its entries grow
-like 1 / √(fraction) on P1 facets), and on quadratic facets w_i may even be ≤ 0 (a P2 end vertex covered on
-[½, 1] of its facet: −h/24)."""
-
-
 def transfer_matrix(pair: Pair, slave, master, local, weights, normals, coords):
-    """Π (slave nodes × master nodes) of the pair's method, the master's nodes, which slave nodes keep their rows
-    and their weights (mortar: the covered parts' w_i = Σ_e ∫_cov ψ_i)."""
+    """Π (slave nodes × master nodes) of the pair's method, the master's nodes, and which slave nodes keep
+    their rows."""
     masters, master_local = np.unique(master.nodes, return_inverse=True)
     master_local = master_local.reshape(master.nodes.shape)
     mean_normal = weights @ normals / np.linalg.norm(weights @ normals)
@@ -315,17 +304,17 @@ def transfer_matrix(pair: Pair, slave, master, local, weights, normals, coords):
         i, f, b, values = node_to_segment(coords, normals, master, along, margin)
         ok = np.zeros(len(weights), bool)
         ok[i] = True
-        return sp.coo_matrix((values, (i, master_local[f, b])), shape=shape).tocsr(), masters, ok, weights
-    (e, a, f, b, values), covered, integrals = (mortar_3d(slave, master, mean_normal) if isinstance(slave, Facets)
-                                                else mortar(slave, master, along, margin))
+        return sp.coo_matrix((values, (i, master_local[f, b])), shape=shape).tocsr(), masters, ok
+    (e, a, f, b, values), covered = (mortar_3d(slave, master, mean_normal) if isinstance(slave, Facets)
+                                     else mortar(slave, master, along, margin))
     if (covered > 1 + COVERED).any():
         raise SceneError("contact.master", f"{pair.master!r} is met twice along the normals of {pair.boundary!r} "
                          "(it folds over, or faces the slave from both sides)",
                          "name only the part of the master boundary that faces the slave")
-    covered_weights = np.bincount(local.ravel(), weights=integrals.ravel(), minlength=len(weights))
-    ok = covered_weights >= KEPT * weights
+    ok = np.ones(len(weights), bool)
+    ok[local[covered < 1 - COVERED].ravel()] = False  # a node keeps its row only when its facets are covered
     mass = sp.coo_matrix((values, (local[e, a], master_local[f, b])), shape=shape).tocsr()
-    return sp.diags(1.0 / np.where(ok, covered_weights, 1.0)) @ mass, masters, ok, covered_weights
+    return sp.diags(1.0 / weights) @ mass, masters, ok
 
 
 def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray,
@@ -343,7 +332,7 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
         master = facets_3d(mesh, check_boundary(mesh, pair.master, "contact.master"), "contact.master", basis)
     nodes, local, weights, normals = slave_nodes(slave)
     coords = basis.doflocs[:, dim * nodes].T
-    transfer, masters, ok, weights = transfer_matrix(pair, slave, master, local, weights, normals, coords)
+    transfer, masters, ok = transfer_matrix(pair, slave, master, local, weights, normals, coords)
     # the slave's coefficients in its multipliers' basis (P2 facets in 3-D; the identity else), on the kept rows;
     # an edge node's row holds its vertices too, so it is kept only with them: the forces its multiplier puts on
     # the slave then land on kept nodes, which the results, the estimate and the pair's balance sum over
@@ -355,9 +344,8 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
                          "side, back to back, or beside each other along the interface: no slave facet's normal meets "
                          "the master)", "pair boundaries that face each other: the slave's outward normal must point "
                          "at the master, across from it")
-    left_out = (f"{np.count_nonzero(~ok)} of {ok.size} nodes of {pair.boundary!r} have no master facet under "
-                f"{KEPT:.0%} of their support or more: they are left out of the contact (make the larger boundary "
-                "the master)")
+    left_out = (f"{np.count_nonzero(~ok)} of {ok.size} nodes of {pair.boundary!r} have no master facet under their "
+                "whole support: they are left out of the contact (make the larger boundary the master)")
     transformed = sp.coo_matrix(transformed[ok])
     all_dofs = dim * nodes[:, None] + np.arange(dim)
     transfer, normals, weights, coords = sp.coo_matrix(transfer[ok]), normals[ok], weights[ok], coords[ok]

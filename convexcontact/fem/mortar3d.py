@@ -29,13 +29,6 @@ from scipy.spatial import cKDTree
 from ..scene.description import SceneError
 from .contact import TRANSFORM
 
-COVERED = 1e-9
-"""Relative round-off by which the master's projections may fall short of (or exceed) a slave facet."""
-
-SLIVER = 1e-3
-"""A slave facet covered on less than this fraction counts as uncovered: its mass matrix on the covered part, whose
-inverse gives the dual basis there, is near-singular (a sliver's Gram matrix of the facet's shape functions)."""
-
 FACING = 1e-3
 """A master facet faces a slave facet when their normals make more than 90° + 0.06° (a facet seen edge-on
 has no projection to integrate on)."""
@@ -255,8 +248,8 @@ def shapes(polygon: np.ndarray, points: np.ndarray, quadratic: bool = False) -> 
 
 
 def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
-    """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a ψ_b), each slave facet's covered
-    fraction and its nodes' ∫_cov ψ_a, as :func:`convexcontact.fem.mortar.mortar` in 2-D."""
+    """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a ψ_b) and each slave facet's covered
+    fraction, as :func:`convexcontact.fem.mortar.mortar` in 2-D."""
     e, f = candidates(slave, master, mean_normal)
     facing = (slave.normal[e] * master.normal[f]).sum(axis=1) < -FACING
     e, f = e[facing], f[facing]
@@ -278,36 +271,9 @@ def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
     points, fractions = DEGREE_8 if slave.quadratic and corners == 4 else DUNAVANT
     at = np.einsum("qk,nfkc->nfqc", points, vertices).reshape(len(e), fan.size * len(fractions), 2)
     weight = (area[:, :, None] * fractions).reshape(len(e), fan.size * len(fractions))  # sizes given: e may be empty
-    psi, dual = shapes(flat, at, slave.quadratic)
-    psi = psi @ TRANSFORMED.T if slave.transformed else psi
+    dual = shapes(flat, at, slave.quadratic)[1]
     shape = shapes(projected, at, master.quadratic)[0]
     values = np.einsum("nq,nqa,nqb->abn", weight, dual, shape, optimize=True)
-    covered = np.bincount(e, weights=area.sum(axis=1), minlength=slave.measure.size) / slave.measure
-    partial, entries, integrals = on_covered_parts(slave, e, weight, psi, shape, covered)
-    values[:, :, partial] = entries.transpose(1, 2, 0)
     a, b, n = np.indices(values.shape).reshape(3, -1)
-    return [e[n], a, f[n], b, values.ravel()], covered, integrals
-
-
-def on_covered_parts(slave, e, weight, psi, shape, covered):
-    """The consistent boundary modification of the dual basis (Cichosz & Bischoff 2011; Popp, Wohlmuth, Gee & Wall
-    2012): on a partly covered slave facet e the dual basis of its covered part cov_e, φ* = A_e ψ with
-    A_e = D_e M_e⁻¹, D_e = diag ∫_cov ψ_a, M_e = ∫_cov ψψᵀ (ψ the slave's basis: ψ̃ on P2 triangles), so that
-    ∫_cov φ*_a ψ_b = δ_ab ∫_cov ψ_b: Π = D⁻¹M still reproduces linear fields and its rows still sum to one on the
-    covered part. Of the pairs (``e``, their points' ``weight``, the slave's ``psi`` and the master's ``shape``):
-    which lie on partly covered facets, their entries ∫_cov φ*_a ψ_b (zero on facets covered less than
-    :data:`SLIVER`), and ∫_cov ψ_a of every facet (facets, nodes): ∫ψ_a on the fully covered ones, whose dual
-    basis stays the reference's."""
-    integrals = np.outer(slave.measure, slave.shares)
-    integrals[covered < 1 - COVERED] = 0.0
-    partial = covered[e] < 1 - COVERED
-    e, weight, psi, shape = e[partial], weight[partial], psi[partial], shape[partial]
-    nodes = psi.shape[-1]
-    mass = np.zeros((slave.measure.size, nodes, nodes))
-    np.add.at(mass, e, np.einsum("nq,nqa,nqb->nab", weight, psi, psi))
-    kept = np.flatnonzero((covered >= SLIVER) & (covered < 1 - COVERED))
-    integrals[kept] = mass[kept].sum(axis=2)  # Σ_b ψ_b = 1
-    coefficients = np.zeros_like(mass)
-    coefficients[kept] = integrals[kept][:, :, None] * np.linalg.inv(mass[kept])
-    dual = np.einsum("nqb,nab->nqa", psi, coefficients[e])
-    return partial, np.einsum("nq,nqa,nqb->nab", weight, dual, shape), integrals
+    covered = np.bincount(e, weights=area.sum(axis=1), minlength=slave.measure.size) / slave.measure
+    return [e[n], a, f[n], b, values.ravel()], covered
