@@ -154,10 +154,10 @@ def two_spheres(cells: int = 12, radii=(2.0, 2.0), moduli=(1.0, 1.0), nu=(0.3, 0
             raise SceneError(f"radii[{k}]", f"must be positive (the caps are convex), got {radius:g}",
                              f"give a radius of at least {CAP_RADIUS}")
         if radius < CAP_RADIUS:  # sag R − √(R² − 2) at the corner, √2 from the axis: 1 (a flat corner cell) at R = 1.5
-            sag = radius - np.sqrt(max(radius**2 - 2.0, 0.0)) if radius > np.sqrt(2) else np.inf
-            raise SceneError(f"radii[{k}]", f"{radius:g} bends the quarter's corner (√2 from the axis) by {sag:.3g}, "
-                             f"more than {CAP_SAG} of the cap's height 1 (its corner cells flatten or fold)",
-                             f"give a radius of at least {CAP_RADIUS}")
+            problem = (f"bends the quarter's corner (√2 from the axis) by {radius - np.sqrt(radius**2 - 2.0):.3g}, more "
+                       f"than {CAP_SAG} of the cap's height 1 (its corner cells flatten or fold)" if radius > np.sqrt(2)
+                       else "does not span the unit quarter (its corner lies √2 from the axis)")
+            raise SceneError(f"radii[{k}]", f"{radius:g} {problem}", f"give a radius of at least {CAP_RADIUS}")
     finite(approach, "approach", "give the approach of the two backs, e.g. 0.012")
     if element not in ("P1", "P2"):
         raise SceneError("element", f"the caps are tetrahedra, {element!r:.30} is not their element", "element='P1' or 'P2'")

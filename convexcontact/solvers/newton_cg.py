@@ -220,8 +220,8 @@ INERT = 1.0
 its step length c_j = 0.1 / P̃_jj turns ∇f's rounding (≥ EPS · max P̃ · ‖v‖, the product's) into more than a tenth of
 the stopping test's tol · ‖v‖ on its natural residual, a floor no step lowers (and c_j |q_j| inflates the answer's
 scale). Where Newton's method with moving radii (:func:`coupled`) stalls, or crawls at their rounding's level (a
-step leaves the residual above STALL × its value there, FLOOR; two stiff-on-soft P1 spheres with Coulomb crawled 30 steps from
-7.6e-13 at the axis node, whose slip both symmetry planes hold), or with fixed radii a step to the segment's
+step leaves the residual above STALL × its value there, FLOOR; two stiff-on-soft P1 spheres with Coulomb crawled 30
+steps from 7.6e-13 at the axis node, whose slip both symmetry planes hold), or with fixed radii a step to the segment's
 or the projected gradient's point leaves the natural residual above STALL × its value even after the projected
 gradient's step and that residual is at their rounding's level (FLOOR), from then on the residual measures those sets with the least step length of all,
 0.1 / max P̃ (their rounding then weighs as little as the stiffest row's), and their rows of the Newton systems gain
@@ -297,7 +297,7 @@ GMRES_CYCLES = 10
 """Restarts of GMRES per Newton system: a direction for the step rules, which judge it, not a solve to the end. Two P2
 spheres with Coulomb (12,168 DOFs, matrix-free): near the axis node's answer GMRES(50) stagnated at 1e-7–1e-9 of the
 right-hand side against a target of 3e-11, 4,100–4,400 iterations a system (CG_LIMIT); capped, the same 20 Newton
-steps and answer in 26 s instead of 255 s."""
+steps and answer in 33 s instead of 255 s."""
 UPDATE_RANK = 64
 """Largest number of rank-one terms g gᵀ/d (a free variable or tangent coordinate joining or leaving the face, or its
 d changing) by which a Newton system's H + Gᵀ D⁻¹ G may differ from the one factored and still be solved with those
