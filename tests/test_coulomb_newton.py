@@ -180,6 +180,23 @@ def test_a_crawl_at_the_inert_sets_rounding_switches_their_metric(monkeypatch):
     assert crawled.extra["history"][0]["inner_iterations"] > steps
 
 
+def test_a_map_that_cannot_reach_its_tol_says_so():
+    """Two P2 caps, soft on stiff (a random pair's find): the axis node's friction law holds to 5.3e-9 only, so the
+    map stops at 10 × that (NOISE) whatever tol asks: the result says so instead of a silent "solved"; a tol it
+    reaches leaves no message."""
+    from convexcontact.scene.bodies_library import two_spheres
+
+    def spheres(law):
+        return two_spheres(cells=6, radii=(2.0, 2.0), moduli=(13.9, 75.9), nu=(0.3, 0.0), approach=0.00868, law=law,
+                           element="P2")
+
+    result = cc.solve(spheres(Coulomb(friction=0.1, tol=1e-11)))
+    stop = result.extra["picard"]["stop_change"]
+    assert result.status == "solved" and stop > 1e-11
+    assert "above tol = 1e-11" in result.message and f"{stop / picard.NOISE:.1e}" in result.message
+    assert cc.solve(spheres(Coulomb(friction=0.1, tol=1e-6))).message == ""
+
+
 @pytest.mark.parametrize("newton", [True, False])
 def test_a_coulomb_solve_whose_inner_solves_all_fail_is_reported(newton):
     """newton-cg held to one step (the user's max_iter, which bounds Newton's Coulomb solve too): every solve

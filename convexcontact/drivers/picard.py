@@ -537,6 +537,10 @@ def report(attempts: list[Attempt], history: list, timings: dict, law: Coulomb):
     if not final.solved and chosen.best is not None:  # else the failed inner solve's own status
         result.status = "not converged"
         result.message = failure_message(attempts, history, law)
+    elif final.solved and final.stop > law.tol and not result.message:  # the map could not reach tol: say so
+        result.message = (f"the Picard map stopped at a relative change of {final.stop:.1e}, above tol = {law.tol:g}: "
+                          f"{NOISE:g} × its inner solves' certificate ({final.stop / NOISE:.1e}) bounds what it can "
+                          "reach; the certificate says how far this answer is")
     return result
 
 
