@@ -192,18 +192,26 @@ def test_random_pairs_are_solved_alike_by_auto_and_the_matrix_free_dual(scene):
     assert np.abs(a.displacement - b.displacement).max() <= allowed * scale
 
 
-@pytest.mark.xfail(strict=True, reason="issue 25, open: newton-cg's dense dual stagnates at a natural residual of "
-                   "1.4e-5 (89 segment steps in 100), and Clarabel's fallback is certified to 2.9e-7 only")
-def test_the_long_profile_s_soft_master_p2_pair_is_certified():
-    """The long profile's find (2026-11-27): two P2 caps (5 cells, radii 5), a stiff slave on a soft master (E 2.56 on
-    0.047), Tresca with s = 0.01 × the softer modulus. The matrix-free dual certifies it to 8e-12; ``auto`` (the dense
-    dual) to 2.9e-7. Its sibling (E 2.56 on 100, s 0.0256: ``auto`` 1.2e-14, the matrix-free dual failed at 8.6e-4
-    after 28 s) is in docs/performance.md, "Random pairs"."""
-    scene = cc.bodies_library.two_spheres(cells=5, radii=(5.0, 5.0), moduli=(2.5576961262334312, 0.04690698734778309),
-                                          nu=(0.0, 0.0), approach=0.0031622776601683794, element="P2",
-                                          law=cc.Tresca(slip_bound=0.00046906987347783094))
-    result = cc.solve(scene)
-    assert result.status == "solved" and result.certificate.worst <= 1e-10
+def long_profile_pair(master_modulus: float, slip_bound: float) -> cc.Scene:
+    """The long profile's finds (2026-11-27): two P2 caps (5 cells, radii 5, ν = 0), E 2.56 above, Tresca."""
+    return cc.bodies_library.two_spheres(cells=5, radii=(5.0, 5.0), moduli=(2.5576961262334312, master_modulus),
+                                         nu=(0.0, 0.0), approach=0.0031622776601683794, element="P2",
+                                         law=cc.Tresca(slip_bound=slip_bound))
+
+
+@pytest.mark.parametrize("master_modulus, slip_bound", [(0.04690698734778309, 0.00046906987347783094),
+                                                        (100.0, 0.025576961262334313)])
+def test_the_long_profile_s_p2_pairs_are_certified_on_both_paths(master_modulus, slip_bound, monkeypatch):
+    """A stiff slave on a soft master: ``auto``'s dense dual sat at a natural residual of 1.4e-5 for 90 segment steps
+    (max_iter) and Clarabel's fallback was certified to 2.9e-7; on a stiffer master the matrix-free dual failed
+    (8.6e-4, 28 s). Both at the axis node's ball, whose step length was 6·10⁵ × the median (STEP_SPREAD caps it at
+    10³ ×): both paths certified now; with the full spread the first fails again."""
+    scene = long_profile_pair(master_modulus, slip_bound)
+    for result in (cc.solve(scene), cc.prepare(scene, "dual-matrix-free").solve()):
+        assert result.status == "solved" and result.certificate.worst <= 1e-10
+    if master_modulus < 1:
+        monkeypatch.setattr(cc.solvers.newton_cg, "STEP_SPREAD", np.inf)
+        assert cc.solve(scene).certificate.worst > 1e-10
 
 
 def test_the_generator_covers_every_law():

@@ -192,4 +192,5 @@ def test_the_inert_disc_of_fixed_radii_stalls_no_more(seed, monkeypatch):
     assert solution.status == "solved" and solution.info["natural_residual"] <= newton_cg.TOL
     assert abs(f(solution.x) - f(reference.x)) <= 1e-8 * abs(f(reference.x))
     monkeypatch.setattr(newton_cg, "_inert", lambda c, tol: None)
+    monkeypatch.setattr(newton_cg, "STEP_SPREAD", np.inf)  # the disc's full step length (STEP_SPREAD alone solves it)
     assert newton_cg.solve(program, max_iter=30).status == "inaccurate"

@@ -215,6 +215,12 @@ of the largest) took one Newton point, then 99 gradient steps at a natural resid
 dual 13 → 9). The family's pinned rows keep their counts; the checks that newton-cg fails without FAR, GROW or ARC
 turn this trigger off too, since it rescues them (docs/performance.md, "The 3-D pair of spheres through the saddle's
 W", its last paragraph)."""
+STEP_SPREAD = 1e3
+"""Largest step length c_j as a multiple of the median: a row P̃ all but ignores (the axis node of a quarter model,
+whose slip both symmetry planes hold: P̃_jj 6·10⁵ × below the median on two P2 caps with Tresca) otherwise measures
+its natural residual, and takes its projected-gradient steps, through a step length that turns a slip of 10⁻¹¹ into
+a residual of 10⁻⁵: newton-cg sat at 1.4e-5 for 90 segment steps (the fuzz suite's long profile). The natural map's
+zeros do not depend on c (INERT); the mortar pair's rows differ by ~50× (_step_lengths), well inside the spread."""
 INERT = 1.0
 """A set (a bound, or a ball: all its rows) is inert where P̃_jj < ε max P̃ on each of its rows, ε = INERT · EPS / tol:
 its step length c_j = 0.1 / P̃_jj turns ∇f's rounding (≥ EPS · max P̃ · ‖v‖, the product's) into more than a tenth of
@@ -900,6 +906,7 @@ def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
     else:
         diagonal = sets.scale**2 * np.asarray(P.diagonal()).ravel()
     lengths = np.where(diagonal > 0, 0.1 / np.maximum(diagonal, 1e-300), c)
+    lengths = np.minimum(lengths, STEP_SPREAD * np.median(lengths))  # see STEP_SPREAD
     if sets.balls.size:
         lengths[sets.balls] = lengths[sets.balls].min(axis=1, keepdims=True)
     return lengths
