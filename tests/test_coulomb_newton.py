@@ -176,18 +176,15 @@ def test_a_crawl_at_the_inert_sets_rounding_switches_their_metric(monkeypatch):
     assert result.status == "solved" and result.extra["history"][0]["coulomb_newton"]
     assert result.certificate.worst <= 1e-12 and steps < 20
     monkeypatch.setattr(newton_cg, "FLOOR", 0.0)  # no switch at the rounding's level: the crawl
-    monkeypatch.setattr(newton_cg, "STEP_SPREAD", np.inf)  # and the axis node's full step length (the cap alone helps)
     crawled = cc.solve(stiff_on_soft_spheres())
     assert crawled.extra["history"][0]["inner_iterations"] > steps
 
 
-def test_a_map_that_cannot_reach_its_tol_says_so(monkeypatch):
-    """Two P2 caps, soft on stiff (a random pair's find): with the axis node's full step length (STEP_SPREAD off, as
-    the find was made) its friction law holds to 5.3e-9 only, so the map stops at 10 × that (NOISE) whatever tol asks:
-    the result says so instead of a silent "solved"; a tol it reaches leaves no message."""
+def test_a_map_that_cannot_reach_its_tol_says_so():
+    """Two P2 caps, soft on stiff (a random pair's find): the axis node's friction law holds to 5.3e-9 only, so the
+    map stops at 10 × that (NOISE) whatever tol asks: the result says so instead of a silent "solved"; a tol it
+    reaches leaves no message."""
     from convexcontact.scene.bodies_library import two_spheres
-
-    monkeypatch.setattr(newton_cg, "STEP_SPREAD", np.inf)
 
     def spheres(law):
         return two_spheres(cells=6, radii=(2.0, 2.0), moduli=(13.9, 75.9), nu=(0.3, 0.0), approach=0.00868, law=law,

@@ -214,6 +214,15 @@ def test_the_long_profile_s_p2_pairs_are_certified_on_both_paths(master_modulus,
         assert cc.solve(scene).certificate.worst > 1e-10
 
 
+def test_the_long_profile_s_coulomb_pair_is_certified_on_both_paths():
+    """The long profile's find with STEP_SPREAD applied where radii move too: two P1 caps of 4 cells (E = 1, ν = 0,
+    radii 1.6, approach 0.01), Coulomb F = 0.3, `inaccurate` at 1.6e-7 on both paths; the cap is for fixed radii."""
+    scene = cc.bodies_library.two_spheres(cells=4, radii=(1.6, 1.6), moduli=(1.0, 1.0), nu=(0.0, 0.0), approach=0.01,
+                                          law=cc.Coulomb(friction=0.3))
+    for result in (cc.solve(scene), cc.prepare(scene, "dual-matrix-free").solve()):
+        assert result.status == "solved" and result.certificate.worst <= 1e-8
+
+
 def test_the_generator_covers_every_law():
     """The strategy reaches every law (a guard against a generator that silently narrows)."""
     seen = set()
