@@ -41,10 +41,8 @@ def check_cylinders(h: float, radii, width: float, height: float, master_h: floa
     if np.ndim(radii) != 1 or len(radii) != 2:
         raise SceneError("radii", f"expected two radii (R₁ above, R₂ below), got {radii!r:.60}", "e.g. radii=(1.0, 1.0)")
     for k, radius in enumerate(radii):
-        radius = finite(radius, f"radii[{k}]", "give a radius, or inf for a flat face") if radius != np.inf else radius
-        if radius <= 0:
-            raise SceneError(f"radii[{k}]", f"must be positive (the faces are convex), got {radius:g}",
-                             f"give a radius above {width / 2:g}, or inf for a flat face")
+        if radius != np.inf:  # convex faces only
+            radius = positive(radius, f"radii[{k}]", f"give a radius above {width / 2:g}, or inf for a flat face")
         if radius <= width / 2:
             raise SceneError(f"radii[{k}]", f"{radius:g} does not span the face of width {width:g} (the circle's arc "
                              "must cover it)", f"give a radius above {width / 2:g}, or a narrower width")
@@ -150,9 +148,7 @@ def two_spheres(cells: int = 12, radii=(2.0, 2.0), moduli=(1.0, 1.0), nu=(0.3, 0
     if np.ndim(radii) != 1 or len(radii) != 2:
         raise SceneError("radii", f"expected two radii (R₁ above, R₂ below), got {radii!r:.60}", "e.g. radii=(2.0, 2.0)")
     for k, radius in enumerate(radii):
-        if finite(radius, f"radii[{k}]") <= 0:
-            raise SceneError(f"radii[{k}]", f"must be positive (the caps are convex), got {radius:g}",
-                             f"give a radius of at least {CAP_RADIUS}")
+        radius = positive(radius, f"radii[{k}]", f"give a radius of at least {CAP_RADIUS}")  # convex caps only
         if radius < CAP_RADIUS:  # sag R − √(R² − 2) at the corner, √2 from the axis: 1 (a flat corner cell) at R = 1.5
             problem = (f"bends the quarter's corner (√2 from the axis) by {radius - np.sqrt(radius**2 - 2.0):.3g}, more "
                        f"than {CAP_SAG} of the cap's height 1 (its corner cells flatten or fold)" if radius > np.sqrt(2)

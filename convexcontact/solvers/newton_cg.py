@@ -532,6 +532,11 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
                 return w, gw, change, "arc"
         return (*gradient_step(v, g), "gradient")
 
+    def at_floor(v, g, residual, size):
+        """Whether the natural residual at v stays above STALL × ``residual`` at the inert sets' rounding level (FLOOR)."""
+        return (inert is not None and natural(v, g)[0] > STALL * residual
+                and residual * size <= FLOOR * inert[2] * np.abs(v).max(initial=0.0))
+
     def gradient_step(v, g):
         """The least f on the segment from v to the natural map's point Π(v − c∇f), ∇f there and f's change."""
         p = _project(v - c * g, sets)
@@ -655,8 +660,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             if not moved:
                 word = "stalled"
                 break
-            if (inert is not None and natural(v, g)[0] > STALL * residual
-                    and residual * size <= FLOOR * inert[2] * np.abs(v).max(initial=0.0)):  # a crawl at their rounding
+            if at_floor(v, g, residual, size):  # a crawl at their rounding: INERT
                 (metric, proximal, _), inert = inert, None
             continue
         # Newton's point, projected, where it halves the least natural residual so far (so those steps cannot cycle;
@@ -667,8 +671,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if kind in ("segment", "gradient") and natural(v, g)[0] > STALL * residual:
             v, g, more = gradient_step(v, g)
             change += more
-            if (inert is not None and natural(v, g)[0] > STALL * residual
-                    and residual * size <= FLOOR * inert[2] * np.abs(v).max(initial=0.0)):  # their rounding: INERT
+            if at_floor(v, g, residual, size):  # their rounding: INERT
                 (metric, proximal, _), inert = inert, None
         risen += change
         kinds[kind] += 1
