@@ -81,12 +81,14 @@ def cylinder_body(upper: bool, quads: bool, cols: int = 16, rows: int = 8, width
                                  for name, side in names.items()})
 
 
-def coarse_cylinders(element: str, level: int, approach: float = 0.03) -> cc.Scene:
-    """Plane-strain Hertz of two unit cylinders pressed by ``approach``, both meshes refined ``level`` times."""
+def coarse_cylinders(element: str, level: int, approach: float = 0.03, law=None, moduli=(1.0, 1.0),
+                     cols: int = 16) -> cc.Scene:
+    """Plane-strain Hertz of two unit cylinders pressed by ``approach``, both meshes (``cols`` × ``cols`` / 2 cells)
+    refined ``level`` times; the upper's Young's modulus ``moduli[0]``, the lower's ``moduli[1]``."""
     quads = element in ("Q1", "Q2")
-    parts = [Part(name, cylinder_body(upper, quads).refined(level), STEEL, element)
-             for name, upper in (("upper", True), ("lower", False))]
-    return bodies_scene(parts, Pair("upper.face", master="lower.face"),
+    parts = [Part(name, cylinder_body(upper, quads, cols, cols // 2).refined(level), cc.Material(E, 0.3), element)
+             for name, upper, E in (("upper", True, moduli[0]), ("lower", False, moduli[1]))]
+    return bodies_scene(parts, Pair("upper.face", master="lower.face", law=law or cc.Signorini()),
                         dirichlet=[cc.Dirichlet("upper.back", ux=0.0, uy=-approach / 2),
                                    cc.Dirichlet("lower.back", ux=0.0, uy=approach / 2)], name="two_cylinders_coarse")
 

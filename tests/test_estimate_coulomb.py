@@ -1,0 +1,128 @@
+"""The error estimate of Coulomb answers (docs/estimate.md, "The coverage, law × bodies × dimension"). Pairs: F = 0.2, the upper
+body's Young's modulus 1 and the lower's 3, so the normal load shears the interface and points slip: two cylinders on
+the coarse graded family of tests/test_estimate_pairs.py, and two spheres' caps of P1 tetrahedra; true errors
+against a reference solve finer levels. One body in 3-D: the Hertz box, F = 0.05."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from test_estimate_pairs import coarse_cylinders
+
+import convexcontact as cc
+from convexcontact.drivers.adapt import refined_uniformly
+from convexcontact.fem import flux
+from convexcontact.fem.estimate import estimate
+from convexcontact.results.result import EFFECTIVITY, EFFECTIVITY_3D, contact_state
+from convexcontact.scene.bodies import bodies_scene
+from convexcontact.scene.bodies_library import two_spheres
+from convexcontact.scene.description import Obstacle
+from convexcontact.scene.library import HERTZ_SPHERE_FORCE, quarter_box
+from convexcontact.scene.meshing import build_mesh
+from convexcontact.studies.precision.refinement import true_errors
+
+COULOMB = cc.Coulomb(friction=0.2)
+
+
+def levels(element: str, cols: int) -> tuple[list, np.ndarray]:
+    """Levels 0 and 1 (544 and 2,112 DOFs) and their energy errors against level 3 (33,024 DOFs)."""
+    runs = [cc.solve(coarse_cylinders(element, k, law=COULOMB, moduli=(1.0, 3.0), cols=cols)) for k in (0, 1, 3)]
+    u_ref = runs[-1].displacement / runs[-1].fem.scaling.displacement
+    errors = np.array(true_errors(runs[:-1], runs[-1])) * np.sqrt(u_ref @ (runs[-1].fem.K_full @ u_ref))
+    return runs[:-1], errors
+
+
+@pytest.fixture(scope="module")
+def p1_cylinders():
+    return levels("P1", 16)
+
+
+@pytest.fixture(scope="module")
+def p2_cylinders():
+    return levels("P2", 8)
+
+
+def reversed_slip(result):
+    """The result's contact state with every slip reversed: the slip along its traction, not against it."""
+    state = contact_state(result)
+    return dataclasses.replace(state, slip=-state.slip)
+
+
+def test_the_bound_of_a_p1_coulomb_pair_is_above_its_true_error(p1_cylinders):
+    """2-D P1, the budget's equilibrated bound: error ≤ η ≤ 3 error on both levels (measured 1.37, 1.32 here; 1.25–1.36
+    on four levels against a reference two or more levels finer), where points slip (2 and 4 nodes)."""
+    runs, errors = p1_cylinders
+    assert all(r.summary()["n_slip"] > 0 for r in runs)
+    ratio = np.array([r.error_estimate.eta for r in runs]) / errors
+    assert all(r.error_budget["estimator"].startswith("equilibrated") for r in runs)
+    assert np.all(1.0 <= ratio) and np.all(ratio <= 3.0)
+
+
+def test_the_bounds_friction_term_is_zero_where_the_slip_opposes_the_traction(p1_cylinders):
+    """The bound's friction term ∫ |t̂_T| |v_T| + t̂_T · v_T is round-off on the discrete answer (measured ≤ 5e-18:
+    on every contact facet the mean traction opposes both nodes' slips), and not zero with the slips reversed (6 and
+    11 % of η²): it checks the direction of slip, and the discrete answer's is right."""
+    runs, _ = p1_cylinders
+    for result in runs:
+        assert result.equilibrated_bound.terms["friction"] < 1e-12 * result.equilibrated_bound.eta**2
+        wrong = flux.flux_estimate(result.fem, result.displacement / result.fem.scaling.displacement,
+                                   reversed_slip(result))
+        assert wrong.terms["friction"] > 0.03 * wrong.eta**2
+
+
+def test_the_calibrated_estimate_of_a_p2_coulomb_pair_is_near_its_true_error(p2_cylinders):
+    """2-D P2, the calibrated residual (5.2): within 1–3 of the true error (measured 1.17, 1.31; 1.16–1.43 on four
+    levels against a reference two or more levels finer); its friction term is not zero where points slip (0.7 and
+    1.5 % of η²: the consistent-mass traction changes sign between the nodes), and grows with the slips reversed."""
+    runs, errors = p2_cylinders
+    assert all(r.summary()["n_slip"] > 0 for r in runs)
+    ratio = np.array([r.residual_estimate.eta / EFFECTIVITY["P2"] for r in runs]) / errors
+    assert np.all(1.0 <= ratio) and np.all(ratio <= 3.0)
+    for result in runs:
+        terms = result.residual_estimate.terms
+        assert 1e-3 * result.residual_estimate.eta**2 < terms["friction"]
+        wrong = estimate(result.fem, result.displacement / result.fem.scaling.displacement, reversed_slip(result))
+        assert wrong.terms["friction"] > 1.1 * terms["friction"]
+
+
+def test_the_estimates_of_a_p1_coulomb_pair_of_spheres_read_above_their_true_error():
+    """3-D P1, ``two_spheres(cells=3)``, levels 288 and 1,764 DOFs against 12,168: the calibrated residual (2.8, the
+    budget's) within 1–3 (measured 1.35, 1.75; with the partly covered slave nodes' rows, branch ``partial``: 1.84,
+    2.00) and the bound on request above the error (1.82, 2.92; 3.19, 2.92 with those rows), where points slip."""
+    base = two_spheres(cells=3, moduli=(1.0, 3.0), law=COULOMB)
+    runs = [cc.solve(bodies_scene(tuple(dataclasses.replace(p, geometry=refined_uniformly(p.geometry, k))
+                                        for p in base.body.parts), base.contact, dirichlet=list(base.dirichlet)))
+            for k in (0, 1, 2)]
+    u_ref = runs[-1].displacement / runs[-1].fem.scaling.displacement
+    errors = np.array(true_errors(runs[:-1], runs[-1])) * np.sqrt(u_ref @ (runs[-1].fem.K_full @ u_ref))
+    runs = runs[:-1]
+    assert all(r.summary()["n_slip"] > 0 for r in runs)
+    assert all(r.error_budget["calibration"] == EFFECTIVITY_3D["P1"] for r in runs)
+    calibrated = np.array([r.residual_estimate.eta / EFFECTIVITY_3D["P1"] for r in runs]) / errors
+    assert np.all(1.0 <= calibrated) and np.all(calibrated <= 3.0)
+    assert np.all(np.array([r.equilibrated_bound.eta for r in runs]) >= errors)
+
+
+@pytest.mark.parametrize("element", ["P1", "Q1"])
+def test_the_calibrated_estimate_of_a_3d_coulomb_body_is_near_its_true_error(element):
+    """The Hertz 0.4 box of 2³ cubes with Coulomb F = 0.05 (at 0.2 no node slips on these levels), levels 42 and 260
+    DOFs against 1,800: the calibrated residual within 1–3 (measured P1 1.48, 1.86; Q1 2.26, 2.03; 1.41–1.48 and
+    1.80–2.17 on three levels against 102,432) and P1's bound above the error (2.87, 2.54), a node slipping on the
+    second level."""
+    base = quarter_box(2, element, 1.0, Obstacle("parabolic", radius=1.0, center=(0.0, 0.0, 0.0),
+                                                 force=HERTZ_SPHERE_FORCE / 4), cc.Coulomb(friction=0.05),
+                       "hertz_sphere", size=0.4)
+    coarse = build_mesh(base.body)
+    runs = [cc.solve(dataclasses.replace(base, body=cc.Body(refined_uniformly(coarse, k), element=element)))
+            for k in (0, 1, 2)]
+    u_ref = runs[-1].displacement / runs[-1].fem.scaling.displacement
+    errors = np.array(true_errors(runs[:-1], runs[-1])) * np.sqrt(u_ref @ (runs[-1].fem.K_full @ u_ref))
+    runs = runs[:-1]
+    assert runs[1].summary()["n_slip"] > 0
+    calibrated = np.array([r.residual_estimate.eta / r.error_budget["calibration"] for r in runs]) / errors
+    assert all(r.error_budget["calibration"] == EFFECTIVITY_3D[element] for r in runs)
+    assert np.all(1.0 <= calibrated) and np.all(calibrated <= 3.0)
+    if element == "P1":
+        assert np.all(np.array([r.equilibrated_bound.eta for r in runs]) >= errors)
