@@ -254,6 +254,26 @@ The same pair's Tresca dual at 3·10⁵ DOFs, W formed (3153 unknowns, fixed rad
 max P̃ and c_j 3.4·10¹¹, held the natural residual at 2.48e-11 (∇f there 2.5e-19, the sum's rounding) for 55 segment
 steps, `inaccurate` (certificate 3.3e-11); from the stall on, 2 more steps: 6e-17, solved (docs/performance.md, "The
 3-D pair of spheres through the saddle's W")."""
+HELD_COLUMNS = 32
+"""Columns of P̃ one product may fetch for :func:`_held` where P is an operator."""
+HELD = 1 / EPS
+"""Where radii move, an inert ball's (INERT) step length is 0.1 / λ_max(S), S the Schur complement of its rows of P̃
+against those of the variable its radius is F times (its node's normal multiplier, which the contact holds), and at
+most HELD × the least step length (0.1 / (EPS max P̃): S's rounding), where that is longer than 0.1 / P̃_jj
+(:func:`_held`). 0.1 / P̃_jj measures how far the ball's own variables move ∇f on it, but the node's normal row moves
+with them: on the axis node of a quarter model (3-D pairs of spheres; the node on both symmetry planes) the two
+tangential rows are its normal row times the mortar normal's tilt (8.6e-3) to 4e-6, S is 1e-19 (two eigenvalues of the
+node's 3 × 3 block at W's rounding) and the ball acts on nothing. Its slip is then set by the other nodes alone (a
+small real one, 1.5e-13 against a median |∇f| of 5e-5), the law puts the ball on its sphere against it, and
+c_j = 0.1 / P̃_jj (2.75·10⁸) turned that slip into a step of 10⁻⁴ of its radius: where the slip briefly pointed
+outwards on Newton's path, the ball left its sphere by 3·10⁻³ of its radius, its Newton systems were singular there,
+and 16 steps each took part of a far point (the residual × 0.65 a step), until the inert sets' metric (a crawl, FLOOR)
+stopped on a ball inside its disc with that slip: certificate 5.3e-9 (friction law; P2 spheres of 6 cells, Coulomb
+F = 0.1, 12,168 DOFs; the same on the matrix-free dual). With S's length the ball's face is its slip's direction:
+28 → 13 Newton steps, 299 → 61 products, 1.1e-14 (matrix-free 14 → 13 steps, 780 → 160 products, 1.9e-14). The
+natural map's zeros do not depend on c (INERT); the residual's metric and scale, and CG's targets, keep 0.1 / P̃_jj.
+Not STEP_SPREAD's cap there: a shorter step length only makes such a ball's face more fragile (two P1 caps of 4 cells
+were left inside their discs, `inaccurate` at 6e-9–1.6e-7; with S's length all 9 pairs of radii are certified, ≤ 2.6e-11)."""
 FLOOR = 100.0
 """A stall with fixed radii is the inert sets' (INERT) where the natural residual is within FLOOR × the level ∇f's
 rounding takes it to there, EPS max P̃ ‖v‖∞ times their largest step length (relative to the answer's scale as the
@@ -471,6 +491,9 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     c = 0.1 / curvature if curvature > 0 else 1.0  # 0.1: 219 products on a 2-D Tresca dual, 1: 263, 10: 2076
     c = _step_lengths(program.P, sets, c, products)
     metric, proximal, inert = c, 0.0, _inert(c, tol)  # the residual's step lengths, see INERT
+    lengths = c  # the step lengths c_j = 0.1 / P̃_jj, which the residual's scale and CG's targets keep
+    if sets.coupling is not None and inert is not None:
+        c = _held(P, matrix, sets, c, inert[1] > 0, products)  # the inert balls' faces: see HELD
     cache = {} if cache is None else cache
     if "precondition" not in cache:
         approximation = getattr(program.P, "approximation", None)
@@ -604,7 +627,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     fixed_steps = 0  # the fixed-point map's steps taken where radii move (see FIXED_STEPS)
     damping = 0.0  # μ of the Newton systems (see DAMPING)
     status, word = "failed", "max_iter"
-    floor = SUM_FLOOR * EPS * (c * np.abs(sets.scale * program.q)).max(initial=0.0)
+    floor = SUM_FLOOR * EPS * (lengths * np.abs(sets.scale * program.q)).max(initial=0.0)
     for steps in range(max_iter + 1):
         residual, y, size = natural(v, g)
         if residual * size <= max(tol * answer(v, size), 0.0 if exact or own is None else floor):
@@ -626,8 +649,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if steps == max_iter:
             break
         empty = steps == 0 and start is None and sets.coupling is None and matrix is None  # see FIRST_FORCING
-        target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
-        target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
+        target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(lengths)
+        target = max(target, 0.1 * tol * answer(v, size) / np.max(lengths))
         newton, iterations, reach, known = newton_point(v, np.zeros_like(y) if empty else y, target, damping, empty)
         cg_total += iterations
         best = min(best, residual)
@@ -916,6 +939,40 @@ def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
     if sets.balls.size:
         lengths[sets.balls] = lengths[sets.balls].min(axis=1, keepdims=True)
     return lengths
+
+
+def _held(P, matrix, sets: _Bounds, c: np.ndarray, inert: np.ndarray, products: list) -> np.ndarray:
+    """c with the step length of each ball whose rows are all ``inert`` (a mask over the variables) and whose radius
+    is one variable's (local Coulomb) from the Schur complement S of its rows against that variable's, 0.1 / λ_max(S)
+    but at most HELD × the least step length (S's rounding), where that is longer: see HELD. ``matrix()``: P̃ (P a
+    matrix), else P̃'s columns by one product with at most HELD_COLUMNS of them, the most inert balls first."""
+    rows = np.flatnonzero(inert[sets.balls].all(axis=1) & (np.diff(sets.coupling.indptr) == 1))
+    if not rows.size or not HELD:
+        return c
+    rows = rows[np.argsort(-c[sets.balls[rows, 0]], kind="stable")]
+    if matrix is None:
+        rows = rows[:HELD_COLUMNS // (sets.balls.shape[1] + 1)]
+    own = sets.coupling.indices[sets.coupling.indptr[rows]]  # the variable each radius is F times
+    blocks = np.column_stack([sets.balls[rows], own])  # (balls, p + 1): the ball's variables, then its radius's
+    columns = np.unique(blocks)
+    if matrix is not None:
+        tilde = matrix()
+        part = (tilde[np.ix_(columns, columns)] if isinstance(tilde, np.ndarray)
+                else tilde[columns][:, columns].toarray())
+    else:
+        units = np.zeros((c.size, columns.size))
+        units[columns, np.arange(columns.size)] = sets.scale[columns]
+        products[0] += 1
+        part = sets.scale[columns, None] * P.matmat(units)[columns]
+    local = np.searchsorted(columns, blocks)
+    block = part[local[:, :, None], local[:, None, :]]  # (balls, p + 1, p + 1)
+    p = sets.balls.shape[1]
+    schur = block[:, :p, :p] - block[:, :p, p:] * block[:, p:, :p] / np.maximum(block[:, p:, p:], 1e-300)
+    largest = np.linalg.eigvalsh(schur)[:, -1]
+    held = c.copy()
+    longer = np.minimum(0.1 / np.maximum(largest, 1e-300), HELD * np.min(c))
+    held[sets.balls[rows]] = np.maximum(c[sets.balls[rows]], longer[:, None])
+    return held
 
 
 def _inert(c, tol: float):
