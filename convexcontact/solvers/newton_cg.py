@@ -255,7 +255,14 @@ max P̃ and c_j 3.4·10¹¹, held the natural residual at 2.48e-11 (∇f there 2
 steps, `inaccurate` (certificate 3.3e-11); from the stall on, 2 more steps: 6e-17, solved (docs/performance.md, "The
 3-D pair of spheres through the saddle's W")."""
 HELD_COLUMNS = 32
-"""Columns of P̃ one product may fetch for :func:`_held` where P is an operator."""
+"""Columns of P̃ (products) :func:`_held` may fetch where P is an operator."""
+HELD_TILT = 1e-2
+"""Largest P̃_jj of a ball's rows, relative to its radius's variable's, for which :func:`_held` computes their Schur
+complement: rows that are that variable's row times a tilt of at most 0.1 (the axis node's: 7e-5 on the P2 caps,
+1.5e-5 on the bench's 3-D pair at 2·10⁴ DOFs). The ratio's median is 1.1–2.2 on the pairs (3-D and 2-D); on the
+clamped strip 100 : 1 (1.5·10³ DOFs), whose normal rows carry the beam's bending, it is below 0.005, but its 20 inert
+intervals, by the clamps (P̃_jj 3e-5–2e-4 of the largest), read 0.09–0.14: not tilts. Their Schur complements would
+raise their step lengths 1.1–2 × (the same 5 Newton steps); the filter spares an operator those products."""
 HELD = 1 / EPS
 """Where radii move, an inert ball's (INERT) step length is 0.1 / λ_max(S), S the Schur complement of its rows of P̃
 against those of the variable its radius is F times (its node's normal multiplier, which the contact holds), and at
@@ -946,13 +953,17 @@ def _held(P, matrix, sets: _Bounds, c: np.ndarray, inert: np.ndarray, products: 
     is one variable's (local Coulomb) from the Schur complement S of its rows against that variable's, 0.1 / λ_max(S)
     but at most HELD × the least step length (S's rounding), where that is longer: see HELD. ``matrix()``: P̃ (P a
     matrix), else P̃'s columns by one product with at most HELD_COLUMNS of them, the most inert balls first."""
-    rows = np.flatnonzero(inert[sets.balls].all(axis=1) & (np.diff(sets.coupling.indptr) == 1))
+    single = np.diff(sets.coupling.indptr) == 1
+    own = np.full(single.size, -1)
+    own[single] = sets.coupling.indices[sets.coupling.indptr[:-1][single]]  # the variable each radius is F times
+    rows = np.flatnonzero(inert[sets.balls].all(axis=1) & single)
+    rows = rows[c[sets.balls[rows, 0]] * HELD_TILT >= c[own[rows]]]  # P̃_bb ≤ HELD_TILT P̃_nn: a tilt's rows
     if not rows.size or not HELD:
         return c
     rows = rows[np.argsort(-c[sets.balls[rows, 0]], kind="stable")]
     if matrix is None:
         rows = rows[:HELD_COLUMNS // (sets.balls.shape[1] + 1)]
-    own = sets.coupling.indices[sets.coupling.indptr[rows]]  # the variable each radius is F times
+    own = own[rows]
     blocks = np.column_stack([sets.balls[rows], own])  # (balls, p + 1): the ball's variables, then its radius's
     columns = np.unique(blocks)
     if matrix is not None:
@@ -962,7 +973,7 @@ def _held(P, matrix, sets: _Bounds, c: np.ndarray, inert: np.ndarray, products: 
     else:
         units = np.zeros((c.size, columns.size))
         units[columns, np.arange(columns.size)] = sets.scale[columns]
-        products[0] += 1
+        products[0] += columns.size
         part = sets.scale[columns, None] * P.matmat(units)[columns]
     local = np.searchsorted(columns, blocks)
     block = part[local[:, :, None], local[:, None, :]]  # (balls, p + 1, p + 1)
