@@ -222,7 +222,8 @@ its natural residual, and takes its projected-gradient steps, through a step len
 a residual of 10⁻⁵: newton-cg sat at 1.4e-5 for 90 segment steps (the fuzz suite's long profile). The natural map's
 zeros do not depend on c (INERT); the mortar pair's rows differ by ~50× (_step_lengths), well inside the spread.
 With fixed radii only: where radii move (Coulomb) it left two P1 caps of 4 cells (E = 1, ν = 0, F = 0.3) `inaccurate`
-at 6e-9–1.6e-7 on 6 of 9 pairs of radii, which the full spread solves."""
+at 6e-9–1.6e-7 on 6 of 9 pairs of radii, which the full spread solves; there such a ball's step length is
+raised instead (HELD)."""
 INERT = 1.0
 """A set (a bound, or a ball: all its rows) is inert where P̃_jj < ε max P̃ on each of its rows, ε = INERT · EPS / tol:
 its step length c_j = 0.1 / P̃_jj turns ∇f's rounding (≥ EPS · max P̃ · ‖v‖, the product's) into more than a tenth of
