@@ -1003,9 +1003,9 @@ def _held(P, matrix, sets: _Bounds, c: np.ndarray, inert: np.ndarray | None, pro
     local = np.searchsorted(columns, blocks)
     block = part[local[:, :, None], local[:, None, :]]  # (balls, p + 1, p + 1)
     schur = block[:, :p, :p] - block[:, :p, p:] * block[:, p:, :p] / np.maximum(block[:, p:, p:], 1e-300)
-    least = np.linalg.eigvalsh(schur)[:, -1]
-    tilt = least <= HELD_TILT * np.diagonal(block[:, :p, :p], axis1=1, axis2=2).max(axis=1)  # that row explains it
-    longer = np.minimum(0.1 / np.maximum(least[tilt], 1e-300), HELD * 0.1 / largest)
+    unexplained = np.linalg.eigvalsh(schur)[:, -1]  # λ_max(S): the rows' part that row does not explain
+    tilt = unexplained <= HELD_TILT * np.diagonal(block[:, :p, :p], axis1=1, axis2=2).max(axis=1)
+    longer = np.minimum(0.1 / np.maximum(unexplained[tilt], 1e-300), HELD * 0.1 / largest)
     held = c.copy()
     held[sets.balls[rows[tilt]]] = np.maximum(c[sets.balls[rows[tilt]]], longer[:, None])
     return held
