@@ -3,6 +3,7 @@ with the unknowns, against the Picard map's fixed point and against Clarabel on 
 radii Newton reached (a fixed point of the map), judged by the certificate."""
 
 import dataclasses
+import functools
 
 import numpy as np
 import pytest
@@ -180,21 +181,76 @@ def test_a_crawl_at_the_inert_sets_rounding_switches_their_metric(monkeypatch):
     assert crawled.extra["history"][0]["inner_iterations"] > steps
 
 
-def test_a_map_that_cannot_reach_its_tol_says_so():
-    """Two P2 caps, soft on stiff (a random pair's find): the axis node's friction law holds to 5.3e-9 only, so the
-    map stops at 10 × that (NOISE) whatever tol asks: the result says so instead of a silent "solved"; a tol it
-    reaches leaves no message."""
+def soft_on_stiff_p2_spheres(law) -> cc.Scene:
+    """Two P2 caps of 6 cells, soft on stiff (a random pair's find; 12,168 DOFs)."""
     from convexcontact.scene.bodies_library import two_spheres
 
-    def spheres(law):
-        return two_spheres(cells=6, radii=(2.0, 2.0), moduli=(13.9, 75.9), nu=(0.3, 0.0), approach=0.00868, law=law,
-                           element="P2")
+    return two_spheres(cells=6, radii=(2.0, 2.0), moduli=(13.9, 75.9), nu=(0.3, 0.0), approach=0.00868, law=law,
+                       element="P2")
 
-    result = cc.solve(spheres(Coulomb(friction=0.1, tol=1e-11)))
+
+def test_a_map_that_cannot_reach_its_tol_says_so(monkeypatch):
+    """Two P2 caps whose axis node's friction law held to 5.3e-9 only (before newton_cg.HELD, off here): the map stops
+    at 10 × that (NOISE) whatever tol asks, and the result says so instead of a silent "solved"; a tol it reaches
+    leaves no message."""
+    monkeypatch.setattr(newton_cg, "HELD", 0.0)
+    result = cc.solve(soft_on_stiff_p2_spheres(Coulomb(friction=0.1, tol=1e-11)))
     stop = result.extra["picard"]["stop_change"]
     assert result.status == "solved" and stop > 1e-11
     assert "above tol = 1e-11" in result.message and f"{stop / picard.NOISE:.1e}" in result.message
-    assert cc.solve(spheres(Coulomb(friction=0.1, tol=1e-6))).message == ""
+    assert cc.solve(soft_on_stiff_p2_spheres(Coulomb(friction=0.1, tol=1e-6))).message == ""
+
+
+def test_the_axis_node_s_disc_is_held_on_its_sphere_by_its_slip(monkeypatch):
+    """The same caps: the axis node's tangential rows are its normal row times the normal's tilt, its disc acts on
+    nothing and its slip (set by the other nodes) puts it on its sphere; with the step length of its Schur complement
+    (newton_cg.HELD) Newton's Coulomb solve certifies it to 1e-10 on both paths, where 0.1 / P̃_jj left it inside its
+    disc, slipping: 5.3e-9 (friction law)."""
+    scene = soft_on_stiff_p2_spheres(Coulomb(friction=0.1))
+    for result in (cc.solve(scene), cc.prepare(scene, "dual-matrix-free").solve()):
+        assert result.status == "solved" and result.extra["history"][0]["coulomb_newton"]
+        assert result.certificate.worst <= 1e-10
+    monkeypatch.setattr(newton_cg, "HELD", 0.0)
+    assert cc.solve(scene).certificate.residuals["friction_law"] > 1e-10
+
+
+def test_a_disc_whose_rows_are_its_normal_s_is_held_by_its_schur_complement():
+    """newton_cg._held on the axis node in miniature (``tilted_disc``): the disc's rows are its normal's times a tilt
+    (plus a part at W's rounding), so its Schur complement against that row is ~0 and its step length is raised to
+    HELD × the least; the same disc with rows of their own (S half of P̃_jj or more) keeps its c, and so does the
+    tilted one without INERT's mark."""
+    for tilted in (True, False):
+        program, coupling = tilted_disc(tilted)
+        form = newton_cg.bound_form_of(program)
+        sets = newton_cg._bounds(program, form, coupling)
+        c = newton_cg._step_lengths(program.P, sets, 1.0)
+        inert = np.zeros(c.size, bool)
+        inert[form.ball_vars] = True
+        W = program.P.toarray()
+        matrix = functools.partial(np.asarray, W)  # newton-cg's P̃ (the scale is 1 on a contact dual)
+        held = newton_cg._held(None, matrix, sets, c, inert, [0], newton_cg.TOL)
+        disc = form.ball_vars[0]
+        schur = W[np.ix_(disc, disc)] - np.outer(W[disc, 0], W[0, disc]) / W[0, 0]  # against the node's normal row
+        ratio = np.linalg.eigvalsh(schur)[-1] / W[disc[0], disc[0]]  # the rows the normal's does not explain
+        assert ratio <= 1e-12 if tilted else ratio >= 0.5
+        assert np.allclose(held[disc], newton_cg.HELD * c.min() if tilted else c[disc])
+        assert np.array_equal(np.delete(held, disc), np.delete(c, disc))
+        assert np.array_equal(newton_cg._held(None, matrix, sets, c, ~inert, [0], newton_cg.TOL), c)
+
+
+def tilted_disc(tilted: bool, normals: int = 6, tilt: float = 1e-2):
+    """A Coulomb dual in miniature: ``normals`` bound rows (W = R Rᵀ, R near the identity) and one disc on the first
+    node, radius 0.1 λ_N of it; its two rows ``tilt`` × that node's normal row (``tilted``: W's 3 × 3 block of the node
+    of rank one) or ``tilt`` × rows of their own."""
+    rng = np.random.default_rng(0)
+    G = np.eye(normals) + 0.1 * rng.standard_normal((normals, normals))
+    own = tilt * rng.standard_normal((2, normals))
+    R = np.vstack([G, tilt * np.vstack([G[0], -G[0]]) if tilted else own])
+    n = normals + 2
+    A = sp.vstack([-sp.eye(normals, n), sp.csr_matrix((1, n)), -sp.eye(2, n, normals)]).tocsc()
+    program = ConicProgram(sp.csc_matrix(R @ R.T), np.concatenate([-np.ones(normals), np.zeros(2)]), A,
+                           np.concatenate([np.zeros(normals), [0.0], np.zeros(2)]), (nonnegative(normals), soc(3)))
+    return program, sp.csr_matrix(([0.1], ([0], [0])), shape=(1, n))
 
 
 @pytest.mark.parametrize("newton", [True, False])

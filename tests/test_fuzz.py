@@ -209,8 +209,9 @@ def test_the_long_profile_s_p2_pairs_are_certified_on_both_paths(master_modulus,
     scene = long_profile_pair(master_modulus, slip_bound)
     for result in (cc.solve(scene), cc.prepare(scene, "dual-matrix-free").solve()):
         assert result.status == "solved" and result.certificate.worst <= 1e-10
-    if master_modulus < 1:
+    if master_modulus < 1:  # HELD off too: the axis disc's Schur step length solves it under the full spread
         monkeypatch.setattr(cc.solvers.newton_cg, "STEP_SPREAD", np.inf)
+        monkeypatch.setattr(cc.solvers.newton_cg, "HELD", 0.0)
         assert cc.solve(scene).certificate.worst > 1e-10
 
 
@@ -221,6 +222,19 @@ def test_the_long_profile_s_coulomb_pair_is_certified_on_both_paths():
                                           law=cc.Coulomb(friction=0.3))
     for result in (cc.solve(scene), cc.prepare(scene, "dual-matrix-free").solve()):
         assert result.status == "solved" and result.certificate.worst <= 1e-8
+
+
+def test_the_long_profile_s_tresca_p1_pair_is_certified(monkeypatch):
+    """The long profile's find of 2026-11-27: two P1 caps of 6 cells, radii 5, Tresca s = 0.1; `auto`'s newton-cg said
+    solved (natural residual 5e-13) at a certificate of 2.75e-10: the axis disc at 0.9997 of its radius, its slip along
+    λ_T, its step length capped (STEP_SPREAD). With its Schur complement's step length (newton_cg.HELD) it is certified;
+    with HELD = 0 it is not."""
+    scene = cc.bodies_library.two_spheres(cells=6, radii=(5.0, 5.0), moduli=(1.0, 1.0), nu=(0.0, 0.0), approach=0.001,
+                                          law=cc.Tresca(slip_bound=0.1), master_cells=6)
+    result = cc.solve(scene)
+    assert result.status == "solved" and result.certificate.worst <= 1e-10
+    monkeypatch.setattr(cc.solvers.newton_cg, "HELD", 0.0)
+    assert cc.solve(scene).certificate.worst > 1e-10
 
 
 def test_the_generator_covers_every_law():

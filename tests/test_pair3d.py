@@ -132,4 +132,5 @@ def test_newton_cg_solves_the_dense_dual_of_two_p2_spheres_with_tresca(monkeypat
     monkeypatch.setattr(newton_cg, "_damped", lambda damping, far, refused, residual: far_only(damping, far, False,
                                                                                               residual))
     monkeypatch.setattr(newton_cg, "STEP_SPREAD", np.inf)  # the axis node's full step length, as it was made on
+    monkeypatch.setattr(newton_cg, "HELD", 0.0)  # its Schur complement's step length (HELD) rescues it too
     assert newton_cg.solve(program, max_iter=100).status == "failed"

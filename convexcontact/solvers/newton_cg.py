@@ -222,7 +222,8 @@ its natural residual, and takes its projected-gradient steps, through a step len
 a residual of 10⁻⁵: newton-cg sat at 1.4e-5 for 90 segment steps (the fuzz suite's long profile). The natural map's
 zeros do not depend on c (INERT); the mortar pair's rows differ by ~50× (_step_lengths), well inside the spread.
 With fixed radii only: where radii move (Coulomb) it left two P1 caps of 4 cells (E = 1, ν = 0, F = 0.3) `inaccurate`
-at 6e-9–1.6e-7 on 6 of 9 pairs of radii, which the full spread solves."""
+at 6e-9–1.6e-7 on 6 of 9 pairs of radii, which the full spread solves; there such a ball's step length is
+raised instead (HELD)."""
 INERT = 1.0
 """A set (a bound, or a ball: all its rows) is inert where P̃_jj < ε max P̃ on each of its rows, ε = INERT · EPS / tol:
 its step length c_j = 0.1 / P̃_jj turns ∇f's rounding (≥ EPS · max P̃ · ‖v‖, the product's) into more than a tenth of
@@ -254,6 +255,39 @@ The same pair's Tresca dual at 3·10⁵ DOFs, W formed (3153 unknowns, fixed rad
 max P̃ and c_j 3.4·10¹¹, held the natural residual at 2.48e-11 (∇f there 2.5e-19, the sum's rounding) for 55 segment
 steps, `inaccurate` (certificate 3.3e-11); from the stall on, 2 more steps: 6e-17, solved (docs/performance.md, "The
 3-D pair of spheres through the saddle's W")."""
+HELD_COLUMNS = 32
+"""Columns of P̃ (products) :func:`_held` may fetch where P is an operator."""
+HELD_TILT = 1e-2
+"""A ball's rows are a tilt of its node's normal row (:func:`_held`) where their P̃_jj is at most HELD_TILT of that
+row's (read first, from the step lengths where radii move: no products) and their Schur complement against it at most
+HELD_TILT of their P̃_jj: the axis node's 7e-5 and 4e-10 on the P2 caps. Elsewhere the ratios are far from that: the
+pairs' median P̃_jj ratio 1.1–2.2 (3-D and 2-D); on the clamped strip 100 : 1 (1.5·10³ DOFs), whose normal rows carry the
+beam's bending, that ratio is below 0.005, but its 20 inert intervals by the clamps read 0.09–0.14; the 2-D pair's
+Tresca dual at 7·10⁴ DOFs has 455 inert intervals whose ratio passes, their Schur complements 0.72–0.76 of their P̃_jj.
+Without the second test their step lengths grew 1.1–2 × (strip) and 1.32–1.39 × (pair), the same Newton steps."""
+HELD = 1 / EPS
+"""An inert ball's (INERT) step length is 0.1 / λ_max(S), S the Schur complement of its rows of P̃ against those of
+its node's normal multiplier (where radii move, the variable its radius is F times; with fixed radii, P a matrix, the
+bound whose row its first row is most aligned with), which the contact holds, at most HELD × 0.1 / max P̃ (S's
+rounding), where that is longer than its c_j (:func:`_held`; only rows that are a tilt of that one's, HELD_TILT).
+0.1 / P̃_jj measures how far the ball's own variables move ∇f on it, but the node's normal multiplier moves with them:
+on the axis node of a quarter model (3-D pairs of spheres; the node on both symmetry planes) the two tangential rows
+are its normal row times the mortar normal's tilt (8.6e-3) to 4e-6, S is 1e-19 (two eigenvalues of the node's 3 × 3
+block at W's rounding) and the ball acts on nothing. Its slip is then set by the other nodes alone (a small real one,
+1.5e-13 against a median |∇f| of 5e-5), the law puts the ball on its sphere against it, and c_j = 0.1 / P̃_jj
+(2.75·10⁸) turned that slip into a step of 10⁻⁴ of its radius: where the slip briefly pointed outwards on Newton's
+path, the ball left its sphere by 3·10⁻³ of its radius, its Newton systems were singular there, and 16 steps each took
+part of a far point (the residual × 0.65 a step), until the inert sets' metric (a stall) stopped on a ball inside its
+disc with that slip: certificate 5.3e-9 (friction law; P2 spheres of 6 cells, Coulomb F = 0.1, 12,168 DOFs; the same on
+the matrix-free dual). With S's length the ball's face is its slip's direction: 28 → 13 Newton steps, 299 → 61
+products, 1.1e-14 (matrix-free 14 → 13 steps, 780 → 160 products, 1.9e-14). With fixed radii STEP_SPREAD's cap had
+hidden the same state: two P1 caps of 6 cells, radii 5, Tresca s = 0.1, `solved` at a certificate of 2.75e-10 (the
+disc at 0.9997 of its radius, its slip along λ_T: the least f is on its sphere's other side); now 8e-15. The natural
+map's zeros do not depend on c (INERT), and with fixed radii "Convergence" holds with C = diag(c) as it is; the
+residual's metric and scale and CG's targets keep 0.1 / P̃_jj (a residual under shorter step lengths is at most the
+one under c, see INERT). Not STEP_SPREAD's cap where radii move: a shorter step length only makes such a ball's face
+more fragile (two P1 caps of 4 cells were left inside their discs, `inaccurate` at 6e-9–1.6e-7; with S's length all 9
+pairs of radii are certified, ≤ 2.6e-11)."""
 FLOOR = 100.0
 """A stall with fixed radii is the inert sets' (INERT) where the natural residual is within FLOOR × the level ∇f's
 rounding takes it to there, EPS max P̃ ‖v‖∞ times their largest step length (relative to the answer's scale as the
@@ -471,6 +505,9 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     c = 0.1 / curvature if curvature > 0 else 1.0  # 0.1: 219 products on a 2-D Tresca dual, 1: 263, 10: 2076
     c = _step_lengths(program.P, sets, c, products)
     metric, proximal, inert = c, 0.0, _inert(c, tol)  # the residual's step lengths, see INERT
+    lengths = c  # the step lengths c_j = 0.1 / P̃_jj, which the residual's scale and CG's targets keep
+    if inert is not None or sets.coupling is None:  # the inert balls' faces: see HELD
+        c = _held(P, matrix, sets, c, None if inert is None else inert[1] > 0, products, tol)
     cache = {} if cache is None else cache
     if "precondition" not in cache:
         approximation = getattr(program.P, "approximation", None)
@@ -604,7 +641,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     fixed_steps = 0  # the fixed-point map's steps taken where radii move (see FIXED_STEPS)
     damping = 0.0  # μ of the Newton systems (see DAMPING)
     status, word = "failed", "max_iter"
-    floor = SUM_FLOOR * EPS * (c * np.abs(sets.scale * program.q)).max(initial=0.0)
+    floor = SUM_FLOOR * EPS * (lengths * np.abs(sets.scale * program.q)).max(initial=0.0)
     for steps in range(max_iter + 1):
         residual, y, size = natural(v, g)
         if residual * size <= max(tol * answer(v, size), 0.0 if exact or own is None else floor):
@@ -626,8 +663,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if steps == max_iter:
             break
         empty = steps == 0 and start is None and sets.coupling is None and matrix is None  # see FIRST_FORCING
-        target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
-        target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
+        target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(lengths)
+        target = max(target, 0.1 * tol * answer(v, size) / np.max(lengths))
         newton, iterations, reach, known = newton_point(v, np.zeros_like(y) if empty else y, target, damping, empty)
         cg_total += iterations
         best = min(best, residual)
@@ -916,6 +953,62 @@ def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
     if sets.balls.size:
         lengths[sets.balls] = lengths[sets.balls].min(axis=1, keepdims=True)
     return lengths
+
+
+def _held(P, matrix, sets: _Bounds, c: np.ndarray, inert: np.ndarray | None, products: list, tol: float) -> np.ndarray:
+    """c with the step length of each inert ball (all its rows marked in ``inert``, a mask over the variables; with
+    fixed radii and P a matrix, marked here by INERT's rule on P̃'s own diagonal, which STEP_SPREAD's cap does not
+    reach) whose rows are a tilt of one variable's (HELD_TILT) from the Schur complement S of its rows against that
+    variable's, 0.1 / λ_max(S) but at most HELD × 0.1 / max P̃ (S's rounding), where that is longer: see HELD. The
+    variable: the one its radius is F times (local Coulomb), or with fixed radii the bound whose row of P̃ its first row
+    is most aligned with. ``matrix()``: P̃ (P a matrix), else P̃'s columns by one product with at most HELD_COLUMNS of
+    them, the most inert balls first (where radii move; fixed radii need P̃)."""
+    if not HELD or not sets.balls.size or (sets.coupling is None and (matrix is None or not sets.bounds.size)):
+        return c
+    c = np.broadcast_to(np.asarray(c, dtype=float), sets.scale.shape)
+    p = sets.balls.shape[1]
+    if sets.coupling is not None:
+        single = np.diff(sets.coupling.indptr) == 1
+        own = np.full(single.size, -1)
+        own[single] = sets.coupling.indices[sets.coupling.indptr[:-1][single]]  # the variable each radius is F times
+        rows = np.flatnonzero(inert[sets.balls].all(axis=1) & single)
+        rows = rows[c[sets.balls[rows, 0]] * HELD_TILT >= c[own[rows]]]  # P̃_bb ≤ HELD_TILT P̃_nn: a tilt's rows
+        rows = rows[np.argsort(-c[sets.balls[rows, 0]], kind="stable")]
+        if matrix is None:
+            rows = rows[:HELD_COLUMNS // (p + 1)]
+        own, largest = own[rows], 0.1 / np.min(c)
+    else:
+        tilde = matrix()
+        diagonal = np.asarray(tilde.diagonal()).ravel()
+        largest = diagonal.max(initial=0.0)
+        rows = np.flatnonzero((diagonal[sets.balls] < INERT * EPS / tol * largest).all(axis=1))
+        first = sets.balls[rows, 0]
+        aligned = tilde[first] if isinstance(tilde, np.ndarray) else tilde[first].toarray()
+        own = sets.bounds[np.argmax(aligned[:, sets.bounds] ** 2 / np.maximum(diagonal[sets.bounds], 1e-300), axis=1)]
+        tilted = diagonal[sets.balls[rows]].max(axis=1, initial=0.0) <= HELD_TILT * diagonal[own]
+        rows, own = rows[tilted], own[tilted]
+    if not rows.size:
+        return c
+    blocks = np.column_stack([sets.balls[rows], own])  # (balls, p + 1): the ball's variables, then that variable
+    columns = np.unique(blocks)
+    if matrix is not None:
+        tilde = matrix()
+        part = (tilde[np.ix_(columns, columns)] if isinstance(tilde, np.ndarray)
+                else tilde[columns][:, columns].toarray())
+    else:
+        units = np.zeros((c.size, columns.size))
+        units[columns, np.arange(columns.size)] = sets.scale[columns]
+        products[0] += columns.size
+        part = sets.scale[columns, None] * P.matmat(units)[columns]
+    local = np.searchsorted(columns, blocks)
+    block = part[local[:, :, None], local[:, None, :]]  # (balls, p + 1, p + 1)
+    schur = block[:, :p, :p] - block[:, :p, p:] * block[:, p:, :p] / np.maximum(block[:, p:, p:], 1e-300)
+    unexplained = np.linalg.eigvalsh(schur)[:, -1]  # λ_max(S): the rows' part that row does not explain
+    tilt = unexplained <= HELD_TILT * np.diagonal(block[:, :p, :p], axis1=1, axis2=2).max(axis=1)
+    longer = np.minimum(0.1 / np.maximum(unexplained[tilt], 1e-300), HELD * 0.1 / largest)
+    held = c.copy()
+    held[sets.balls[rows[tilt]]] = np.maximum(c[sets.balls[rows[tilt]]], longer[:, None])
+    return held
 
 
 def _inert(c, tol: float):
