@@ -588,29 +588,33 @@ class FluxEstimate:
 def contact_terms(fem: FEModel, state: ContactState, lumped: np.ndarray) -> dict[str, np.ndarray]:
     """The complementarity, friction and penetration terms per contact facet, with the traction σ̂ n = t̂ (the mean of
     the lumped nodal tractions over the facet): ∫_E p̂ (g − u_N,h) (kept where positive), ∫_E |t̂_T| |v_T| + t̂_T · v_T
-    and 2μ |E|⁻¹ ‖(u_N,h − g)_+‖²_E (the vertex rule on the facet's d nodes: exact for the linear opening)."""
+    and 2μ |E|⁻¹ ‖(u_N,h − g)_+‖²_E (the vertex rule on the facet's d nodes: exact for the linear opening); zero on
+    the facets of a pair's slave side with a node left out (no row, so no gap or slip: indexed as −1, such a node read
+    the last row's values, on the P1 spheres' first level the one closed row's opening 0)."""
     mesh, contact = fem.mesh, fem.contact
-    facets = contact.facets
-    ends = mesh.facets[:, facets]  # (d, facets) vertices
-    measure = facet_measures(mesh, facets)
-    d = fem.dim
+    ends = mesh.facets[:, contact.facets]  # (d, facets) vertices
     node = np.full(mesh.nvertices, -1)
     node[contact.dofs[:, 0] // fem.dim] = np.arange(contact.dofs.shape[0])
+    rows = (node[ends] >= 0).all(axis=0)
+    out = {name: np.zeros(contact.facets.size) for name in TERMS[2:]}
+    facets, ends = contact.facets[rows], ends[:, rows]
+    measure = facet_measures(mesh, facets)
+    d = fem.dim
     traction = lumped[ends].mean(axis=0)  # (facets, d)
     normal = contact.normals[node[ends]].mean(axis=0)
     normal /= np.linalg.norm(normal, axis=1)[:, None]
     pressure = -(traction * normal).sum(axis=1)
-    out = {name: np.zeros(facets.size) for name in TERMS[2:]}
     if state.constrained:
         opening = (state.gap - state.normal_displacement)[node[ends]]  # (d, facets)
-        out["complementarity"] = np.maximum(pressure * measure * opening.mean(axis=0), 0.0)
-        out["penetration"] = 2.0 * fem.lame[1][mesh.f2t[0, facets]] / d * (np.maximum(-opening, 0.0) ** 2).sum(axis=0)
+        out["complementarity"][rows] = np.maximum(pressure * measure * opening.mean(axis=0), 0.0)
+        out["penetration"][rows] = (2.0 * fem.lame[1][mesh.f2t[0, facets]] / d
+                                    * (np.maximum(-opening, 0.0) ** 2).sum(axis=0))
     if state.slip is not None:
         tangential = traction + pressure[:, None] * normal
         slip = state.slip[node[ends]]  # (d, facets, d)
         slip = slip - (slip * normal).sum(axis=2)[..., None] * normal
-        out["friction"] = measure / d * (np.linalg.norm(tangential, axis=1) * np.linalg.norm(slip, axis=2)
-                                         + (tangential * slip).sum(axis=2)).sum(axis=0)
+        out["friction"][rows] = measure / d * (np.linalg.norm(tangential, axis=1) * np.linalg.norm(slip, axis=2)
+                                               + (tangential * slip).sum(axis=2)).sum(axis=0)
     return out
 
 
