@@ -250,3 +250,18 @@ def test_the_bound_runs_blas_on_one_thread_and_gives_the_pools_back(monkeypatch)
     assert [pool["num_threads"] for pool in threadpoolctl.threadpool_info()] == before
     monkeypatch.setattr(blas, "limited", lambda threads: contextlib.nullcontext())
     assert flux.flux_estimate(fem, u, state).eta == pytest.approx(eta, rel=1e-12)
+
+
+def test_blas_limits_see_mkl_loaded_after_their_first_scan():
+    """PARDISO's mkl_rt brings a BLAS pool of its own: a limit scanned before it was loaded left that pool on all its
+    threads (seen as test_the_bound_runs_blas_on_one_thread_and_gives_the_pools_back failing after test_flux3d.py,
+    whose first bound ran before any factorization). A fresh process: scan, load MKL, limit, look."""
+    import subprocess
+    import sys
+
+    script = ("import threadpoolctl; from convexcontact import blas; from convexcontact.fem.pardiso import _library\n"
+              "blas.pools(); _library()\n"
+              "with blas.limited(1):\n"
+              "    print(sorted({p['num_threads'] for p in threadpoolctl.threadpool_info() if p['user_api'] == 'blas'}))")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[1]"

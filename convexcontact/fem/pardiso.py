@@ -17,6 +17,8 @@ import weakref
 import numpy as np
 import scipy.sparse as sp
 
+from ..blas import pools
+
 BLOCK = 50
 """Right-hand sides per PARDISO call: MKL adds its own n × nrhs workspace (docs/factorizations.md)."""
 
@@ -54,6 +56,7 @@ def _library() -> ctypes.CDLL:
     lib = PyPardisoSolver().libmkl
     lib.pardiso.restype = None
     lib.pardisoinit.restype = None
+    pools.cache_clear()  # mkl_rt brings a BLAS pool of its own, which a scan made before missed (blas.limited)
     return lib
 
 
