@@ -143,3 +143,11 @@ def test_a_tresca_pair_tied_across_its_gap_reads_below_its_error_and_the_result_
         assert (level.equilibrated_bound.eta < error) == tied
         assert (level.tied_open_nodes > 0) == tied
         assert any(w.startswith("the error estimate is not verified") for w in level.warnings) == tied
+
+
+def test_an_unsolved_tresca_pair_has_no_tied_nodes_and_warns_as_before():
+    """An answer that is not there (no contact nodes) reads 0 tied nodes, not an error."""
+    result = cc.solve(coarse_cylinders("P1", 0, law=cc.Tresca(slip_bound=0.01), moduli=(1.0, 3.0)))
+    failed = dataclasses.replace(result, status="failed", contact=None)
+    assert result.tied_open_nodes > 0 and failed.tied_open_nodes == 0
+    assert not any(w.startswith("the error estimate is not verified") for w in failed.warnings)

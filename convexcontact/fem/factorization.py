@@ -133,7 +133,7 @@ class Factorization(ABC):
         W = np.empty((B.shape[0], B.shape[0]))
         for start in range(0, B.shape[0], self._block):
             W[:, start:start + self._block] = B @ self.solve(Bt[:, start:start + self._block].toarray())
-        return symmetrized(W)
+        return _symmetrized(W)
 
     def delassus(self, B: sp.spmatrix, K: sp.spmatrix | None = None, coarse: Callable | None = None) -> Delassus:
         """W = B K⁻¹ Bᵀ as an operator, never formed (see :class:`Delassus`); with ``K`` (the matrix factorized), it
@@ -241,7 +241,7 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None, whole: 
     return Approximation(G.tocsr(), H.tocsr(), factorize_sum, index.size)
 
 
-def symmetrized(A: np.ndarray, scale: float = 1.0, block: int = 1024) -> np.ndarray:
+def _symmetrized(A: np.ndarray, scale: float = 1.0, block: int = 1024) -> np.ndarray:
     """scale · (A + Aᵀ) / 2 in A's own memory, a pair of blocks at a time: ``A += A.T`` makes a copy of A (numpy's
     rule for overlapping operands), an m² array at the dense dual's peak (the 2-D pair at 3.2·10⁵ DOFs with Tresca:
     165 MB of its 847)."""
@@ -583,7 +583,7 @@ class Saddle(Factorization):
         zeros = sp.csr_matrix((np.zeros(m), np.arange(m), np.arange(m + 1)), shape=(m, m))  # stored: PARDISO's rule
         A = sp.bmat([[sp.triu(self._K), self.B.T], [None, zeros]], format="csr")
         self._factors = _pardiso_factors(A, schur=np.arange(n, n + m), mtype=_pardiso().SADDLE)
-        self._W, self._factors.S = symmetrized(self._factors.S, -1.0), None
+        self._W, self._factors.S = _symmetrized(self._factors.S, -1.0), None
         self.timings["factorization"] = time.perf_counter() - start
 
     def solve(self, b: np.ndarray) -> np.ndarray:

@@ -233,10 +233,9 @@ class ContactResult:
         """Open nodes of a Tresca pair that carry a tangential force (more than :data:`TIED` of the largest contact
         force): the slip bound holds them to the other body across the gap, where the error estimate is not verified
         (:data:`UNVERIFIED`)."""
-        c = self.contact
-        if not isinstance(self.scene.contact.law, Tresca) or c.master_forces is None or not self.solved:
-            return 0
-        force = np.linalg.norm(c.forces, axis=1)
+        if not self.solved or not isinstance(self.scene.contact.law, Tresca) or self.contact.master_forces is None:
+            return 0  # an unsolved result has no contact nodes
+        force = np.linalg.norm(self.contact.forces, axis=1)
         return int(np.count_nonzero(force[~self.closed] > TIED * force.max(initial=0.0)))
 
     def cell_fields(self) -> dict[str, np.ndarray]:
