@@ -270,8 +270,15 @@ def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
     """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a ψ_b) and each slave facet's covered
     fraction, as :func:`convexcontact.fem.mortar.mortar` in 2-D."""
     e, f = candidates(slave, master, mean_normal)
-    facing = (slave.normal[e] * master.normal[f]).sum(axis=1) < -FACING
-    e, f = e[facing], f[facing]
+    # facing, and the master facet's centroid projected on the slave's plane within both radii of the slave's (the
+    # projection only shortens): the candidates' windows are wide where the normals tilt (:func:`across`)
+    centre = [x.points.mean(axis=1) for x in (slave, master)]
+    radius = [np.linalg.norm(x.points - c[:, None], axis=2).max(axis=1) for x, c in zip((slave, master), centre)]
+    offset = centre[1][f] - centre[0][e]
+    aside = offset - (offset * slave.normal[e]).sum(axis=1)[:, None] * slave.normal[e]
+    keep = ((slave.normal[e] * master.normal[f]).sum(axis=1) < -FACING) & (
+        np.linalg.norm(aside, axis=1) <= (radius[0][e] + radius[1][f]) * (1 + 1e-9))
+    e, f = e[keep], f[keep]
     origin, frame = slave.points[e, 0], slave.frame[e]  # (n, 3), (n, 2, 3)
     flat = np.einsum("nkc,njc->nkj", slave.points[e] - origin[:, None], frame)  # slave vertices in its plane
     projected = np.einsum("nkc,njc->nkj", master.points[f] - origin[:, None], frame)
