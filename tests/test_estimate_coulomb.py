@@ -128,26 +128,31 @@ def test_the_calibrated_estimate_of_a_3d_coulomb_body_is_near_its_true_error(ele
         assert np.all(np.array([r.equilibrated_bound.eta for r in runs]) >= errors)
 
 
-def test_a_tresca_pair_tied_across_its_gap_reads_below_its_error_and_the_result_says_so():
-    """Two cylinders of moduli 1 and 3 with Tresca (docs/estimate.md, "Tresca pairs in 2-D: below 1"): with s = 0.01
-    on all of Γ_C the open nodes are held to the other body across the gap and the P1 bound reads below the true error
-    on level 2 (0.51 against level 5; here against level 4), and the result warns; with s on |x| < 0.05 only (the
-    closed zone) the bound is above it (1.24 against level 5) and the result does not warn."""
+def test_a_tresca_pair_tied_across_its_gap_is_bounded_and_warns_where_the_tie_reaches_the_coverages_end():
+    """Two cylinders of moduli 1 and 3 with Tresca (docs/estimate.md, "Tresca pairs tied across their gap: the
+    cause"): with s = 0.01 on all of Γ_C the open nodes are tied to the other body across the gap. The mortar's search
+    missed the master facets that the slave's tilted normals meet far aside, so the covered part of Γ_C, and the tie,
+    shrank with the mesh (|x| ≤ 0.35, 0.27, 0.20 on levels 2, 3, 5) and the P1 bound read 0.51 of the true error on
+    level 2; now (|x| ≤ 0.41, 0.43, 0.45) 1.09 (against level 5; 1.13 here against level 4). The tie still ends at the
+    coverage's end, which moves with the mesh: the result warns. With s on |x| < 0.28 (inside every level's coverage)
+    open nodes are tied as well, the bound is above the error and the result does not warn."""
     def runs(s):
         return [cc.solve(coarse_cylinders("P1", k, law=cc.Tresca(slip_bound=s), moduli=(1.0, 3.0))) for k in (2, 4)]
 
-    for s, tied in ((0.01, True), (lambda x, y: 0.01 * (np.abs(x) < 0.05), False)):
+    for s, at_end in ((0.01, True), (lambda x, y: 0.01 * (np.abs(x) < 0.28), False)):
         level, reference = runs(s)
         u_ref = reference.displacement / reference.fem.scaling.displacement
         error = true_errors([level], reference)[0] * np.sqrt(u_ref @ (reference.fem.K_full @ u_ref))
-        assert (level.equilibrated_bound.eta < error) == tied
-        assert (level.tied_open_nodes > 0) == tied
-        assert any(w.startswith("the error estimate is not verified") for w in level.warnings) == tied
+        force = np.linalg.norm(level.contact.forces, axis=1)
+        assert np.count_nonzero(force[~level.closed] > 1e-3 * force.max()) >= 10  # open nodes tied in both
+        assert level.equilibrated_bound.eta >= error
+        assert (level.tied_at_coverage_end > 0) == at_end
+        assert any(w.startswith("the error estimate is not verified") for w in level.warnings) == at_end
 
 
 def test_an_unsolved_tresca_pair_has_no_tied_nodes_and_warns_as_before():
     """An answer that is not there (no contact nodes) reads 0 tied nodes, not an error."""
     result = cc.solve(coarse_cylinders("P1", 0, law=cc.Tresca(slip_bound=0.01), moduli=(1.0, 3.0)))
     failed = dataclasses.replace(result, status="failed", contact=None)
-    assert result.tied_open_nodes > 0 and failed.tied_open_nodes == 0
+    assert result.tied_at_coverage_end > 0 and failed.tied_at_coverage_end == 0
     assert not any(w.startswith("the error estimate is not verified") for w in failed.warnings)

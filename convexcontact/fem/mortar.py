@@ -36,7 +36,7 @@ from ..scene.bodies import Pair, Pairs
 from ..scene.description import Contact, SceneError
 from ..scene.meshing import check_boundary
 from .contact import ContactTrace, contact_trace, multiplier_transform, tangent_frame
-from .mortar3d import Facets, dual_coefficients, facets_3d, gauss, lagrange, mortar_3d
+from .mortar3d import Facets, across, dual_coefficients, facets_3d, gauss, lagrange, mortar_3d
 from .scaling import Scaling
 
 COVERED = 1e-9
@@ -127,6 +127,11 @@ class Segments:
         return self.measure
 
     @property
+    def points(self) -> np.ndarray:
+        """(facets, 2, 2): start and end."""
+        return np.stack([self.start, self.end], axis=1)
+
+    @property
     def degree(self) -> int:
         return self.nodes.shape[1] - 1
 
@@ -169,26 +174,33 @@ def segments(mesh: fe.Mesh, facets: np.ndarray, basis: fe.Basis, field_name: str
     return Segments(nodes, start, end, length, tangent, np.column_stack([tangent[:, 1], -tangent[:, 0]]))
 
 
+def normal_to(along: np.ndarray) -> np.ndarray:
+    """Γ_C's mean normal from its mean tangent (the tangent is the normal turned clockwise)."""
+    return np.array([-along[1], along[0]])
+
+
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
 
 
-def overlapping(lo_s, hi_s, lo_m, hi_m, margin: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """Pairs (slave, master) of intervals along Γ_C's mean tangent that overlap within ``margin``, in chunks of at
-    most CANDIDATES candidates: the masters sorted once, each slave's candidates a contiguous run found by bisection.
+def overlapping(lo_s, hi_s, lo_m, hi_m, margin) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Pairs (slave, master) of intervals along Γ_C's mean tangent that overlap within ``margin`` (one, or one per
+    slave), in chunks of at most CANDIDATES candidates: the masters sorted once, each slave's candidates a contiguous
+    run found by bisection.
 
     Chunked because the margin (twice the largest facet) takes nearly every pair on graded meshes: 3.6·10⁶ of
     2272 × 1759 facets at 2.8·10⁵ DOFs (bench two-body), and past 13 GB at 1.4·10⁶ DOFs, all at once."""
     order = np.argsort(lo_m)
-    first = np.searchsorted(lo_m[order], lo_s - (hi_m - lo_m).max() - margin)
-    counts = np.maximum(np.searchsorted(lo_m[order], hi_s + margin, side="right") - first, 0)
+    lo_s, hi_s = lo_s - margin, hi_s + margin
+    first = np.searchsorted(lo_m[order], lo_s - (hi_m - lo_m).max())
+    counts = np.maximum(np.searchsorted(lo_m[order], hi_s, side="right") - first, 0)
     bounds = np.unique(np.r_[0, np.searchsorted(np.cumsum(counts), np.arange(CANDIDATES, counts.sum(), CANDIDATES)),
                              lo_s.size])
     for begin, stop in itertools.pairwise(bounds):
         run = counts[begin:stop]
         slave = np.repeat(np.arange(begin, stop), run)
         master = order[np.repeat(first[begin:stop], run) + np.arange(run.sum()) - np.repeat(np.cumsum(run) - run, run)]
-        keep = (hi_m[master] >= lo_s[slave] - margin) & (lo_m[master] <= hi_s[slave] + margin)
+        keep = (hi_m[master] >= lo_s[slave]) & (lo_m[master] <= hi_s[slave])
         yield slave[keep], master[keep]
 
 
@@ -207,13 +219,16 @@ def clipped(slave: Segments, master: Segments, e: np.ndarray, f: np.ndarray) -> 
 def mortar(slave: Segments, master: Segments, along: np.ndarray, margin: float):
     """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a φ_b) and each slave facet's covered
     fraction: one Gauss rule on every intersection, exact for the product of the slave's dual and the master's
-    shape functions (degree 2 for P1/Q1, 4 for P2/Q2).
+    shape functions (degree 2 for P1/Q1, 4 for P2/Q2). Candidates are searched along Γ_C's mean tangent ``along``
+    within ``margin`` plus how far each slave facet's normal carries it across the gap (:func:`across`: at a curved
+    Γ_C's open ends more than any facet; without it the facets covered there changed with the mesh).
 
     Clipped by hand rather than by scikit-fem's ``skfem.supermeshing.intersect`` (measured, docs/bodies.md): that
     one intersects 1-D meshes of one common coordinate (no projection along each slave facet's normal, so no
     curved Γ_C), rounds the nodes to 10 decimals (the patch test then fails by 1.5e-7 at 10⁴ slave facets, 4e-16
     here) and finds elements by comparing all with all (3.4 s at 10⁴ slave facets, 73 ms here)."""
     ends = [np.column_stack([s.start @ along, s.end @ along]) for s in (slave, master)]
+    margin = margin + across(slave.points, slave.normal, master.points, normal_to(along))
     chunks = [clipped(slave, master, e, f)
               for e, f in overlapping(ends[0].min(1), ends[0].max(1), ends[1].min(1), ends[1].max(1), margin)]
     e, f, lo, hi, xi_start, xi_end, length = (np.concatenate(parts) for parts in zip(*chunks))
@@ -230,8 +245,9 @@ def mortar(slave: Segments, master: Segments, along: np.ndarray, margin: float):
 
 def node_to_segment(coords, normals, master: Segments, along: np.ndarray, margin: float):
     """Entries (slave node, master facet, its node b, φ_b(π(x_i))): x_i projected along n_i on the nearest
-    facing master facet; each node once at most."""
+    facing master facet; each node once at most (candidates as :func:`mortar` finds them)."""
     s = coords @ along
+    margin = margin + across(coords[:, None], normals, master.points, normal_to(along))
     ends = np.column_stack([master.start @ along, master.end @ along])
     chunks = [projected(coords, normals, master, i, f) for i, f in overlapping(s, s, ends.min(1), ends.max(1), margin)]
     i, f, eta, distance = (np.concatenate(parts) for parts in zip(*chunks))

@@ -120,13 +120,32 @@ def plane_axes(normal: np.ndarray) -> np.ndarray:
     return np.array([first, np.cross(normal, first)])
 
 
+def across(points: np.ndarray, normals: np.ndarray, master_points: np.ndarray, mean_normal: np.ndarray) -> np.ndarray:
+    """How far, seen along Γ_C's mean normal N, the projection of each slave facet (or node: ``points`` (n, corners,
+    d)) along its own normal ``normals`` can land from it on the master: a point x + d n_e lies |d| |n_e − (n_e·N) N|
+    aside, and |d| is at most |Δν| / (n_e·N), Δν the difference of the two points' heights along N (bounded by the
+    facet's and the master's ranges), and at most the diameter of both boundaries. Zero where n_e = N; across a wide
+    gap with tilted normals (a curved Γ_C's open ends) it is larger than any facet."""
+    heights, master_heights = points @ mean_normal, master_points @ mean_normal
+    depth = np.maximum(master_heights.max() - heights.min(axis=1), heights.max(axis=1) - master_heights.min())
+    both = np.concatenate([points.reshape(-1, points.shape[-1]), master_points.reshape(-1, points.shape[-1])])
+    diameter = np.linalg.norm(both.max(axis=0) - both.min(axis=0))
+    along = normals @ mean_normal
+    aside = np.linalg.norm(normals - np.outer(along, mean_normal), axis=1)
+    distance = np.full(along.shape, diameter)
+    np.divide(depth, along, out=distance, where=along * diameter > depth)  # |d| ≤ depth / (n_e·N) where that is less
+    return aside * distance
+
+
 def candidates(slave: Facets, master: Facets, mean_normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Facet pairs whose centroids, seen along Γ_C's mean normal, lie closer than their sizes (a KD-tree)."""
+    """Facet pairs whose centroids, seen along Γ_C's mean normal, lie closer than their sizes plus how far the slave
+    facet's normal carries it across the gap (:func:`across`; a KD-tree)."""
     axes = plane_axes(mean_normal)
     trees = [cKDTree(facets.points.mean(axis=1) @ axes.T) for facets in (slave, master)]
     reach = sum(np.linalg.norm(f.points - f.points.mean(axis=1, keepdims=True), axis=2).max() for f in (slave, master))
-    pairs = trees[0].sparse_distance_matrix(trees[1], reach, output_type="ndarray")
-    return pairs["i"].astype(int), pairs["j"].astype(int)
+    reach = reach + across(slave.points, slave.normal, master.points, mean_normal)
+    found = trees[1].query_ball_point(trees[0].data, reach)
+    return np.repeat(np.arange(len(found)), [len(j) for j in found]), np.concatenate([*found, []]).astype(int)
 
 
 def cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -251,8 +270,15 @@ def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
     """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a ψ_b) and each slave facet's covered
     fraction, as :func:`convexcontact.fem.mortar.mortar` in 2-D."""
     e, f = candidates(slave, master, mean_normal)
-    facing = (slave.normal[e] * master.normal[f]).sum(axis=1) < -FACING
-    e, f = e[facing], f[facing]
+    # facing, and the master facet's centroid projected on the slave's plane within both radii of the slave's (the
+    # projection only shortens): the candidates' windows are wide where the normals tilt (:func:`across`)
+    centre = [x.points.mean(axis=1) for x in (slave, master)]
+    radius = [np.linalg.norm(x.points - c[:, None], axis=2).max(axis=1) for x, c in zip((slave, master), centre)]
+    offset = centre[1][f] - centre[0][e]
+    aside = offset - (offset * slave.normal[e]).sum(axis=1)[:, None] * slave.normal[e]
+    keep = ((slave.normal[e] * master.normal[f]).sum(axis=1) < -FACING) & (
+        np.linalg.norm(aside, axis=1) <= (radius[0][e] + radius[1][f]) * (1 + 1e-9))
+    e, f = e[keep], f[keep]
     origin, frame = slave.points[e, 0], slave.frame[e]  # (n, 3), (n, 2, 3)
     flat = np.einsum("nkc,njc->nkj", slave.points[e] - origin[:, None], frame)  # slave vertices in its plane
     projected = np.einsum("nkc,njc->nkj", master.points[f] - origin[:, None], frame)
