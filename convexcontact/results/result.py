@@ -351,8 +351,8 @@ def effectivity(element: str, dim: int) -> float:
 UNVERIFIED = ("the error estimate is not verified: the Tresca slip bound holds {} nodes (closed, or open and tied "
               "across the gap) to the other body up to the end of the master's coverage, which moves with the mesh "
               "(slave nodes the master covers only partly are left out), so each mesh ties a different part of the "
-              "interface and the estimate misses the difference (two cylinders: the P2 estimate 0.74-0.98 of the "
-              "true error, the P1 bound 1.09-1.23; 1.07-1.41 with the tie inside the coverage; two P2 spheres "
+              "interface and the estimate misses the difference (two cylinders: the P2 and Q2 estimates 0.59-0.98 of "
+              "the true error, the P1 bound 1.09-1.23; 1.07-1.62 with the tie inside the coverage; two P2 spheres "
               "0.47-1.00): give the slip bound only where the bodies may touch, or a master that covers the whole "
               "slave face (docs/estimate.md, 'Tresca pairs tied across their gap')")
 """The warning of a Tresca pair tied up to its coverage's end (:attr:`Result.tied_at_coverage_end`)."""
