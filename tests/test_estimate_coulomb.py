@@ -156,3 +156,28 @@ def test_an_unsolved_tresca_pair_has_no_tied_nodes_and_warns_as_before():
     failed = dataclasses.replace(result, status="failed", contact=None)
     assert result.tied_at_coverage_end > 0 and failed.tied_at_coverage_end == 0
     assert not any(w.startswith("the error estimate is not verified") for w in failed.warnings)
+
+
+def test_a_coarse_3d_tresca_pair_warns_where_its_contact_zone_reaches_the_coverages_end():
+    """Two P2 spheres' caps (``cells=3``, moduli 1 and 3, 1,764 DOFs) with Tresca: the master covers 9 of the slave's
+    49 nodes, all closed, so the contact zone itself ends where the coverage does. With s = 0.005 everywhere a finer
+    mesh covers more and ties it across the gap: the calibrated residual reads 0.93 of the true error against the
+    next level (0.60 against 90,000 DOFs, docs/estimate.md, "The last cells") and the result warns, though no open
+    node is tied (main's rule counted 0). With s only where the caps touch (r < 0.15) the level solves the same
+    problem, its estimate reads 1.59 and it does not warn: the slip bound is zero at the left-out nodes."""
+    readings = []
+    for s in (0.005, lambda x, y, z: 0.005 * (x**2 + y**2 < 0.15**2)):
+        base = two_spheres(cells=3, moduli=(1.0, 3.0), law=cc.Tresca(slip_bound=s), element="P2")
+        finer = bodies_scene(tuple(dataclasses.replace(p, geometry=refined_uniformly(p.geometry, 1))
+                                   for p in base.body.parts), base.contact, dirichlet=list(base.dirichlet))
+        level, reference = cc.solve(base), cc.solve(finer)
+        u_ref = reference.displacement / reference.fem.scaling.displacement
+        error = true_errors([level], reference)[0] * np.sqrt(u_ref @ (reference.fem.K_full @ u_ref))
+        assert level.closed.all() and "40 of 49" in level.fem.warnings[0]
+        warned = any(w.startswith("the error estimate is not verified") for w in level.warnings)
+        readings.append((level.displacement, level.residual_estimate.eta / level.error_budget["calibration"] / error,
+                         level.tied_at_coverage_end, warned))
+    (u_all, everywhere, held, warned), (u_inside, inside, held_inside, warned_inside) = readings
+    np.testing.assert_allclose(u_all, u_inside, rtol=0, atol=1e-12 * np.abs(u_all).max())
+    assert everywhere < 1.0 and held > 0 and warned
+    assert inside >= 1.0 and held_inside == 0 and not warned_inside
