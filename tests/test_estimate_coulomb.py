@@ -163,8 +163,9 @@ def test_a_coarse_3d_tresca_pair_warns_where_its_contact_zone_reaches_the_covera
     49 nodes, all closed, so the contact zone itself ends where the coverage does. With s = 0.005 everywhere a finer
     mesh covers more and ties it across the gap: the calibrated residual reads 0.93 of the true error against the
     next level (0.60 against 90,000 DOFs, docs/estimate.md, "The last cells") and the result warns, though no open
-    node is tied (main's rule counted 0). With s only where the caps touch (r < 0.15) the level solves the same
-    problem, its estimate reads 1.59 and it does not warn: the slip bound is zero at the left-out nodes."""
+    node is tied (a rule counting open tied nodes only counted 0). With s only where the caps touch (r < 0.15) the
+    level solves the same problem, its estimate reads 1.59 and it does not warn: the slip bound is zero at the
+    left-out nodes."""
     readings = []
     for s in (0.005, lambda x, y, z: 0.005 * (x**2 + y**2 < 0.15**2)):
         base = two_spheres(cells=3, moduli=(1.0, 3.0), law=cc.Tresca(slip_bound=s), element="P2")
