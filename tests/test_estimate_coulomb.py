@@ -182,3 +182,34 @@ def test_a_coarse_3d_tresca_pair_warns_where_its_contact_zone_reaches_the_covera
     np.testing.assert_allclose(u_all, u_inside, rtol=0, atol=1e-12 * np.abs(u_all).max())
     assert everywhere < 1.0 and held > 0 and warned
     assert inside >= 1.0 and held_inside == 0 and not warned_inside
+
+
+def sliding(element: str, cols: int, k: int) -> cc.Scene:
+    """The coarse cylinders (equal bodies, approach 0.03), F = 0.6, the upper back moved 0.07 along x: gross sliding,
+    Q/(F P) = 1.02–1.05, every closed node slips."""
+    scene = coarse_cylinders(element, k, law=cc.Coulomb(friction=0.6), cols=cols)
+    return dataclasses.replace(scene, dirichlet=[cc.Dirichlet("upper.back", ux=0.07, uy=-0.015), scene.dirichlet[1]])
+
+
+@pytest.mark.parametrize("element, cols", [("P1", 16), ("P2", 8)])
+def test_the_estimates_of_a_sliding_pair_read_above_their_true_error(element, cols):
+    """A tangentially loaded pair sliding as a whole, levels 0 and 1 against level 3: the friction term is where it
+    matters in P2's residual (7 and 12 % of η²: the consistent-mass traction turns along the slip within cells inside
+    the zone, the largest at x = 0.67 a, and the large slip multiplies it), and the calibrated residual still reads 1–3
+    (measured 1.21, 1.26);
+    P1's bound keeps a friction term of round-off (every slip opposes its facet's traction) and reads above the error
+    (1.26, 1.25). Against a finer reference (level 5) the P2 reading falls to 1.00 at level 2 (docs/estimate.md)."""
+    runs = [cc.solve(sliding(element, cols, k)) for k in (0, 1, 3)]
+    u_ref = runs[-1].displacement / runs[-1].fem.scaling.displacement
+    errors = np.array(true_errors(runs[:-1], runs[-1])) * np.sqrt(u_ref @ (runs[-1].fem.K_full @ u_ref))
+    runs = runs[:-1]
+    assert all(r.summary()["n_slip"] > 0 and not np.any(r.contact.status == "stick") for r in runs)
+    if element == "P2":
+        estimates = [r.residual_estimate for r in runs]
+        assert all(e.terms["friction"] > 0.05 * e.eta**2 for e in estimates)
+        ratio = np.array([e.eta / EFFECTIVITY["P2"] for e in estimates]) / errors
+        assert np.all(1.0 <= ratio) and np.all(ratio <= 3.0)
+    else:
+        bounds = [r.equilibrated_bound for r in runs]
+        assert all(abs(b.terms["friction"]) < 1e-12 * b.eta**2 for b in bounds)
+        assert np.all(np.array([b.eta for b in bounds]) >= errors)

@@ -123,25 +123,45 @@ CAP_RADIUS = 1.57
 """The least radius whose sag at the corner, R − √(R² − 2), is at most :data:`CAP_SAG` (1.5611…, rounded up)."""
 
 
-def sphere_cap_mesh(cells: int, radius: float, upper: bool, grading: float = 12.0) -> fe.Mesh:
+def sphere_cap_mesh(cells: int, radius: float, upper: bool, grading: float = 12.0, half: bool = False) -> fe.Mesh:
     """A quarter [0, 1]² × [0, 1] (``upper``) or × [−1, 0] of P1 tetrahedra whose face on z = 0 is bent into the
     sphere of ``radius`` touching the origin; cells graded ``grading``:1 towards the origin. Boundaries as
-    :class:`~convexcontact.scene.description.Box`'s (the bent face is ``bottom`` above, ``top`` below)."""
+    :class:`~convexcontact.scene.description.Box`'s (the bent face is ``bottom`` above, ``top`` below). ``half``: the
+    quarter and its mirror image across x = 0, [−1, 1] × [0, 1] across; ``left`` is then the side on x = −1."""
     base = build_mesh(Body(Box(size=(1.0, 1.0, 1.0), cells=(cells,) * 3, origin=(0.0, 0.0, 0.0 if upper else -1.0),
                                grading=(grading,) * 3, refine=(0.0, 0.0, 0.0))))
     x, y, z = base.p
     sag = radius - np.sqrt(radius**2 - x**2 - y**2)
     sign = 1.0 if upper else -1.0
     bent = type(base)(np.vstack([x, y, z + sign * sag * (1 - sign * z)]), base.t)
-    return bent.with_boundaries({name: facet_index(bent, np.sort(base.facets[:, facets], axis=0))
-                                 for name, facets in base.boundaries.items()})
+    boundaries = {name: np.sort(base.facets[:, facets], axis=0) for name, facets in base.boundaries.items()}
+    if half:
+        bent, boundaries = mirrored_across_x(bent, boundaries)
+    return bent.with_boundaries({name: facet_index(bent, np.sort(vertices, axis=0)) for name, vertices in boundaries.items()})
+
+
+def mirrored_across_x(mesh: fe.Mesh, boundaries: dict) -> tuple[fe.Mesh, dict]:
+    """``mesh`` (on x ≥ 0, a side on x = 0 named ``left``) joined to its mirror image across x = 0, the nodes on the
+    plane shared; ``boundaries`` (name → facets' vertices) carried to both halves, the image's ``right`` becoming
+    ``left`` and the old ``left`` (now inside) dropped."""
+    plane = mesh.p[0] == 0.0  # the Box's side on x = 0, built exactly there
+    image = np.where(plane, np.arange(mesh.nvertices), mesh.nvertices + np.cumsum(~plane) - 1)
+    points = np.hstack([mesh.p, mesh.p[:, ~plane] * np.array([[-1.0], [1.0], [1.0]])])
+    joined = type(mesh)(points, np.hstack([mesh.t, image[mesh.t[[1, 0, 2, 3]]]]))  # two rows swapped: orientation kept
+    carried = {name: np.hstack([vertices, image[vertices]]) for name, vertices in boundaries.items()
+               if name not in ("left", "right")}
+    carried["right"], carried["left"] = boundaries["right"], image[boundaries["right"]]
+    return joined, carried
 
 
 def two_spheres(cells: int = 12, radii=(2.0, 2.0), moduli=(1.0, 1.0), nu=(0.3, 0.3), approach: float = 0.012,
-                law=None, master_cells: int | None = None, element: str = "P1") -> Scene:
+                law=None, master_cells: int | None = None, element: str = "P1", half: bool = False,
+                shift: float = 0.0) -> Scene:
     """A quarter of two spheres' caps (R₁ above, the slave; R₂ below) pressed together by ``approach`` (3-D
     Hertz), symmetry rollers on x = 0 (``left``) and y = 0 (``front``), the backs moved by half the approach; tetrahedra
-    of ``element`` P1 or P2. Radii from :data:`CAP_RADIUS` (below it the quarter's corner cells flatten)."""
+    of ``element`` P1 or P2. Radii from :data:`CAP_RADIUS` (below it the quarter's corner cells flatten). ``half``: the
+    half model (x from −1 to 1, rollers on y = 0 only, the backs' x held), which ``shift``, the upper back's x
+    displacement, needs (Cattaneo–Mindlin: a shear along x breaks the symmetry across x = 0)."""
     for name, value in (("cells", cells), ("master_cells", master_cells)):
         if value is not None:
             positive_integer(value, name, "give the cells along each side, e.g. 12")
@@ -157,13 +177,20 @@ def two_spheres(cells: int = 12, radii=(2.0, 2.0), moduli=(1.0, 1.0), nu=(0.3, 0
     finite(approach, "approach", "give the approach of the two backs, e.g. 0.012")
     if element not in ("P1", "P2"):
         raise SceneError("element", f"the caps are tetrahedra, {element!r:.30} is not their element", "element='P1' or 'P2'")
-    parts = [Part("upper", sphere_cap_mesh(cells, radii[0], True), Material(E=moduli[0], nu=nu[0]), element),
-             Part("lower", sphere_cap_mesh(master_cells or cells, radii[1], False), Material(E=moduli[1], nu=nu[1]),
-                  element)]
-    rollers = [Dirichlet(f"{part}.{side}", **{axis: 0.0}) for part in ("upper", "lower")
-               for side, axis in (("left", "ux"), ("front", "uy"))]
+    if half not in (True, False):
+        raise SceneError("half", f"expected True or False, got {half!r:.30}", "half=True for the half model")
+    if finite(shift, "shift", "give the upper back's x displacement, e.g. 0.0") != 0 and not half:
+        raise SceneError("shift", "a shear along x breaks the quarter's symmetry across x = 0 (its rollers hold x there)",
+                         "give half=True with a shift")
+    parts = [Part("upper", sphere_cap_mesh(cells, radii[0], True, half=half), Material(E=moduli[0], nu=nu[0]), element),
+             Part("lower", sphere_cap_mesh(master_cells or cells, radii[1], False, half=half),
+                  Material(E=moduli[1], nu=nu[1]), element)]
+    sides = (("front", "uy"),) if half else (("left", "ux"), ("front", "uy"))
+    rollers = [Dirichlet(f"{part}.{side}", **{axis: 0.0}) for part in ("upper", "lower") for side, axis in sides]
+    held = {"ux": shift} if half else {}  # the half model has no roller holding x: the backs do
     return bodies_scene(
         parts, Pair("upper.bottom", master="lower.top", law=law or Signorini()),
-        dirichlet=[Dirichlet("upper.top", uz=-approach / 2), Dirichlet("lower.bottom", uz=approach / 2), *rollers],
+        dirichlet=[Dirichlet("upper.top", uz=-approach / 2, **held),
+                   Dirichlet("lower.bottom", uz=approach / 2, **({"ux": 0.0} if half else {})), *rollers],
         name="two_spheres",
     )
