@@ -27,10 +27,10 @@ def graded_line(fine: float, height: float, normal: float) -> mortar.Segments:
 def test_graded_pair_is_clipped_in_chunks(monkeypatch):
     slave, master = graded_line(2e-4, 0.0, 1.0), graded_line(2.6e-4, 1e-3, -1.0)
     margin = 2.0 * max(slave.size.max(), master.size.max())
-    whole, covered_whole = mortar.mortar(slave, master, np.array([1.0, 0.0]), margin)
+    whole, covered_whole = mortar.mortar(slave, master, np.array([0.0, 1.0]), margin)
     monkeypatch.setattr(mortar, "CANDIDATES", 5_000)
     tracemalloc.start()
-    chunked, covered = mortar.mortar(slave, master, np.array([1.0, 0.0]), margin)
+    chunked, covered = mortar.mortar(slave, master, np.array([0.0, 1.0]), margin)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     # ~540 × 420 candidate pairs within the margin: 21 MB clipped at once (the search before), the entries ~0.5 MB
@@ -78,13 +78,13 @@ def test_a_tilted_slave_is_covered_across_a_wide_gap():
     (mortar and node-to-segment) and 3-D."""
     x = np.linspace(-0.5, 0.5, 21)
     slave, master = polyline(x, 1 + 0.6 * np.abs(x)), polyline(np.linspace(3, -3, 121), np.zeros(121))
-    along = np.array([-1.0, 0.0])  # the slave's mean normal (0, −1) turned clockwise, as the pair's trace takes it
-    entries, covered = mortar.mortar(slave, master, along, 2.0 * max(slave.size.max(), master.size.max()))
+    mean_normal = np.array([0.0, -1.0])  # the slave's
+    entries, covered = mortar.mortar(slave, master, mean_normal, 2.0 * max(slave.size.max(), master.size.max()))
     np.testing.assert_allclose(covered, 1.0, atol=1e-12)
     np.testing.assert_allclose(entries[-1].sum(), slave.measure.sum(), rtol=1e-12)
     nodes, _, _, normals = mortar.slave_nodes(slave)
     node, _, _, values = mortar.node_to_segment(np.column_stack([x, 1 + 0.6 * np.abs(x)])[nodes], normals, master,
-                                                along, 0.12)
+                                                mean_normal, 0.12)
     np.testing.assert_array_equal(np.unique(node), nodes)
     np.testing.assert_allclose(np.bincount(node, values), 1.0, rtol=1e-12)
     grid = np.linspace(-0.5, 0.5, 11)

@@ -139,13 +139,20 @@ def across(points: np.ndarray, normals: np.ndarray, master_points: np.ndarray, m
 
 def candidates(slave: Facets, master: Facets, mean_normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Facet pairs whose centroids, seen along Γ_C's mean normal, lie closer than their sizes plus how far the slave
-    facet's normal carries it across the gap (:func:`across`; a KD-tree)."""
+    facet's normal carries it across the gap (:func:`across`; a KD-tree), kept where the master facet's centroid,
+    projected on the slave's plane, lies within both facets' radii (the projection only shortens; the windows are
+    wide where the normals tilt)."""
+    centre = [facets.points.mean(axis=1) for facets in (slave, master)]
+    radius = [np.linalg.norm(facets.points - c[:, None], axis=2).max(axis=1) for facets, c in zip((slave, master), centre)]
     axes = plane_axes(mean_normal)
-    trees = [cKDTree(facets.points.mean(axis=1) @ axes.T) for facets in (slave, master)]
-    reach = sum(np.linalg.norm(f.points - f.points.mean(axis=1, keepdims=True), axis=2).max() for f in (slave, master))
-    reach = reach + across(slave.points, slave.normal, master.points, mean_normal)
+    trees = [cKDTree(c @ axes.T) for c in centre]
+    reach = radius[0].max() + radius[1].max() + across(slave.points, slave.normal, master.points, mean_normal)
     found = trees[1].query_ball_point(trees[0].data, reach)
-    return np.repeat(np.arange(len(found)), [len(j) for j in found]), np.concatenate([*found, []]).astype(int)
+    e, f = np.repeat(np.arange(len(found)), [len(j) for j in found]), np.concatenate([*found, []]).astype(int)
+    offset = centre[1][f] - centre[0][e]
+    aside = offset - (offset * slave.normal[e]).sum(axis=1)[:, None] * slave.normal[e]
+    near = np.linalg.norm(aside, axis=1) <= (radius[0][e] + radius[1][f]) * (1 + 1e-9)
+    return e[near], f[near]
 
 
 def cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -270,15 +277,8 @@ def mortar_3d(slave: Facets, master: Facets, mean_normal: np.ndarray):
     """Entries (slave facet, its node a, master facet, its node b, ∫φ*_a ψ_b) and each slave facet's covered
     fraction, as :func:`convexcontact.fem.mortar.mortar` in 2-D."""
     e, f = candidates(slave, master, mean_normal)
-    # facing, and the master facet's centroid projected on the slave's plane within both radii of the slave's (the
-    # projection only shortens): the candidates' windows are wide where the normals tilt (:func:`across`)
-    centre = [x.points.mean(axis=1) for x in (slave, master)]
-    radius = [np.linalg.norm(x.points - c[:, None], axis=2).max(axis=1) for x, c in zip((slave, master), centre)]
-    offset = centre[1][f] - centre[0][e]
-    aside = offset - (offset * slave.normal[e]).sum(axis=1)[:, None] * slave.normal[e]
-    keep = ((slave.normal[e] * master.normal[f]).sum(axis=1) < -FACING) & (
-        np.linalg.norm(aside, axis=1) <= (radius[0][e] + radius[1][f]) * (1 + 1e-9))
-    e, f = e[keep], f[keep]
+    facing = (slave.normal[e] * master.normal[f]).sum(axis=1) < -FACING
+    e, f = e[facing], f[facing]
     origin, frame = slave.points[e, 0], slave.frame[e]  # (n, 3), (n, 2, 3)
     flat = np.einsum("nkc,njc->nkj", slave.points[e] - origin[:, None], frame)  # slave vertices in its plane
     projected = np.einsum("nkc,njc->nkj", master.points[f] - origin[:, None], frame)

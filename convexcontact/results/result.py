@@ -214,19 +214,19 @@ class ContactResult:
     def warnings(self) -> list[str]:
         """The model's warnings, one naming a remedy when the estimated discretization error is large, and one where
         the estimate is not verified (a Tresca pair: :data:`UNVERIFIED`)."""
-        budget = self.error_budget
-        unverified = [UNVERIFIED.format(tied)] if budget is not None and (tied := self.tied_at_coverage_end) else []
-        if budget is None or budget["discretization"] is None or budget["discretization"] <= LARGE_ERROR:
-            return [*self.fem.warnings, *unverified]
-        element = self.scene.body.element
-        if element in ("P1", "Q1"):
-            remedy = "refine the mesh, or use P2/Q2 elements if ν is near 0.5 (volumetric locking of P1/Q1)"
-        else:
-            remedy = "refine the mesh (for ν near 0.5 the residual estimate overstates the error: docs/estimate.md)"
-        share = budget["discretization"]
-        return [*self.fem.warnings,
-                f"estimated discretization error {share:.0%} of the energy norm (over {LARGE_ERROR:.0%}): {remedy}",
-                *unverified]
+        budget, warnings = self.error_budget, list(self.fem.warnings)
+        if budget is None:
+            return warnings
+        if budget["discretization"] is not None and budget["discretization"] > LARGE_ERROR:
+            if self.scene.body.element in ("P1", "Q1"):
+                remedy = "refine the mesh, or use P2/Q2 elements if ν is near 0.5 (volumetric locking of P1/Q1)"
+            else:
+                remedy = "refine the mesh (for ν near 0.5 the residual estimate overstates the error: docs/estimate.md)"
+            warnings.append(f"estimated discretization error {budget['discretization']:.0%} of the energy norm "
+                            f"(over {LARGE_ERROR:.0%}): {remedy}")
+        if tied := self.tied_at_coverage_end:
+            warnings.append(UNVERIFIED.format(tied))
+        return warnings
 
     @property
     def tied_at_coverage_end(self) -> int:
@@ -238,7 +238,7 @@ class ContactResult:
         if not self.solved or not isinstance(self.scene.contact.law, Tresca) or self.contact.master_forces is None:
             return 0  # an unsolved result has no contact nodes
         force = np.linalg.norm(self.contact.forces, axis=1)
-        held = force > TIED * force.max(initial=0.0)
+        holding = force > TIED * force.max(initial=0.0)
         trace = self.fem.contact
         vertices = self.fem.mesh.facets[:, trace.facets]  # the slave facets' vertices: every row's, and the left-out
         kept = trace.dofs[:, 0] // self.fem.dim
@@ -250,7 +250,7 @@ class ContactResult:
             tying = left_out[evaluate_field(bound, "contact.slip_bound", self.fem.mesh.p[:, left_out].T
                                             * self.fem.scaling.length) > 0]
         at_end = np.unique(vertices[:, np.isin(vertices, tying).any(axis=0)])
-        return int(np.count_nonzero(held & np.isin(kept, at_end)))
+        return int(np.count_nonzero(holding & np.isin(kept, at_end)))
 
     def cell_fields(self) -> dict[str, np.ndarray]:
         """The per-cell fields of solution.vtu (user units): element stresses and von Mises."""
