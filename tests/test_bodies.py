@@ -414,7 +414,9 @@ def test_the_half_spheres_mirror_the_quarter():
     assert half.boundaries["left"].size == half.boundaries["right"].size == quarter.boundaries["right"].size
     assert half.p[0, half.facets[:, half.boundaries["left"]]].max() == -1.0
     assert half.boundaries["bottom"].size == 2 * quarter.boundaries["bottom"].size
-    for arguments, field in (({"shift": 0.001}, "shift"), ({"half": "yes"}, "half")):
+    for arguments, field in (({"shift": 0.001}, "shift"), ({"half": "yes"}, "half"), ({"half": None}, "half"),
+                             ({"half": True, "shift": float("nan")}, "shift"), ({"half": True, "shift": "a"}, "shift"),
+                             ({"half": True, "shift": [0.1, 0.2]}, "shift")):
         with pytest.raises(cc.SceneError) as error:
             two_spheres(4, **arguments)
         assert error.value.field == field
