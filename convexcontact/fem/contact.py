@@ -241,6 +241,8 @@ def held_by_symmetry(frame: list[np.ndarray], planes: np.ndarray) -> np.ndarray:
 def emptied(rows: sp.csr_matrix, held: np.ndarray) -> sp.csr_matrix:
     """``rows`` with the ``held`` ones exactly empty (no stored zeros: :func:`~convexcontact.formulations.primal.carrying`
     reads an empty row's multiplier as 0)."""
+    if not held.any():
+        return rows
     kept = sp.csr_matrix(sp.diags((~held).astype(float)) @ rows)
     kept.eliminate_zeros()
     return kept
