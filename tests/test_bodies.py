@@ -401,7 +401,12 @@ def test_cattaneo_mindlin_two_spheres(shift, expected_load):
     assert load == pytest.approx(expected_load, abs=0.01)
     assert c_over_a == pytest.approx((1 - load) ** (1 / 3), abs=0.025)
     assert {"stick", "slip"} <= set(result.contact.status)
-    assert not result.contact.friction[np.abs(result.contact.coords[:, 1]) < 1e-12, 1].any()  # along y on y = 0
+    plane = np.abs(result.contact.coords[:, 1]) < 1e-12
+    assert not result.contact.friction[plane, 1].any()  # along y on y = 0, so a slipping node's x part is the disc's
+    slipping = plane & (result.contact.status == "slip")  # radius (it was 0.9995 F p: the y part took the rest)
+    assert slipping.any()
+    assert np.abs(result.contact.friction[slipping, 0]) == pytest.approx(friction * result.contact.pressure[slipping],
+                                                                          rel=1e-9)
 
 
 def test_the_half_spheres_mirror_the_quarter():
