@@ -381,8 +381,9 @@ def test_hertz_two_spheres():
 
 def cattaneo_mindlin_sphere(result, friction: float) -> tuple[float, float]:
     """Q/(F P) from the resultants, and c/a from the traction at the axis: inside the stick disc Cattaneo–Mindlin's
-    traction is q = F p (1 − sqrt((c² − r²)/(a² − r²))), so q/(F p) = 1 − c/a at r = 0. Only its x part: the axis node
-    lies on y = 0, where both bodies' rollers hold u_y and the friction's y part is the dual's free choice."""
+    traction is q = F p (1 − sqrt((c² − r²)/(a² − r²))), so q/(F p) = 1 − c/a at r = 0. Its x part: the axis node lies
+    on the symmetry plane y = 0, where the friction has no y part (its row is empty: docs/bodies.md, *Symmetry
+    planes*; it was the dual's free choice, up to F p)."""
     contact, (shear, _, force) = result.contact, result.contact_force
     centre = np.argmin(np.linalg.norm(contact.coords[:, :2], axis=1))
     return abs(shear) / (friction * force), 1 - abs(contact.friction[centre, 0]) / (friction * contact.pressure[centre])
@@ -400,6 +401,12 @@ def test_cattaneo_mindlin_two_spheres(shift, expected_load):
     assert load == pytest.approx(expected_load, abs=0.01)
     assert c_over_a == pytest.approx((1 - load) ** (1 / 3), abs=0.025)
     assert {"stick", "slip"} <= set(result.contact.status)
+    plane = np.abs(result.contact.coords[:, 1]) < 1e-12
+    assert not result.contact.friction[plane, 1].any()  # along y on y = 0, so a slipping node's x part is the disc's
+    slipping = plane & (result.contact.status == "slip")  # radius (it was 0.9995 F p: the y part took the rest)
+    assert slipping.any()
+    assert np.abs(result.contact.friction[slipping, 0]) == pytest.approx(friction * result.contact.pressure[slipping],
+                                                                          rel=1e-9)
 
 
 def test_the_half_spheres_mirror_the_quarter():

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from former_trace import without_symmetry_planes
 
 import convexcontact as cc
 from convexcontact import solvers
@@ -172,7 +173,10 @@ def test_a_crawl_at_the_inert_sets_rounding_switches_their_metric(monkeypatch):
     Newton on the Coulomb problem lowered that residual by under a tenth a step from 7.6e-13 for 30 steps (max_iter:
     "inaccurate", certificate 1.9e-12); at a crawl at their rounding's level (FLOOR) the inert sets are measured with
     the least step length, as at a stall, and Newton converges. With HELD off: the axis node's step length from its Schur
-    complement holds its disc by itself (9 steps with the switch or without it), so it would hide the crawl."""
+    complement holds its disc by itself (9 steps with the switch or without it), so it would hide the crawl. All on the
+    former trace: with the symmetry planes' rows empty the axis node has no disc, and the solve takes 5 Newton steps
+    (1.1e-13) with HELD and FLOOR on or off."""
+    without_symmetry_planes(monkeypatch)
     monkeypatch.setattr(newton_cg, "HELD", 0.0)
     result = cc.solve(stiff_on_soft_spheres())
     steps = result.extra["history"][0]["inner_iterations"]
@@ -194,7 +198,8 @@ def soft_on_stiff_p2_spheres(law) -> cc.Scene:
 def test_a_map_that_cannot_reach_its_tol_says_so(monkeypatch):
     """Two P2 caps whose axis node's friction law held to 5.3e-9 only (before newton_cg.HELD, off here): the map stops
     at 10 × that (NOISE) whatever tol asks, and the result says so instead of a silent "solved"; a tol it reaches
-    leaves no message."""
+    leaves no message. On the former trace: with the symmetry planes' rows empty the map reaches 1e-11 (no message)."""
+    without_symmetry_planes(monkeypatch)
     monkeypatch.setattr(newton_cg, "HELD", 0.0)
     result = cc.solve(soft_on_stiff_p2_spheres(Coulomb(friction=0.1, tol=1e-11)))
     stop = result.extra["picard"]["stop_change"]
@@ -207,12 +212,15 @@ def test_the_axis_node_s_disc_is_held_on_its_sphere_by_its_slip(monkeypatch):
     """The same caps: the axis node's tangential rows are its normal row times the normal's tilt, its disc acts on
     nothing and its slip (set by the other nodes) puts it on its sphere; with the step length of its Schur complement
     (newton_cg.HELD) Newton's Coulomb solve certifies it to 1e-10 on both paths, where 0.1 / P̃_jj left it inside its
-    disc, slipping: 5.3e-9 (friction law)."""
+    disc, slipping: 5.3e-9 (friction law) — on the former trace (13 Newton steps on both paths). With the symmetry planes'
+    rows empty the disc is gone: 5 and 4 steps, and 1.8e-16 with HELD off."""
     scene = soft_on_stiff_p2_spheres(Coulomb(friction=0.1))
     for result in (cc.solve(scene), cc.prepare(scene, "dual-matrix-free").solve()):
         assert result.status == "solved" and result.extra["history"][0]["coulomb_newton"]
         assert result.certificate.worst <= 1e-10
     monkeypatch.setattr(newton_cg, "HELD", 0.0)
+    assert cc.solve(scene).certificate.worst <= 1e-10
+    without_symmetry_planes(monkeypatch)
     assert cc.solve(scene).certificate.residuals["friction_law"] > 1e-10
 
 

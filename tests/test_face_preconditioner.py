@@ -85,11 +85,13 @@ def signorini(shape, dim, size, restricted, monkeypatch):
 def test_signorini_faces_exact_where_the_restriction_costs_more(monkeypatch):
     """The 2-D pair (2·10⁴ DOFs): a refactorization costs ~8 products, the restriction's first system more CG
     iterations than that, so the session switches: fewer products (and Newton steps no more). The 3-D pair (10⁴
-    DOFs): a refactorization costs ~37 products, more than any system's CG, so nothing changes."""
+    DOFs): a refactorization costs ~19 products (20.5 before the symmetry planes' 20 rows were emptied: the
+    approximation's factor is smaller without them), more than any of its 3 systems' CG (29 iterations in all), so
+    nothing changes."""
     before, _ = signorini("two-body", 2, 2e4, True, monkeypatch)
     after, cost = signorini("two-body", 2, 2e4, False, monkeypatch)
     assert 1 < cost < 20 and after["products"] < before["products"]
     assert sum(after["steps"].values()) <= sum(before["steps"].values())
     before, _ = signorini("two-body", 3, 1e4, True, monkeypatch)
     after, cost = signorini("two-body", 3, 1e4, False, monkeypatch)
-    assert cost > 20 and after["products"] == before["products"] and after["factorizations"] == 0
+    assert cost > 15 and after["products"] == before["products"] and after["factorizations"] == 0

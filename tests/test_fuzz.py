@@ -14,6 +14,7 @@ import itertools
 
 import numpy as np
 import pytest
+from former_trace import without_symmetry_planes
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
@@ -192,13 +193,11 @@ def test_random_pairs_are_solved_alike_by_auto_and_the_matrix_free_dual(scene):
     assert np.abs(a.displacement - b.displacement).max() <= allowed * scale
 
 
-@pytest.mark.xfail(strict=True, reason="open (issue 25): the long profile's find of 2026-11-27, newton-cg at max_iter")
 def test_the_long_profile_s_p2_coulomb_pair_on_the_matrix_free_dual():
-    """The long profile's find of 2026-11-27 (it fails on the session's start tree too): two equal P2 caps (5 cells,
-    radii 5), ν 0.026 above and 0.28 below (the normal load shears the interface), Coulomb F = 0.1. ``auto`` (the
-    dense dual, 7,260 DOFs) certifies it at 1e-14 in about 1 s; the matrix-free dual, forced, stops at max_iter after
-    ~20 s (`failed`, a clear message, no answer). Partly covered rows' damping (branch ``partial3``) does not fix it.
-    Strict: when it passes, drop the mark."""
+    """The long profile's find of 2026-11-27: two equal P2 caps (5 cells, radii 5), ν 0.026 above and 0.28 below (the
+    normal load shears the interface), Coulomb F = 0.1. ``auto`` (the dense dual, 7,260 DOFs) certified it at 1e-14;
+    the matrix-free dual, forced, stopped at max_iter after ~20 s (`failed`, 6.7e-4) until the symmetry planes' rows
+    were emptied (fem/contact.py, ``symmetry_planes``): now solved, 1.4e-14, in about 1.5 s."""
     scene = cc.bodies_library.two_spheres(cells=5, radii=(5.0, 5.0), moduli=(1.0, 1.0), nu=(0.0264750117657029, 0.28125),
                                           approach=0.005623413251903491, law=cc.Coulomb(friction=0.1), element="P2")
     result = cc.prepare(scene, "dual-matrix-free").solve()
@@ -218,13 +217,17 @@ def test_the_long_profile_s_p2_pairs_are_certified_on_both_paths(master_modulus,
     """A stiff slave on a soft master: ``auto``'s dense dual sat at a natural residual of 1.4e-5 for 90 segment steps
     (max_iter) and Clarabel's fallback was certified to 2.9e-7; on a stiffer master the matrix-free dual failed
     (8.6e-4, 28 s). Both at the axis node's ball, whose step length was 6·10⁵ × the median (STEP_SPREAD caps it at
-    10³ ×): both paths certified now; with the full spread the first fails again."""
+    10³ ×). With the symmetry planes' rows empty (the axis node's ball with them) both paths are certified with the
+    full spread and HELD off as well (2.8e-13 and 8.6e-15; 1.3e-13 and 7.5e-15); on the former trace (its rows left as
+    they were) the first fails again so (2.9e-7)."""
     scene = long_profile_pair(master_modulus, slip_bound)
     for result in (cc.solve(scene), cc.prepare(scene, "dual-matrix-free").solve()):
         assert result.status == "solved" and result.certificate.worst <= 1e-10
     if master_modulus < 1:  # HELD off too: the axis disc's Schur step length solves it under the full spread
         monkeypatch.setattr(cc.solvers.newton_cg, "STEP_SPREAD", np.inf)
         monkeypatch.setattr(cc.solvers.newton_cg, "HELD", 0.0)
+        assert cc.solve(scene).certificate.worst <= 1e-10
+        without_symmetry_planes(monkeypatch)
         assert cc.solve(scene).certificate.worst > 1e-10
 
 
@@ -241,12 +244,15 @@ def test_the_long_profile_s_tresca_p1_pair_is_certified(monkeypatch):
     """The long profile's find of 2026-11-27: two P1 caps of 6 cells, radii 5, Tresca s = 0.1; `auto`'s newton-cg said
     solved (natural residual 5e-13) at a certificate of 2.75e-10: the axis disc at 0.9997 of its radius, its slip along
     λ_T, its step length capped (STEP_SPREAD). With its Schur complement's step length (newton_cg.HELD) it is certified;
-    with HELD = 0 it is not."""
+    with HELD = 0 it is not (2.8e-10) — on the former trace: with the symmetry planes' rows empty the axis disc is
+    gone, and HELD = 0 is certified too (5.1e-12 either way)."""
     scene = cc.bodies_library.two_spheres(cells=6, radii=(5.0, 5.0), moduli=(1.0, 1.0), nu=(0.0, 0.0), approach=0.001,
                                           law=cc.Tresca(slip_bound=0.1), master_cells=6)
     result = cc.solve(scene)
     assert result.status == "solved" and result.certificate.worst <= 1e-10
     monkeypatch.setattr(cc.solvers.newton_cg, "HELD", 0.0)
+    assert cc.solve(scene).certificate.worst <= 1e-10
+    without_symmetry_planes(monkeypatch)
     assert cc.solve(scene).certificate.worst > 1e-10
 
 

@@ -70,6 +70,7 @@ class ContactTrace:
     bitangents: np.ndarray | None = None  # (m, 3) in 3-D
     points: ContactPoints | None = None  # Gauss-point non-penetration only
     multiplier_transform: sp.csr_matrix | None = None  # ψ̃ = T ψ of weak rows (P2 tetrahedra)
+    symmetric: np.ndarray | None = None  # rows of T held by a symmetry plane, left empty (:func:`symmetry_planes`)
 
     def in_displacement_units(self, scale: float) -> ContactTrace:
         """This trace with displacements measured in units ``scale`` times as large: gaps, offsets and the
@@ -179,6 +180,72 @@ def axis_offset(obstacle, coords: np.ndarray, coordinate: np.ndarray, mean_norma
 def axis_distance(offset: np.ndarray, mean_tangent: np.ndarray) -> np.ndarray:
     """r from :func:`axis_offset`: signed along the mean tangent in 2-D, the distance in 3-D."""
     return offset @ mean_tangent if offset.shape[1] == 2 else np.linalg.norm(offset, axis=1)
+
+
+PLANE = 1e-9
+"""Distance, relative to the mesh's size, within which a point lies on a coordinate plane."""
+
+TILT = np.sqrt(0.5)
+"""The most a node's normal may lean out of a symmetry plane (|n·e|, 45°) for the node to be treated as on it."""
+
+
+def symmetry_planes(mesh: fe.Mesh, basis: fe.Basis, dofs: np.ndarray, normals: np.ndarray, free: np.ndarray,
+                    prescribed: np.ndarray) -> np.ndarray:
+    """(m, d) mask: contact node i (``dofs``, its full DOFs) lies on a mirror-symmetry plane normal to axis e_a.
+
+    A quarter or half model's roller stands for the mirror image beyond it, where n_i and the friction along e_a are
+    what the full model's symmetry makes them: n_i in the plane, no friction along e_a (u·e_a is odd across the
+    plane, the shape functions of a node on it even). The rule, conservative (a roller that is no symmetry keeps its
+    rows as they are):
+
+    - the plane x_a = c bounds the whole mesh (every body lies on one side: c is the mesh's least or largest x_a) and
+      holds a boundary facet of it (a face, not a corner or an edge touching it);
+    - every node of the mesh on the plane holds u_a = 0: a roller over all of it, so on a pair the master's nodes
+      there too (a master free along e_a there is moved by the friction along e_a, which the full model then has);
+    - node i lies on it, holds u_a = 0 and has a free component (a clamped node's rows are empty anyway), and its
+      normal leans at most :data:`TILT` out of the plane.
+
+    A rigid obstacle must be symmetric about the plane too: :func:`contact_trace` checks its gap.
+    """
+    dim = mesh.dim()
+    held = prescribed == 0.0
+    held[free] = False
+    tolerance = PLANE * np.ptp(mesh.p, axis=1).max()
+    boundary = mesh.p[:, mesh.facets[:, mesh.boundary_facets()]]  # (d, vertices, facets)
+    coords = basis.doflocs[:, dofs[:, 0]].T
+    candidates = ~held[dofs].all(axis=1)[:, None] & held[dofs] & (np.abs(normals) <= TILT)
+    planes = np.zeros(dofs.shape, bool)
+    for a in range(dim):
+        located = basis.doflocs[a, a::dim]  # component a's DOFs are a, a + d, … (scikit-fem interleaves them)
+        for c in np.unique([located.min(), located.max()]):
+            on = np.abs(located - c) <= tolerance
+            if held[a::dim][on].all() and (np.abs(boundary[a] - c) <= tolerance).all(axis=0).any():
+                planes[:, a] |= candidates[:, a] & (np.abs(coords[:, a] - c) <= tolerance)
+    return planes
+
+
+def in_plane(normals: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """The normals with their components along the symmetry planes' normals dropped: the full model's normal at a
+    node on its mirror plane (n_i ∝ ∫ψ_i n over both sides, the images' e_a-components cancelling)."""
+    kept = np.where(planes, 0.0, normals)
+    return kept / np.linalg.norm(kept, axis=1, keepdims=True)
+
+
+def held_by_symmetry(frame: list[np.ndarray], planes: np.ndarray) -> np.ndarray:
+    """Mask of T's rows (component-major) along a symmetry plane's normal: with the normal in the plane, one frame
+    vector of a node on it is ±e_a (:func:`tangent_frame` keeps exact zeros), both on two planes (3-D) and the only
+    one in 2-D."""
+    return np.concatenate([(planes & (np.abs(t) > TILT)).any(axis=1) for t in frame])
+
+
+def emptied(rows: sp.csr_matrix, held: np.ndarray) -> sp.csr_matrix:
+    """``rows`` with the ``held`` ones exactly empty (no stored zeros: :func:`~convexcontact.formulations.primal.carrying`
+    reads an empty row's multiplier as 0)."""
+    if not held.any():
+        return rows
+    kept = sp.csr_matrix(sp.diags((~held).astype(float)) @ rows)
+    kept.eliminate_zeros()
+    return kept
 
 
 @dataclass
@@ -317,6 +384,27 @@ def under_punch(contact: Contact, facets: np.ndarray, mesh: fe.Mesh, basis: fe.B
     return kept
 
 
+def symmetric_obstacle(obstacle, coords: np.ndarray, gap: np.ndarray, planes: np.ndarray, scaling: Scaling,
+                       mean_normal: np.ndarray, mean_tangent: np.ndarray) -> np.ndarray:
+    """``planes`` (:func:`symmetry_planes`) where they mirror the rigid obstacle too: its gap at the mirror image of
+    every node is the node's, and it moves only along the plane (force control along Γ_C's mean normal, no
+    tangential force)."""
+    kept = np.zeros_like(planes)
+    if obstacle.tangential_force is not None:
+        return kept
+    for a in np.flatnonzero(planes.any(axis=0)):
+        if obstacle.force_controlled and abs(mean_normal[a]) > PLANE:
+            continue
+        for c in np.unique(coords[planes[:, a], a]):  # nodes on one plane share c: symmetry_planes reads the mesh's
+            image = coords.copy()
+            image[:, a] = 2.0 * c - coords[:, a]
+            mirrored, _ = obstacle_gap(obstacle, image * scaling.length, image @ mean_tangent * scaling.length,
+                                       mean_normal, mean_tangent)
+            if np.allclose(mirrored / scaling.displacement, gap, rtol=PLANE, atol=PLANE * np.abs(gap).max()):
+                kept[:, a] |= planes[:, a] & (coords[:, a] == c)
+    return kept
+
+
 def contact_trace(
     contact: Contact, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, free: np.ndarray, prescribed: np.ndarray
 ) -> ContactTrace:
@@ -334,6 +422,9 @@ def contact_trace(
                                          mean_normal, mean_tangent)
     gap = gap / scaling.displacement
     normals = normals if obstacle_normals is None else obstacle_normals
+    planes = symmetry_planes(mesh, basis, dofs, normals, free, prescribed)
+    planes = symmetric_obstacle(contact.obstacle, coords, gap, planes, scaling, mean_normal, mean_tangent)
+    normals = in_plane(normals, planes)
     points = None
     if getattr(contact.law, "non_penetration", None) == "gauss":
         if contact.law.order is not None:  # before the rule is built: its size grows with the order
@@ -346,7 +437,8 @@ def contact_trace(
     tangents, bitangents, _ = tangent_frame(normals, weights)
     frame = [tangents] if bitangents is None else [tangents, bitangents]
     N_full = _rows(normals, dofs, basis.N)
-    T_full = sp.vstack([_rows(t, dofs, basis.N) for t in frame]).tocsr()
+    symmetric = held_by_symmetry(frame, planes)
+    T_full = emptied(sp.vstack([_rows(t, dofs, basis.N) for t in frame]).tocsr(), symmetric)
 
     coupling = normals @ mean_normal if obstacle.force_controlled else None
     tangential = None
@@ -377,4 +469,5 @@ def contact_trace(
         obstacle_tangential_force=(obstacle.tangential_force or 0.0) / scaling.force,
         bitangents=bitangents,
         points=points,
+        symmetric=symmetric,
     )

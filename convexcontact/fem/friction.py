@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 import skfem as fe
 
-from .contact import ContactTrace, gauss_interpolation
+from .contact import ContactTrace, emptied, gauss_interpolation
 
 
 @dataclass
@@ -85,8 +85,11 @@ def friction_points(
     coupling = None if contact.tangential_coupling is None else weighting @ contact.tangential_coupling
     components = contact.dim - 1
     weighting = sp.block_diag([weighting] * components, format="csr")  # the same weights for each tangent
+    R = sp.csr_matrix(weighting @ contact.T)
+    if quadrature != "gauss" and contact.symmetric is not None:  # weak rows mix the neighbours' T: empty them too
+        R = emptied(R, contact.symmetric.reshape(components, -1)[:, slice(None) if nodes is None else nodes].ravel())
     return FrictionPoints(
-        R=sp.csr_matrix(weighting @ contact.T),
+        R=R,
         offset=weighting @ contact.tangent_offset,
         weights=weights,
         interpolation=sp.csr_matrix(G),

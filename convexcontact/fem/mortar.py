@@ -35,7 +35,16 @@ import skfem as fe
 from ..scene.bodies import Pair, Pairs
 from ..scene.description import Contact, SceneError
 from ..scene.meshing import check_boundary
-from .contact import ContactTrace, contact_trace, multiplier_transform, tangent_frame
+from .contact import (
+    ContactTrace,
+    contact_trace,
+    emptied,
+    held_by_symmetry,
+    in_plane,
+    multiplier_transform,
+    symmetry_planes,
+    tangent_frame,
+)
 from .mortar3d import Facets, across, dual_coefficients, facets_3d, gauss, lagrange, mortar_3d
 from .scaling import Scaling
 
@@ -102,7 +111,7 @@ def stack(traces: list[PairTrace]) -> PairTrace:
     return PairTrace(
         **{name: joined(name) for name in arrays}, obstacle_coupling=None, obstacle_force=0.0,
         bitangents=None if traces[0].bitangents is None else joined("bitangents"),
-        tangent_offset=by_component("tangent_offset", np.concatenate),
+        tangent_offset=by_component("tangent_offset", np.concatenate), symmetric=by_component("symmetric", np.concatenate),
         **{name: sp.block_diag([getattr(t, name) for t in traces], format="csr") for name in ("mass", "transfer")},
         **{name: sp.vstack([getattr(t, name) for t in traces]).tocsr() for name in ("N", "N_full")},
         **{name: by_component(name, lambda blocks: sp.vstack(blocks).tocsr()) for name in ("T", "T_full")},
@@ -349,6 +358,9 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
         master = facets_3d(mesh, check_boundary(mesh, pair.master, "contact.master"), "contact.master", basis)
     nodes, local, weights, normals = slave_nodes(slave)
     coords = basis.doflocs[:, dim * nodes].T
+    all_dofs = dim * nodes[:, None] + np.arange(dim)
+    planes = symmetry_planes(mesh, basis, all_dofs, normals, free, prescribed)
+    normals = in_plane(normals, planes)  # before the transfer: node-to-segment projects along them
     transfer, masters, ok = transfer_matrix(pair, slave, master, local, weights, normals, coords)
     # the slave's coefficients in its multipliers' basis (P2 facets in 3-D; the identity else), on the kept rows;
     # an edge node's row holds its vertices too, so it is kept only with them: the forces its multiplier puts on
@@ -364,14 +376,15 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
     left_out = (f"{np.count_nonzero(~ok)} of {ok.size} nodes of {pair.boundary!r} have no master facet under their "
                 "whole support: they are left out of the contact (make the larger boundary the master)")
     transformed = sp.coo_matrix(transformed[ok])
-    all_dofs = dim * nodes[:, None] + np.arange(dim)
     transfer, normals, weights, coords = sp.coo_matrix(transfer[ok]), normals[ok], weights[ok], coords[ok]
     dofs, master_dofs = all_dofs[ok], dim * masters[:, None] + np.arange(dim)
     master_coords = basis.doflocs[:, master_dofs[:, 0]].T
     tangents, bitangents, mean_tangent = tangent_frame(normals, weights)
     N_full = relative_rows(normals, all_dofs, transfer, master_dofs, basis.N, transformed)
     frame = [tangents] if bitangents is None else [tangents, bitangents]
-    T_full = sp.vstack([relative_rows(t, all_dofs, transfer, master_dofs, basis.N, transformed) for t in frame]).tocsr()
+    symmetric = held_by_symmetry(frame, planes[ok])  # the master's columns too: the full model's images cancel them
+    T_full = emptied(sp.vstack([relative_rows(t, all_dofs, transfer, master_dofs, basis.N, transformed)
+                                for t in frame]).tocsr(), symmetric)
     gap = ((transfer @ master_coords - transformed @ basis.doflocs[:, all_dofs[:, 0]].T) * normals).sum(axis=1)
     if gap.min() < -max(slave.size.max(), master.size.max()):
         raise SceneError("parts", f"the bodies overlap: {pair.boundary!r} lies up to {-gap.min() * scaling.length:.3g} "
@@ -385,7 +398,7 @@ def pair_trace(pair: Pair, mesh: fe.Mesh, basis: fe.Basis, scaling: Scaling, fre
         gap=gap * scaling.length / scaling.displacement, obstacle_coupling=None, obstacle_force=0.0,
         master_dofs=master_dofs, master_coords=master_coords, transfer=transfer.tocsr(), N_full=N_full,
         T_full=T_full, warnings=() if ok.all() else (left_out,), pieces=((slice(None), dofs, master_dofs),),
-        bitangents=bitangents,
+        bitangents=bitangents, symmetric=symmetric,
     )
 
 
@@ -397,12 +410,13 @@ def obstacle_piece(contact: Contact, mesh: fe.Mesh, basis: fe.Basis, scaling: Sc
     no_master = sp.coo_matrix((trace.m, 0))
     frame = [trace.tangents] if trace.bitangents is None else [trace.tangents, trace.bitangents]
     N_full = relative_rows(trace.normals, trace.dofs, no_master, np.zeros((0, dim), int), basis.N)
-    T_full = sp.vstack([relative_rows(t, trace.dofs, no_master, np.zeros((0, dim), int), basis.N) for t in frame])
+    T_full = emptied(sp.vstack([relative_rows(t, trace.dofs, no_master, np.zeros((0, dim), int), basis.N)
+                                for t in frame]).tocsr(), trace.symmetric)
     return PairTrace(**{name: getattr(trace, name) for name in (
         "facets", "dofs", "coords", "normals", "tangents", "coordinate", "weights", "mass", "N", "T", "normal_offset",
-        "tangent_offset", "gap", "obstacle_coupling", "obstacle_force", "bitangents")},
+        "tangent_offset", "gap", "obstacle_coupling", "obstacle_force", "bitangents", "symmetric")},
         master_dofs=np.zeros((0, dim), int), master_coords=np.zeros((0, dim)), transfer=no_master.tocsr(),
-        N_full=N_full, T_full=T_full.tocsr(), pieces=((slice(None), trace.dofs, np.zeros((0, dim), int)),))
+        N_full=N_full, T_full=T_full, pieces=((slice(None), trace.dofs, np.zeros((0, dim), int)),))
 
 
 def pairs_trace(pairs: Pairs, *arguments) -> PairTrace:
