@@ -50,8 +50,8 @@ def agree(small, large, on_plane: np.ndarray, axis: int):
 def test_a_quarter_pair_of_spheres_answers_as_its_half_model(law):
     """The quarter (rollers on x = 0 and y = 0) against the half model (its mirror image across x = 0 added, rollers
     on y = 0): both backs' x held, which the mirror keeps (u_x = 0 is its own image). The upper cap 10 times stiffer,
-    so the normal load shears the interface. On main the quarter's nodes on x = 0 leaned out of the plane (one-sided
-    normals) and their friction along x was the dual's free choice."""
+    so the normal load shears the interface. Before the planes were found, the quarter's nodes on x = 0 leaned out of
+    the plane (one-sided normals) and their friction along x was the dual's free choice."""
     def scene(half):
         base = two_spheres(4, moduli=(10.0, 1.0), law=LAWS[law], half=half)
         backs = {"upper.top", "lower.bottom"}
