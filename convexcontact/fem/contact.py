@@ -210,12 +210,14 @@ def symmetry_planes(mesh: fe.Mesh, basis: fe.Basis, dofs: np.ndarray, normals: n
     dim = mesh.dim()
     held = prescribed == 0.0
     held[free] = False
+    candidates = ~held[dofs].all(axis=1)[:, None] & held[dofs] & (np.abs(normals) <= TILT)
+    planes = np.zeros(dofs.shape, bool)
+    if not candidates.any():  # no roller on Γ_C: the mesh's boundary is not needed
+        return planes
     tolerance = PLANE * np.ptp(mesh.p, axis=1).max()
     boundary = mesh.p[:, mesh.facets[:, mesh.boundary_facets()]]  # (d, vertices, facets)
     coords = basis.doflocs[:, dofs[:, 0]].T
-    candidates = ~held[dofs].all(axis=1)[:, None] & held[dofs] & (np.abs(normals) <= TILT)
-    planes = np.zeros(dofs.shape, bool)
-    for a in range(dim):
+    for a in np.flatnonzero(candidates.any(axis=0)):
         located = basis.doflocs[a, a::dim]  # component a's DOFs are a, a + d, … (scikit-fem interleaves them)
         for c in np.unique([located.min(), located.max()]):
             on = np.abs(located - c) <= tolerance

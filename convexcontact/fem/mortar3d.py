@@ -138,15 +138,17 @@ def across(points: np.ndarray, normals: np.ndarray, master_points: np.ndarray, m
 
 
 def candidates(slave: Facets, master: Facets, mean_normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Facet pairs whose centroids, seen along Γ_C's mean normal, lie closer than their sizes plus how far the slave
-    facet's normal carries it across the gap (:func:`across`; a KD-tree), kept where the master facet's centroid,
-    projected on the slave's plane, lies within both facets' radii (the projection only shortens; the windows are
-    wide where the normals tilt)."""
+    """Facet pairs whose centroids, seen along Γ_C's mean normal, lie closer than the slave facet's radius, the
+    largest master radius and how far the slave facet's normal carries it across the gap (:func:`across`; a
+    KD-tree), kept where the master facet's centroid, projected on the slave's plane, lies within both facets' radii
+    (the projection only shortens; the windows are wide where the normals tilt). The slave's own radius, not the
+    largest, as the 2-D search (:func:`~.mortar.transfer_matrix`) takes its own size: graded meshes' largest facets
+    lie far from the contact."""
     centre = [facets.points.mean(axis=1) for facets in (slave, master)]
     radius = [np.linalg.norm(facets.points - c[:, None], axis=2).max(axis=1) for facets, c in zip((slave, master), centre)]
     axes = plane_axes(mean_normal)
     trees = [cKDTree(c @ axes.T) for c in centre]
-    reach = radius[0].max() + radius[1].max() + across(slave.points, slave.normal, master.points, mean_normal)
+    reach = radius[0] + radius[1].max() + across(slave.points, slave.normal, master.points, mean_normal)
     found = trees[1].query_ball_point(trees[0].data, reach)
     e, f = np.repeat(np.arange(len(found)), [len(j) for j in found]), np.concatenate([*found, []]).astype(int)
     offset = centre[1][f] - centre[0][e]
