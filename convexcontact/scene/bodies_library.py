@@ -143,7 +143,8 @@ def sphere_cap_mesh(cells: int, radius: float, upper: bool, grading: float = 12.
 def mirrored_across_x(mesh: fe.Mesh, boundaries: dict) -> tuple[fe.Mesh, dict]:
     """``mesh`` (on x ≥ 0, a side on x = 0 named ``left``) joined to its mirror image across x = 0, the nodes on the
     plane shared; ``boundaries`` (name → facets' vertices) carried to both halves, the image's ``right`` becoming
-    ``left`` and the old ``left`` (now inside) dropped."""
+    ``left`` and the old ``left`` (now inside) dropped. By hand, not scikit-fem's ``mirrored`` and ``+``: that joins
+    by coordinates rounded to 8 decimals (moving every node off its place) and drops the named boundaries."""
     plane = mesh.p[0] == 0.0  # the Box's side on x = 0, built exactly there
     image = np.where(plane, np.arange(mesh.nvertices), mesh.nvertices + np.cumsum(~plane) - 1)
     points = np.hstack([mesh.p, mesh.p[:, ~plane] * np.array([[-1.0], [1.0], [1.0]])])
