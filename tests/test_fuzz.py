@@ -14,7 +14,6 @@ import itertools
 
 import numpy as np
 import pytest
-from former_trace import without_symmetry_planes
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
@@ -213,47 +212,35 @@ def long_profile_pair(master_modulus: float, slip_bound: float) -> cc.Scene:
 
 @pytest.mark.parametrize("master_modulus, slip_bound", [(0.04690698734778309, 0.00046906987347783094),
                                                         (100.0, 0.025576961262334313)])
-def test_the_long_profile_s_p2_pairs_are_certified_on_both_paths(master_modulus, slip_bound, monkeypatch):
+def test_the_long_profile_s_p2_pairs_are_certified_on_both_paths(master_modulus, slip_bound):
     """A stiff slave on a soft master: ``auto``'s dense dual sat at a natural residual of 1.4e-5 for 90 segment steps
     (max_iter) and Clarabel's fallback was certified to 2.9e-7; on a stiffer master the matrix-free dual failed
-    (8.6e-4, 28 s). Both at the axis node's ball, whose step length was 6·10⁵ × the median (STEP_SPREAD caps it at
-    10³ ×). With the symmetry planes' rows empty (the axis node's ball with them) both paths are certified with the
-    full spread and HELD off as well (2.8e-13 and 8.6e-15; 1.3e-13 and 7.5e-15); on the former trace (its rows left as
-    they were) the first fails again so (2.9e-7)."""
+    (8.6e-4, 28 s). Both at the axis node's ball, whose step length was 6·10⁵ × the median (newton-cg's STEP_SPREAD
+    then capped it, since removed). With the symmetry planes' rows empty (the axis node's ball with them) both paths
+    are certified: 2.8e-13 and 8.6e-15; 1.3e-13 and 7.5e-15."""
     scene = long_profile_pair(master_modulus, slip_bound)
     for result in (cc.solve(scene), cc.prepare(scene, "dual-matrix-free").solve()):
         assert result.status == "solved" and result.certificate.worst <= 1e-10
-    if master_modulus < 1:  # HELD off too: the axis disc's Schur step length solves it under the full spread
-        monkeypatch.setattr(cc.solvers.newton_cg, "STEP_SPREAD", np.inf)
-        monkeypatch.setattr(cc.solvers.newton_cg, "HELD", 0.0)
-        assert cc.solve(scene).certificate.worst <= 1e-10
-        without_symmetry_planes(monkeypatch)
-        assert cc.solve(scene).certificate.worst > 1e-10
 
 
 def test_the_long_profile_s_coulomb_pair_is_certified_on_both_paths():
-    """The long profile's find with STEP_SPREAD applied where radii move too: two P1 caps of 4 cells (E = 1, ν = 0,
-    radii 1.6, approach 0.01), Coulomb F = 0.3, `inaccurate` at 1.6e-7 on both paths; the cap is for fixed radii."""
+    """The long profile's find with newton-cg's former STEP_SPREAD cap applied where radii move too: two P1 caps of
+    4 cells (E = 1, ν = 0, radii 1.6, approach 0.01), Coulomb F = 0.3, `inaccurate` at 1.6e-7 on both paths."""
     scene = cc.bodies_library.two_spheres(cells=4, radii=(1.6, 1.6), moduli=(1.0, 1.0), nu=(0.0, 0.0), approach=0.01,
                                           law=cc.Coulomb(friction=0.3))
     for result in (cc.solve(scene), cc.prepare(scene, "dual-matrix-free").solve()):
         assert result.status == "solved" and result.certificate.worst <= 1e-8
 
 
-def test_the_long_profile_s_tresca_p1_pair_is_certified(monkeypatch):
+def test_the_long_profile_s_tresca_p1_pair_is_certified():
     """The long profile's find of 2026-11-27: two P1 caps of 6 cells, radii 5, Tresca s = 0.1; `auto`'s newton-cg said
     solved (natural residual 5e-13) at a certificate of 2.75e-10: the axis disc at 0.9997 of its radius, its slip along
-    λ_T, its step length capped (STEP_SPREAD). With its Schur complement's step length (newton_cg.HELD) it is certified;
-    with HELD = 0 it is not (2.8e-10) — on the former trace: with the symmetry planes' rows empty the axis disc is
-    gone, and HELD = 0 is certified too (5.1e-12 either way)."""
+    λ_T, its step length capped (STEP_SPREAD, since removed) — on the former trace. With the symmetry planes' rows
+    empty the axis disc is gone: 5.1e-12."""
     scene = cc.bodies_library.two_spheres(cells=6, radii=(5.0, 5.0), moduli=(1.0, 1.0), nu=(0.0, 0.0), approach=0.001,
                                           law=cc.Tresca(slip_bound=0.1), master_cells=6)
     result = cc.solve(scene)
     assert result.status == "solved" and result.certificate.worst <= 1e-10
-    monkeypatch.setattr(cc.solvers.newton_cg, "HELD", 0.0)
-    assert cc.solve(scene).certificate.worst <= 1e-10
-    without_symmetry_planes(monkeypatch)
-    assert cc.solve(scene).certificate.worst > 1e-10
 
 
 def test_the_generator_covers_every_law():

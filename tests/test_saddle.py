@@ -10,7 +10,6 @@ import scipy.sparse as sp
 
 import convexcontact as cc
 from convexcontact import solvers
-from convexcontact.conic import ConicProgram, nonnegative, soc
 from convexcontact.drivers import rules
 from convexcontact.drivers.rules import contact_columns
 from convexcontact.fem import factorization
@@ -18,7 +17,6 @@ from convexcontact.fem.factorization import Condensation, Saddle, condense, dual
 from convexcontact.formulations.dual import contact_rows
 from convexcontact.scene.description import SceneError
 from convexcontact.scene.library import pressure_patch
-from convexcontact.solvers import newton_cg
 from convexcontact.studies.benchmarks.bench import punch_scene, two_body_scene
 
 pytestmark = pytest.mark.skipif(factorization._pardiso() is None, reason="Saddle needs PARDISO")
@@ -162,35 +160,3 @@ def test_a_large_3d_pair_keeps_its_dense_w_from_the_saddle(monkeypatch):
     monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 10**9)
     model = cc.prepare(scene)
     assert solvers.matrix_free(model.program) and "costs more to condense than to factorize" in model.reason
-
-
-def tilted_pair(seed: int, tilt: float = 1e-6, normals: int = 20) -> ConicProgram:
-    """The dual of a pair's axis node in miniature: W = R Rᵀ over ``normals`` bound rows (near the identity) and one
-    disc whose two rows are ``tilt`` × differences of normal rows (the axis node's tangential rows on the free DOFs:
-    its normal's tilt; W singular on them), q −1 on the normals and 0 on the disc (equal loads' difference), radius 1.
-    The disc's P̃_jj is ~tilt² of the largest: an inert set (newton_cg.INERT)."""
-    rng = np.random.default_rng(seed)
-    G = np.eye(normals) + 0.1 * rng.standard_normal((normals, normals))
-    R = np.vstack([G, tilt * (G[0] - G[1]), tilt * (G[0] - G[2])])
-    n = normals + 2
-    A = sp.vstack([-sp.eye(normals, n), sp.csr_matrix((1, n)), -sp.eye(2, n, normals)]).tocsc()
-    return ConicProgram(sp.csc_matrix(R @ R.T), np.concatenate([-np.ones(normals), np.zeros(2)]), A,
-                        np.concatenate([np.zeros(normals), [1.0], np.zeros(2)]), (nonnegative(normals), soc(3)))
-
-
-@pytest.mark.parametrize("seed", range(4))
-def test_the_inert_disc_of_fixed_radii_stalls_no_more(seed, monkeypatch):
-    """The floor of the pair of spheres' Tresca dual through the saddle's W at 3·10⁵ DOFs (docs/performance.md, "The
-    3-D pair of spheres through the saddle's W"): ∇f's rounding on the disc (~ε · tilt), times its step length
-    0.1 / P̃_jj (~1 / tilt²), held the natural residual above TOL for every later step, as on the axis node. With the
-    inert sets' metric from that stall on (fixed radii too) newton-cg solves it, at Clarabel's optimum; without them
-    the same solve ends `inaccurate` (4 seeds of 4 before this change)."""
-    program = tilted_pair(seed)
-    solution = newton_cg.solve(program, max_iter=30)
-    reference = solvers.solve(program, "clarabel")
-    f = lambda x: 0.5 * x @ (program.P @ x) + program.q @ x
-    assert solution.status == "solved" and solution.info["natural_residual"] <= newton_cg.TOL
-    assert abs(f(solution.x) - f(reference.x)) <= 1e-8 * abs(f(reference.x))
-    monkeypatch.setattr(newton_cg, "_inert", lambda c, tol: None)
-    monkeypatch.setattr(newton_cg, "STEP_SPREAD", np.inf)  # the disc's full step length (STEP_SPREAD alone solves it)
-    assert newton_cg.solve(program, max_iter=30).status == "inaccurate"

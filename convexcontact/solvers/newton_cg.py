@@ -25,8 +25,8 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
     (the exact line search of a quadratic on a feasible segment; no bound of P is needed to take it).
 
 Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
-way; after a point far from v its systems are damped (FAR, DAMPING: a face with a near-singular system), and a solve
-from no start with P an operator takes the empty face's first (FIRST_FORCING), which (a) or (b) judges as any other.
+way; a solve from no start with P an operator takes the empty face's first (FIRST_FORCING), which (a) or (b) judges
+as any other.
 With fixed radii it is Newton's point on the face the natural map holds at v, then on the face it holds at that point
 (the primal-dual active set update: the sets the point leaves held, those whose multipliers point inward released,
 an interval moved to the end its multiplier pushes it to), solved for again until the face stays, at most GROW times
@@ -194,107 +194,6 @@ solve with K, as a product is); where P is a matrix a product is far cheaper tha
 Tresca: 27 solves took the dense newton-cg from 0.12 to 0.94 s), so the sum serves until the natural residual is within
 SUM_FLOOR × ε ‖c q‖∞ of 0 or passes the stopping test, P's own formula after (the sum's rounding held the clamped
 strip 400 : 1 at ~5·10³ ε ‖c q‖ for 100 steps; from there P's own formula refines it as iterative refinement does)."""
-FAR = 1e3
-"""A Newton point more than FAR × the answer's scale from v (‖point − v‖∞) is far: its face holds a direction along
-which f is all but linear (a near-singular Newton system), and the next systems are damped (DAMPING). The 3-D pair of
-spheres (mortar, quarter model): the tangential multipliers of nodes on the symmetry planes act on almost nothing
-(W's least eigenvalues 1e-18 and 2e-14 against 1.5e-2), and from the stick start (frictionless pressures, every point
-sticking) Newton's point went 3·10⁶ × |v| away, its projection raised f, and no Newton point was taken in 100 steps.
-Elsewhere the Newton points measured stayed within 25 × |v| (the 2-D family at 2·10⁴ DOFs, matrix-free)."""
-DAMPING = 10.0
-"""After a far Newton point the Newton systems gain μ C⁻¹ on their diagonal (Levenberg–Marquardt; μ at least the
-natural residual, then DAMPING times more after each far point, DAMPING times less after each other; C = diag(c)).
-The point is only a trial of the step rules ("Convergence"), so the argument is unchanged; μ → 0 near the answer
-keeps Newton's local rate. The pair's Tresca dual from the stick start: 100 steps without a Newton point → 6; at
-10⁵ DOFs, matrix-free from its own start: stuck at 4e-11 after 62 steps and 3197 products → 6 and 123; every
-row of the 2-D family at 2·10⁴ DOFs, matrix-free, the same steps and products (none far). μ = the natural residual at
-every step instead damped the 2-D block's Tresca dual into 100 projected-gradient steps (its residual starts at ~1).
-Also after a projected-gradient step (Newton's point and its segment refused, the point not far): the dense dual of
-two P2 spheres of 4 cells with Tresca (75 unknowns, W singular on the axis node's multipliers, its least diagonal 4e-7
-of the largest) took one Newton point, then 99 gradient steps at a natural residual of 1e-6; now 7 steps (the 6-cell
-dual 13 → 9). The family's pinned rows keep their counts; the checks that newton-cg fails without FAR, GROW or ARC
-turn this trigger off too, since it rescues them (docs/performance.md, "The 3-D pair of spheres through the saddle's
-W", its last paragraph)."""
-STEP_SPREAD = 1e3
-"""Largest step length c_j as a multiple of the median: a row P̃ all but ignores (the axis node of a quarter model,
-whose slip both symmetry planes hold: P̃_jj 6·10⁵ × below the median on two P2 caps with Tresca) otherwise measures
-its natural residual, and takes its projected-gradient steps, through a step length that turns a slip of 10⁻¹¹ into
-a residual of 10⁻⁵: newton-cg sat at 1.4e-5 for 90 segment steps (the fuzz suite's long profile). The natural map's
-zeros do not depend on c (INERT); the mortar pair's rows differ by ~50× (_step_lengths), well inside the spread.
-With fixed radii only: where radii move (Coulomb) it left two P1 caps of 4 cells (E = 1, ν = 0, F = 0.3) `inaccurate`
-at 6e-9–1.6e-7 on 6 of 9 pairs of radii, which the full spread solves; there such a ball's step length is
-raised instead (HELD)."""
-INERT = 1.0
-"""A set (a bound, or a ball: all its rows) is inert where P̃_jj < ε max P̃ on each of its rows, ε = INERT · EPS / tol:
-its step length c_j = 0.1 / P̃_jj turns ∇f's rounding (≥ EPS · max P̃ · ‖v‖, the product's) into more than a tenth of
-the stopping test's tol · ‖v‖ on its natural residual, a floor no step lowers (and c_j |q_j| inflates the answer's
-scale). Where Newton's method with moving radii (:func:`coupled`) stalls, or crawls at their rounding's level (a
-step leaves the residual above STALL × its value there, FLOOR; two stiff-on-soft P1 spheres with Coulomb crawled 30
-steps from 7.6e-13 at the axis node, whose slip both symmetry planes hold), or with fixed radii a step to the segment's
-or the projected gradient's point leaves the natural residual above STALL × its value even after the projected
-gradient's step and that residual is at their rounding's level (FLOOR), from then on the residual measures those sets with the least step length of all,
-0.1 / max P̃ (their rounding then weighs as little as the stiffest row's), and their rows of the Newton systems gain
-ε max P̃ (a proximal term). Both are sound: the natural map's zeros do not depend on the step lengths (for each set,
-Π(v − c g) = v says that −g is normal to it at v, whatever c > 0), Newton's point is only a trial of the step rules,
-and the certificate, computed on the whole problem, still judges the answer. With fixed radii "Convergence" holds as
-it is: the switch happens once, the steps (b) keep c, and a residual under the smaller step lengths is at most the one
-under c (‖v − Π(v − t g)‖ grows with t), so the least residual so far bounds the new ones as it did.
-
-The 3-D pair of spheres (mortar, quarter model), its node on both symmetry planes: on the free DOFs its two
-tangential rows are its normal row (the mortar normal's tilt), W is singular on its three multipliers, P̃_jj is
-3.6e-8 max P̃ and c_j 10⁹. Its Coulomb solve at 10⁴ DOFs stalled after 9 steps at 1.4e-8 on those rows (the rounding
-× 10⁹), the points beside them still at 1.2e-8: certificate 2.5e-8 > the law's 1e-8, `inaccurate`. Newton's point at
-that stall moved the node's multipliers 200 along the singular direction. Now 2 more steps: natural residual 8e-16,
-certificate 7e-12; at 1.9·10⁴ DOFs, where Newton stalled at once and the Picard map took 116 s, 8 steps and 0.14 s.
-Only from a stall: from the start, step lengths capped at 0.1 / (ε max P̃) stalled the same
-solve after 3 steps at 8e-5 and the proximal term after 4 at 1e-1 (the large c_j is what puts such a ball on its
-sphere in the first steps); the Tresca dual under the answer's radii from the stick start, capped, failed after 100
-steps (3.3e-5) where it takes 8 (docs/performance.md, "The pair's Coulomb row at 10⁴ DOFs").
-
-The same pair's Tresca dual at 3·10⁵ DOFs, W formed (3153 unknowns, fixed radii): the axis node's ball, P̃_jj 2.0e-9
-max P̃ and c_j 3.4·10¹¹, held the natural residual at 2.48e-11 (∇f there 2.5e-19, the sum's rounding) for 55 segment
-steps, `inaccurate` (certificate 3.3e-11); from the stall on, 2 more steps: 6e-17, solved (docs/performance.md, "The
-3-D pair of spheres through the saddle's W")."""
-HELD_COLUMNS = 32
-"""Columns of P̃ (products) :func:`_held` may fetch where P is an operator."""
-HELD_TILT = 1e-2
-"""A ball's rows are a tilt of its node's normal row (:func:`_held`) where their P̃_jj is at most HELD_TILT of that
-row's (read first, from the step lengths where radii move: no products) and their Schur complement against it at most
-HELD_TILT of their P̃_jj: the axis node's 7e-5 and 4e-10 on the P2 caps. Elsewhere the ratios are far from that: the
-pairs' median P̃_jj ratio 1.1–2.2 (3-D and 2-D); on the clamped strip 100 : 1 (1.5·10³ DOFs), whose normal rows carry the
-beam's bending, that ratio is below 0.005, but its 20 inert intervals by the clamps read 0.09–0.14; the 2-D pair's
-Tresca dual at 7·10⁴ DOFs has 455 inert intervals whose ratio passes, their Schur complements 0.72–0.76 of their P̃_jj.
-Without the second test their step lengths grew 1.1–2 × (strip) and 1.32–1.39 × (pair), the same Newton steps."""
-HELD = 1 / EPS
-"""An inert ball's (INERT) step length is 0.1 / λ_max(S), S the Schur complement of its rows of P̃ against those of
-its node's normal multiplier (where radii move, the variable its radius is F times; with fixed radii, P a matrix, the
-bound whose row its first row is most aligned with), which the contact holds, at most HELD × 0.1 / max P̃ (S's
-rounding), where that is longer than its c_j (:func:`_held`; only rows that are a tilt of that one's, HELD_TILT).
-0.1 / P̃_jj measures how far the ball's own variables move ∇f on it, but the node's normal multiplier moves with them:
-on the axis node of a quarter model (3-D pairs of spheres; the node on both symmetry planes) the two tangential rows
-are its normal row times the mortar normal's tilt (8.6e-3) to 4e-6, S is 1e-19 (two eigenvalues of the node's 3 × 3
-block at W's rounding) and the ball acts on nothing. Its slip is then set by the other nodes alone (a small real one,
-1.5e-13 against a median |∇f| of 5e-5), the law puts the ball on its sphere against it, and c_j = 0.1 / P̃_jj
-(2.75·10⁸) turned that slip into a step of 10⁻⁴ of its radius: where the slip briefly pointed outwards on Newton's
-path, the ball left its sphere by 3·10⁻³ of its radius, its Newton systems were singular there, and 16 steps each took
-part of a far point (the residual × 0.65 a step), until the inert sets' metric (a stall) stopped on a ball inside its
-disc with that slip: certificate 5.3e-9 (friction law; P2 spheres of 6 cells, Coulomb F = 0.1, 12,168 DOFs; the same on
-the matrix-free dual). With S's length the ball's face is its slip's direction: 28 → 13 Newton steps, 299 → 61
-products, 1.1e-14 (matrix-free 14 → 13 steps, 780 → 160 products, 1.9e-14). With fixed radii STEP_SPREAD's cap had
-hidden the same state: two P1 caps of 6 cells, radii 5, Tresca s = 0.1, `solved` at a certificate of 2.75e-10 (the
-disc at 0.9997 of its radius, its slip along λ_T: the least f is on its sphere's other side); now 8e-15. The natural
-map's zeros do not depend on c (INERT), and with fixed radii "Convergence" holds with C = diag(c) as it is; the
-residual's metric and scale and CG's targets keep 0.1 / P̃_jj (a residual under shorter step lengths is at most the
-one under c, see INERT). Not STEP_SPREAD's cap where radii move: a shorter step length only makes such a ball's face
-more fragile (two P1 caps of 4 cells were left inside their discs, `inaccurate` at 6e-9–1.6e-7; with S's length all 9
-pairs of radii are certified, ≤ 2.6e-11)."""
-FLOOR = 100.0
-"""A stall with fixed radii is the inert sets' (INERT) where the natural residual is within FLOOR × the level ∇f's
-rounding takes it to there, EPS max P̃ ‖v‖∞ times their largest step length (relative to the answer's scale as the
-residual is). Not at any stall: the 2-D pair's Tresca dual at 7·10⁴ DOFs (978 unknowns, 912 of them inert: P̃_jj down
-to 3.7e-6 max P̃) stalled at 2.3e-3 on its way (grown faces off, tests/test_scalable.py), against a level of 8e-13,
-and under the inert metric from there it failed after 50 steps where it takes 23; the pair of spheres at 3·10⁵
-stalled at 2.48e-11 against 8.0e-12."""
 REUSE = 4.0
 """Where a Newton system's preconditioner (:class:`_Preconditioner`, with balls) keeps its factors instead of a
 numeric refactorization of H + Gᵀ D⁻¹ G, where that is K-sized: a body that is its own approximation, H = K on its
@@ -504,10 +403,6 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     curvature = probe @ P.matvec(probe) / (probe @ probe)
     c = 0.1 / curvature if curvature > 0 else 1.0  # 0.1: 219 products on a 2-D Tresca dual, 1: 263, 10: 2076
     c = _step_lengths(program.P, sets, c, products)
-    metric, proximal, inert = c, 0.0, _inert(c, tol)  # the residual's step lengths, see INERT
-    lengths = c  # the step lengths c_j = 0.1 / P̃_jj, which the residual's scale and CG's targets keep
-    if inert is not None or sets.coupling is None:  # the inert balls' faces: see HELD
-        c = _held(P, matrix, sets, c, None if inert is None else inert[1] > 0, products, tol)
     cache = {} if cache is None else cache
     if "precondition" not in cache:
         approximation = getattr(program.P, "approximation", None)
@@ -523,8 +418,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         v = _project(v - c * g, sets)
         g = gradient(v)
     def natural(v, g):
-        """:func:`_natural` with the residual's step lengths (see INERT)."""
-        return _natural(v, g, c, sets, program.q, metric)
+        """:func:`_natural` with this solve's step lengths."""
+        return _natural(v, g, c, sets, program.q)
 
     def move(v, g, w, known=None):
         """∇f at w, f(w) − f(v) (exact: f is quadratic) and P̃(w − v): one product. Where P x + q has its own
@@ -569,31 +464,24 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
                 return w, gw, change, "arc"
         return (*gradient_step(v, g), "gradient")
 
-    def at_floor(v, g, residual, size):
-        """Whether the natural residual at v stays above STALL × ``residual`` at the inert sets' rounding level (FLOOR)."""
-        return (inert is not None and natural(v, g)[0] > STALL * residual
-                and residual * size <= FLOOR * inert[2] * np.abs(v).max(initial=0.0))
-
     def gradient_step(v, g):
         """The least f on the segment from v to the natural map's point Π(v − c∇f), ∇f there and f's change."""
         p = _project(v - c * g, sets)
         return least_on_segment(v, g, p, move(v, g, p)[2])
 
-    def newton_point(v, y, target, damping, empty=False):
-        """Newton's point from v on the face y holds, the CG iterations it took and how far the first solve went
-        (‖point − v‖∞, see FAR) and ∇f there where known; with fixed radii on the face the natural map holds at that
-        point (:func:`grown_point`), whose solves stop at GROWN_FORCING alone where y is the ``empty`` face (see
-        FIRST_FORCING)."""
+    def newton_point(v, y, target, empty=False):
+        """Newton's point from v on the face y holds, the CG iterations it took and ∇f there where known; with fixed
+        radii on the face the natural map holds at that point (:func:`grown_point`), whose solves stop at
+        GROWN_FORCING alone where y is the ``empty`` face (see FIRST_FORCING)."""
         face = {}  # the dense Cholesky factor of this step's first system, for its grown faces (_direct)
         newton, iterations, known = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix,
-                                          damping, proximal=proximal, face=face)
-        reach = np.abs(newton - v).max(initial=0.0)
+                                          face=face)
         if sets.coupling is None:
-            newton, more, known = grown_point(v, y, newton, 0.0 if empty else target, damping, face, known=known)
+            newton, more, known = grown_point(v, y, newton, 0.0 if empty else target, face, known=known)
             iterations += more
-        return newton, iterations, reach, known
+        return newton, iterations, known
 
-    def grown_point(v, y, newton, target, damping, face=None, limit=None, known=None):
+    def grown_point(v, y, newton, target, face=None, limit=None, known=None):
         """Newton's point on the face y holds, updated to the face the natural map holds at that point (fixed radii:
         :func:`_released`, ∇f there ``known`` or one product) or, where radii move, grown by the sets the point leaves
         (:func:`_grown`), each solve started from the last point, projected, until the face stays (at most ``limit``
@@ -611,9 +499,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             # not the step's kept factors where radii move: REUSE's bound is for CG's symmetric systems, and GMRES
             # on the clamped plate's Coulomb problem (2·10⁴ DOFs) took over 4 min CPU with them, 13 s without; nor
             # once a set was released (that bound is for faces that hold more)
-            newton, more, known = _step(P, affine, sets, at, y, c, target, products,
-                                        cache["precondition"], matrix, damping, GROWN_FORCING, proximal, face,
-                                        grown=sets.coupling is None and not moved)
+            newton, more, known = _step(P, affine, sets, at, y, c, target, products, cache["precondition"], matrix,
+                                        GROWN_FORCING, face, grown=sets.coupling is None and not moved)
             iterations += more
             faces[0] += 1
         return newton, iterations, known if y is None else None
@@ -637,11 +524,9 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     risen, kinds, descent = 0.0, dict.fromkeys(("residual", "segment", "arc", "gradient"), 0), []
     steps = cg_total = 0
     faces = [0]  # the faces grown (see GROW)
-    refused = False  # whether the last step was the projected gradient's (see DAMPING)
     fixed_steps = 0  # the fixed-point map's steps taken where radii move (see FIXED_STEPS)
-    damping = 0.0  # μ of the Newton systems (see DAMPING)
     status, word = "failed", "max_iter"
-    floor = SUM_FLOOR * EPS * (lengths * np.abs(sets.scale * program.q)).max(initial=0.0)
+    floor = SUM_FLOOR * EPS * (c * np.abs(sets.scale * program.q)).max(initial=0.0)
     for steps in range(max_iter + 1):
         residual, y, size = natural(v, g)
         if residual * size <= max(tol * answer(v, size), 0.0 if exact or own is None else floor):
@@ -663,16 +548,15 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if steps == max_iter:
             break
         empty = steps == 0 and start is None and sets.coupling is None and matrix is None  # see FIRST_FORCING
-        target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(lengths)
-        target = max(target, 0.1 * tol * answer(v, size) / np.max(lengths))
-        newton, iterations, reach, known = newton_point(v, np.zeros_like(y) if empty else y, target, damping, empty)
+        target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
+        target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
+        newton, iterations, known = newton_point(v, np.zeros_like(y) if empty else y, target, empty)
         cg_total += iterations
         best = min(best, residual)
-        damping = _damped(damping, reach > FAR * size, refused, residual)
         if sets.coupling is not None:
             v, g, moved = backtrack(v, g, newton, residual, (1.0,))
             if not moved:  # Newton's point refused: first on the face grown by the sets it leaves (see GROW)
-                grown, more, _ = grown_point(v, y, newton, target, damping, limit=min(GROW, GROW_MOVING))
+                grown, more, _ = grown_point(v, y, newton, target, limit=min(GROW, GROW_MOVING))
                 cg_total += more
                 if grown is not newton:
                     v, g, moved = backtrack(v, g, grown, residual)
@@ -680,9 +564,6 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
                 v, g, moved = backtrack(v, g, newton, residual, (0.5, 0.25, 0.125, 0.0625))
             if not moved:  # a projected-gradient segment, as for a fixed f: Newton stalled on a punch with F = 2
                 v, g, moved = backtrack(v, g, _project(v - c * g, sets), residual, GRADIENT_LENGTHS)
-            if not moved and inert is not None:  # the inert sets' rounding may be what stalls it: see INERT
-                (metric, proximal, _), inert = inert, None
-                continue
             if not moved and fixed_steps < FIXED_STEPS:  # the fixed-point map's step (see FIXED_STEPS)
                 fixed_steps += 1
                 b = program.b.copy()
@@ -697,8 +578,6 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             if not moved:
                 word = "stalled"
                 break
-            if at_floor(v, g, residual, size):  # a crawl at their rounding: INERT
-                (metric, proximal, _), inert = inert, None
             continue
         # Newton's point, projected, where it halves the least natural residual so far (so those steps cannot cycle;
         # near the answer f's changes are round-off, and the segment alone stalled a 3-D Tresca dual at 2e-10), else a
@@ -708,11 +587,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if kind in ("segment", "gradient") and natural(v, g)[0] > STALL * residual:
             v, g, more = gradient_step(v, g)
             change += more
-            if at_floor(v, g, residual, size):  # their rounding: INERT
-                (metric, proximal, _), inert = inert, None
         risen += change
         kinds[kind] += 1
-        refused = kind == "gradient"  # Newton's point and its segment refused (see DAMPING)
         descent.append((kind, change, cauchy))
     x = sets.shift + sets.scale * v
     info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history,
@@ -731,13 +607,6 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         status = "inaccurate"
     return ConicSolution(x=x, z=z, s=program.b - program.A @ x, status=status, solver_status=word, iterations=steps,
                          solve_time=time.perf_counter() - began, solver="newton-cg", info=info)
-
-
-def _damped(damping: float, far: bool, refused: bool, residual: float) -> float:
-    """μ for the next step: where Newton's point was ``far`` (see FAR), or the last step was a projected-gradient one
-    (Newton's point and its segment ``refused``), DAMPING times more and at least the natural residual
-    (Levenberg–Marquardt's choice), else DAMPING times less."""
-    return max(DAMPING * damping, residual) if far or refused else damping / DAMPING
 
 
 class _Preconditioner:
@@ -948,80 +817,9 @@ def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
     else:
         diagonal = sets.scale**2 * np.asarray(P.diagonal()).ravel()
     lengths = np.where(diagonal > 0, 0.1 / np.maximum(diagonal, 1e-300), c)
-    if sets.coupling is None:  # fixed radii only: see STEP_SPREAD
-        lengths = np.minimum(lengths, STEP_SPREAD * np.median(lengths))
     if sets.balls.size:
         lengths[sets.balls] = lengths[sets.balls].min(axis=1, keepdims=True)
     return lengths
-
-
-def _held(P, matrix, sets: _Bounds, c: np.ndarray, inert: np.ndarray | None, products: list, tol: float) -> np.ndarray:
-    """c with the step length of each inert ball (all its rows marked in ``inert``, a mask over the variables; with
-    fixed radii and P a matrix, marked here by INERT's rule on P̃'s own diagonal, which STEP_SPREAD's cap does not
-    reach) whose rows are a tilt of one variable's (HELD_TILT) from the Schur complement S of its rows against that
-    variable's, 0.1 / λ_max(S) but at most HELD × 0.1 / max P̃ (S's rounding), where that is longer: see HELD. The
-    variable: the one its radius is F times (local Coulomb), or with fixed radii the bound whose row of P̃ its first row
-    is most aligned with. ``matrix()``: P̃ (P a matrix), else P̃'s columns by one product with at most HELD_COLUMNS of
-    them, the most inert balls first (where radii move; fixed radii need P̃)."""
-    if not HELD or not sets.balls.size or (sets.coupling is None and (matrix is None or not sets.bounds.size)):
-        return c
-    c = np.broadcast_to(np.asarray(c, dtype=float), sets.scale.shape)
-    p = sets.balls.shape[1]
-    if sets.coupling is not None:
-        single = np.diff(sets.coupling.indptr) == 1
-        own = np.full(single.size, -1)
-        own[single] = sets.coupling.indices[sets.coupling.indptr[:-1][single]]  # the variable each radius is F times
-        rows = np.flatnonzero(inert[sets.balls].all(axis=1) & single)
-        rows = rows[c[sets.balls[rows, 0]] * HELD_TILT >= c[own[rows]]]  # P̃_bb ≤ HELD_TILT P̃_nn: a tilt's rows
-        rows = rows[np.argsort(-c[sets.balls[rows, 0]], kind="stable")]
-        if matrix is None:
-            rows = rows[:HELD_COLUMNS // (p + 1)]
-        own, largest = own[rows], 0.1 / np.min(c)
-    else:
-        tilde = matrix()
-        diagonal = np.asarray(tilde.diagonal()).ravel()
-        largest = diagonal.max(initial=0.0)
-        rows = np.flatnonzero((diagonal[sets.balls] < INERT * EPS / tol * largest).all(axis=1))
-        first = sets.balls[rows, 0]
-        aligned = tilde[first] if isinstance(tilde, np.ndarray) else tilde[first].toarray()
-        own = sets.bounds[np.argmax(aligned[:, sets.bounds] ** 2 / np.maximum(diagonal[sets.bounds], 1e-300), axis=1)]
-        tilted = diagonal[sets.balls[rows]].max(axis=1, initial=0.0) <= HELD_TILT * diagonal[own]
-        rows, own = rows[tilted], own[tilted]
-    if not rows.size:
-        return c
-    blocks = np.column_stack([sets.balls[rows], own])  # (balls, p + 1): the ball's variables, then that variable
-    columns = np.unique(blocks)
-    if matrix is not None:
-        tilde = matrix()
-        part = (tilde[np.ix_(columns, columns)] if isinstance(tilde, np.ndarray)
-                else tilde[columns][:, columns].toarray())
-    else:
-        units = np.zeros((c.size, columns.size))
-        units[columns, np.arange(columns.size)] = sets.scale[columns]
-        products[0] += columns.size
-        part = sets.scale[columns, None] * P.matmat(units)[columns]
-    local = np.searchsorted(columns, blocks)
-    block = part[local[:, :, None], local[:, None, :]]  # (balls, p + 1, p + 1)
-    schur = block[:, :p, :p] - block[:, :p, p:] * block[:, p:, :p] / np.maximum(block[:, p:, p:], 1e-300)
-    unexplained = np.linalg.eigvalsh(schur)[:, -1]  # λ_max(S): the rows' part that row does not explain
-    tilt = unexplained <= HELD_TILT * np.diagonal(block[:, :p, :p], axis1=1, axis2=2).max(axis=1)
-    longer = np.minimum(0.1 / np.maximum(unexplained[tilt], 1e-300), HELD * 0.1 / largest)
-    held = c.copy()
-    held[sets.balls[rows[tilt]]] = np.maximum(c[sets.balls[rows[tilt]]], longer[:, None])
-    return held
-
-
-def _inert(c, tol: float):
-    """The residual's step lengths, the least c on the inert sets (see INERT), the proximal term of each variable,
-    ε max P̃ on those sets and 0 elsewhere, and EPS max P̃ max c_inert (∇f's rounding on the inert sets through their
-    largest step length, per unit of ‖v‖∞; see FLOOR); None where no set is inert or c is one number."""
-    if np.ndim(c) == 0:
-        return None
-    floor = INERT * EPS / tol * 0.1 / np.min(c)  # P̃_jj = 0.1 / c_j (:func:`_step_lengths`)
-    inert = c > 0.1 / floor
-    if not inert.any():
-        return None
-    return np.where(inert, np.min(c), c), np.where(inert, floor, 0.0), EPS * 0.1 / np.min(c) * np.max(c[inert])
 
 
 def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds, radius: np.ndarray) -> np.ndarray | None:
@@ -1094,13 +892,12 @@ def _dense_values(P) -> np.ndarray | None:
     return None
 
 
-def _natural(v, g, c, sets: _Bounds, q, metric=None):
-    """The natural residual ‖v − Π(v − c̃∇f)‖∞ relative to the answer's scale, v − c∇f and that scale
-    (Π onto the sets at v, where radii move); c̃ = ``metric`` (step lengths of the residual only, see INERT) or c."""
+def _natural(v, g, c, sets: _Bounds, q):
+    """The natural residual ‖v − Π(v − c∇f)‖∞ relative to the answer's scale, v − c∇f and that scale
+    (Π onto the sets at v, where radii move)."""
     y = v - c * g
-    metric = c if metric is None else metric
-    size = max(np.abs(v).max(initial=0.0), (metric * np.abs(sets.scale * q)).max(initial=0.0), 1e-300)
-    return np.abs(v - _project(v - metric * g, sets, sets.radii(v))).max(initial=0.0) / size, y, size
+    size = max(np.abs(v).max(initial=0.0), (c * np.abs(sets.scale * q)).max(initial=0.0), 1e-300)
+    return np.abs(v - _project(y, sets, sets.radii(v))).max(initial=0.0) / size, y, size
 
 
 def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> np.ndarray:
@@ -1117,16 +914,14 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
     return v
 
 
-def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, damping=0.0,
-          relative=0.0, proximal=0.0, face=None, grown=False):
+def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, relative=0.0, face=None,
+          grown=False):
     """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v, the CG
     (GMRES, where radii move) iterations it took and ∇f at the new v where CG's products give it (else None), CG
     stopping at ``target`` or ``relative`` × its first residual (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃)
     and the system has at most DIRECT_LIMIT unknowns, a dense Cholesky (LU where that fails or radii move) instead, or
-    the factor kept in ``face`` (:func:`_direct`).
-    ``damping`` μ adds μ/c to the system's diagonal (:func:`_damped`, DAMPING), ``proximal`` (0 or one number per
-    variable) its own number to each variable's (:func:`_inert`); ``grown``: the face is a grown one of the step's
-    (:func:`_grown`), whose preconditioner may be the step's factors (REUSE, KEPT_FORCING)."""
+    the factor kept in ``face`` (:func:`_direct`). ``grown``: the face is a grown one of the step's (:func:`_grown`),
+    whose preconditioner may be the step's factors (REUSE, KEPT_FORCING)."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
@@ -1152,10 +947,6 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     k, _, t = bases.shape
     c_sphere = c[sets.balls[sphere, 0]] if np.ndim(c) and sets.balls.shape[1] else np.max(c)
     curvature = np.repeat((norm[sphere] - rho) / (c_sphere * rho), t)
-    proximal = np.broadcast_to(proximal, (n,))
-    shift = np.concatenate([damping / np.broadcast_to(c, (n,))[free] + proximal[free],  # μ/c: see DAMPING
-                            np.repeat(np.broadcast_to(damping / c_sphere, (sphere.size,)), t)
-                            + (bases**2 * proximal[sets.balls[sphere]][:, :, None]).sum(axis=1).ravel()])
     # v = new + Z ξ: ξ holds the free variables, then t tangent coordinates per sphere (see _expansion)
     sphere_vars = sets.balls[sphere]
     moving = None if sets.coupling is None else sets.coupling[sphere]
@@ -1171,8 +962,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     def hessian(xi):  # Rᵀ P̃ Z ξ + curvature on the tangent coordinates
         products[0] += 1
         last[0], last[1] = xi.copy(), sets.scale * P.matvec(sets.scale * (Z @ xi))  # CG scales xi in place after
-        return R.T @ last[1] + np.concatenate(
-            [np.zeros(free.size), curvature * xi[free.size:]]) + shift * xi
+        return R.T @ last[1] + np.concatenate([np.zeros(free.size), curvature * xi[free.size:]])
 
     size = free.size + k * t
     # the system for the step from ξ at v, whose right-hand side is the residual there: one product with P where
@@ -1185,7 +975,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     count, at_point = [0], None if size else gradient  # ∇f at the point, where known without a product
     direct = size and matrix is not None and size <= DIRECT_LIMIT
     if direct:
-        system = functools.partial(_system, matrix, Z, R, free.size, curvature, shift)
+        system = functools.partial(_system, matrix, Z, R, free.size, curvature)
         with blas.limited(DENSE_THREADS):
             xi = _direct(system, free, rhs, moving is None, face if k * t == 0 else None)
         direct = xi is not None
@@ -1194,7 +984,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     if size and not direct:
         H = spla.LinearOperator((size, size), matvec=hessian, dtype=float)
         M = None if precondition is None else spla.LinearOperator(
-            (size, size), matvec=precondition.system(R, np.concatenate([np.zeros(free.size), curvature]) + shift,
+            (size, size), matvec=precondition.system(R, np.concatenate([np.zeros(free.size), curvature]),
                                                      grown=grown), dtype=float)
         callback = lambda *_: count.__setitem__(0, count[0] + 1)
         if moving is None:
@@ -1253,13 +1043,12 @@ def _direct(system, free, rhs, symmetric: bool, face: dict | None):
             return None
 
 
-def _system(matrix, Z, R, free: int, curvature, shift) -> np.ndarray:
-    """The dense Newton system Rᵀ P̃ Z + curvature (on the tangent coordinates, after the ``free`` variables) + shift,
+def _system(matrix, Z, R, free: int, curvature) -> np.ndarray:
+    """The dense Newton system Rᵀ P̃ Z + curvature (on the tangent coordinates, after the ``free`` variables),
     with a relative 1e-14 on its diagonal: W is singular where a multiplier's DOFs are all held (a 3-D punch's
     symmetry planes); such a variable then stays where it is."""
     H = _reduced(matrix(), Z, R)
     H[free:, free:] += np.diag(curvature)
-    H[np.diag_indices(H.shape[0])] += shift
     H[np.diag_indices(H.shape[0])] += 1e-14 * max(H.max(initial=0.0), -H.min(initial=0.0))  # no |H| copy
     return H
 
