@@ -761,13 +761,16 @@ def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter:
     """The answer of ``program`` restricted to x = shift + scale ⊙ Q v_c, solved to COARSE_TOL (see COARSE_SETS): Q
     copies each coarse set to the sets of its aggregate (:func:`_aggregates`, bounds and balls apart), so a feasible
     v_c is a feasible x (a coarse ball's radius is its aggregate's least), and P_c = Q̃ᵀ P Q̃ (Q̃ = diag(scale) Q)
-    carries P's approximation with G's rows summed alike (Q̃ᵀ G). None where P has no approximation, where some
+    carries P's approximation with G's rows summed alike (Q̃ᵀ G). None where P has no approximation or one without
+    coarse functions beyond a slab (H may be K itself: the coarse approximation would cost a factorization of K, see
+    REUSE; a 3-D clamped plate's Tresca dual at 2·10³ DOFs was then certified at 3e-10 against 1e-10), where some
     variable is in no set, where the sets are too few for the coarse program to be much smaller, or where the
     projected gradient's point ``v`` holds at 0 no more bounds than an aggregate has (no zone to find at its scale)."""
     approximation = getattr(program.P, "approximation", None)
     groups = [members for members in (sets.bounds[:, None], sets.balls) if members.size]
     counted = sum(members.size for members in groups)
-    if (approximation is None or counted < program.n_variables or sum(map(len, groups)) < 4 * COARSE_SETS
+    if (approximation is None or approximation.slab in (None, approximation.H.shape[0])
+            or counted < program.n_variables or sum(map(len, groups)) < 4 * COARSE_SETS
             or (v[sets.bounds] == 0).sum() * COARSE_SETS <= sets.bounds.size):
         return None
     G = sp.csr_matrix(approximation.G)
@@ -801,19 +804,21 @@ def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter:
 
 
 def _coarse_approximation(approximation, G: sp.csr_matrix):
-    """The coarse program's approximation G H⁻¹ Gᵀ (G: P's approximation's rows summed) as its own dense matrix A, in
-    the approximation's form with G = I and H = A⁻¹: A from one factorization of H and a solve with G's few rows as
-    right-hand sides (COARSE_BLOCK at a time). With G's summed rows in a factorization of H + Gᵀ D⁻¹ G, each aggregate
-    filled a block as wide as its DOFs: the pair at 1.4·10⁶ DOFs, Signorini, its peak memory 1.72 → 2.44 × the
-    linear solve's."""
+    """The coarse program's approximation A = G H⁻¹ Gᵀ (G: P's approximation's rows summed) as a dense matrix, in the
+    approximation's form with H = I and G = V Λ^½ (A = V Λ Vᵀ: A may be singular, where summed rows are dependent or
+    empty, as a 3-D clamped plate's friction rows on its symmetry planes): A from one factorization of H and a solve with
+    G's few rows as right-hand sides (COARSE_BLOCK at a time). With G's summed rows in a factorization of H + Gᵀ D⁻¹ G,
+    each aggregate filled a block as wide as its DOFs: the pair at 1.4·10⁶ DOFs, Signorini, its peak memory 1.72 →
+    2.44 × the linear solve's."""
     factors = approximation.factorize(approximation.H)
     dense = np.zeros((G.shape[0], G.shape[0]))
     for first in range(0, G.shape[0], COARSE_BLOCK):
         rows = slice(first, first + COARSE_BLOCK)
         dense[:, rows] = G @ factors.solve(G[rows].T.toarray())
     del factors
-    dense = 0.5 * (dense + dense.T)
-    return replace(approximation, G=sp.eye(G.shape[0], format="csr"), H=sp.csr_matrix(np.linalg.inv(dense)), slab=None)
+    values, vectors = np.linalg.eigh(0.5 * (dense + dense.T))
+    root = sp.csr_matrix(vectors * np.sqrt(np.maximum(values, 0.0)))
+    return replace(approximation, G=root, H=sp.eye(G.shape[0], format="csr"), slab=None)
 
 
 def _aggregates(rows: sp.csr_matrix, count: int) -> np.ndarray:
