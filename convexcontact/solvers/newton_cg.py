@@ -533,8 +533,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if sets.coupling is None and matrix is None:  # (FORCING, not the empty face's FIRST_FORCING)
             coarse = _coarse_start(program, sets, v, max_iter, verbose)
         if coarse is not None:
-            v = _project((coarse.x - sets.shift) / sets.scale, sets)
-            products[0] += coarse.info["products"]
+            v = _project((coarse[0] - sets.shift) / sets.scale, sets)
+            products[0] += coarse[1]["products"]
         g = gradient(v)
     cache = {} if cache is None else cache
     if "precondition" not in cache:
@@ -740,8 +740,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             "steps": kinds, "descent": descent, "grown": faces[0], "fixed_steps": fixed_steps,
             "factorizations": getattr(cache["precondition"], "factorizations", 0) - factorized,
             "updates": getattr(cache["precondition"], "updates", 0) - updated,
-            "coarse": None if coarse is None else {key: coarse.info[key] for key in ("products", "grown", "factorizations",
-                                                                                    "updates")} | {"steps": coarse.iterations}}
+            "coarse": None if coarse is None else coarse[1]}
     if sets.coupling is not None:  # the program of the radii reached: x is its answer
         b = program.b.copy()
         b[form.ball_radius_rows] = info["radii"] = sets.radii(v)
@@ -757,8 +756,9 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
 
 
 def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter: int,
-                  verbose: bool) -> ConicSolution | None:
-    """The answer of ``program`` restricted to x = shift + scale ⊙ Q v_c, solved to COARSE_TOL (see COARSE_SETS): Q
+                  verbose: bool) -> tuple[np.ndarray, dict] | None:
+    """x of the answer of ``program`` restricted to x = shift + scale ⊙ Q v_c, solved to COARSE_TOL (COARSE_SETS), and
+    that solve's products (K solves, as this program's), Newton steps, faces grown, refactorizations and updates: Q
     copies each coarse set to the sets of its aggregate (:func:`_aggregates`, bounds and balls apart), so a feasible
     v_c is a feasible x (a coarse ball's radius is its aggregate's least), and P_c = Q̃ᵀ P Q̃ (Q̃ = diag(scale) Q)
     carries P's approximation with G's rows summed alike (Q̃ᵀ G). None where P has no approximation or one without
@@ -799,8 +799,9 @@ def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter:
     b = np.concatenate([np.zeros(bounds)] + [np.concatenate([[r], np.zeros(p)]) for r in radius])
     coarse = ConicProgram(P, Q.T @ q, sp.vstack(A).tocsc(), b, tuple(cones))
     solution = newton_cg(coarse, bound_form_of(coarse), None, COARSE_TOL, max_iter, verbose)
-    products = solution.info["products"] + (1 if sets.shift.any() else 0)
-    return replace(solution, x=sets.shift + Q @ solution.x, info={**solution.info, "products": products})
+    info = {key: solution.info[key] for key in ("products", "grown", "factorizations", "updates")}
+    info.update(products=info["products"] + int(sets.shift.any()), steps=solution.iterations)
+    return sets.shift + Q @ solution.x, info
 
 
 def _coarse_approximation(approximation, G: sp.csr_matrix):
