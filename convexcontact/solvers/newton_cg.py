@@ -56,15 +56,16 @@ from __future__ import annotations
 import functools
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from .. import blas
-from ..conic import ConicProgram, ConicSolution
+from ..conic import ConicProgram, ConicSolution, nonnegative, soc
 from .cone_polish import BoundForm, bound_form, tangent_bases, unit_rows
 
 TOL = 1e-12
@@ -247,6 +248,20 @@ rounding), so the Newton path does not change, unlike a kept, inexact one (REUSE
 docs/performance.md: 6 → 8 Newton steps on the pair at 1.4·10⁶ DOFs). The pair at 2.8·10⁵ DOFs, Tresca: consecutive
 faces differ by 1–20 terms on 23 of its 44 refactorized systems (docs/performance.md, "The preconditioner updated by
 low rank"). Each CG iteration then also multiplies by Z (rank × H's size)."""
+COARSE_SETS = 64
+"""A solve from no start with P an operator that carries an approximation (fixed radii) first solves the program
+restricted to COARSE_SETS aggregates of neighbouring bounds and as many of balls (:func:`_coarse_start`), and starts
+from that answer. From no start the first step's faces find the opening and slip zones a front at a time, the part of
+the zone left after each face a fixed fraction of the last (the 2-D pair at 3.2·10⁵ DOFs, Signorini: 0, 8, 16, 201,
+561, …, 1124, 1135 of 1153 bounds held in 10 faces), each face a product, a gradient and mostly a refactorization; the
+coarse program finds the zones to within an aggregate in a few faces on 64 unknowns, and the fine one's faces then
+move the fronts within it (docs/performance.md, "The first step on aggregated rows")."""
+COARSE_TOL = 1e-3
+"""The coarse program's tolerance (COARSE_SETS): its answer is a start, constant on each aggregate (1e-2 on the pair
+at 10⁵ DOFs forced matrix-free, Tresca: 82 → 108 products)."""
+COARSE_BLOCK = 16
+"""Right-hand sides per solve with H's factors where the coarse approximation is formed (:func:`_coarse_approximation`):
+each block is H's size × COARSE_BLOCK numbers (at 1.4·10⁶ DOFs ~50 MB)."""
 UPDATE_SOLVES = 12
 """Largest number of the update's terms not met since the factorization (each a solve with the factors, ≈ 7 ms on the
 pair at 2.8·10⁵ DOFs, against ≈ 0.1 s for a refactorization): a term of the last update keeps its solve."""
@@ -403,6 +418,19 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     curvature = probe @ P.matvec(probe) / (probe @ probe)
     c = 0.1 / curvature if curvature > 0 else 1.0  # 0.1: 219 products on a 2-D Tresca dual, 1: 263, 10: 2076
     c = _step_lengths(program.P, sets, c, products)
+    v = np.zeros(program.n_variables) if start is None else (start - sets.shift) / sets.scale
+    if start is not None and sets.coupling is None:  # the last answer may be outside this program's sets (a Picard
+        v = _project(v, sets)  # step's smaller radii), and the convergence argument needs v₀ in them
+    g = gradient(v)
+    coarse = None
+    if start is None:  # the projected gradient's point, or the coarse answer (COARSE_SETS: before the preconditioner's
+        v = _project(v - c * g, sets)  # factors, whose peak is the fine program's), whose first face is then its own
+        if sets.coupling is None and matrix is None:  # (FORCING, not the empty face's FIRST_FORCING)
+            coarse = _coarse_start(program, sets, v, max_iter, verbose)
+        if coarse is not None:
+            v = _project((coarse[0] - sets.shift) / sets.scale, sets)
+            products[0] += coarse[1]["products"]
+        g = gradient(v)
     cache = {} if cache is None else cache
     if "precondition" not in cache:
         approximation = getattr(program.P, "approximation", None)
@@ -410,13 +438,6 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
                                                                   SHIFT * _shifts(approximation, sets, curvature))
     factorized = getattr(cache["precondition"], "factorizations", 0)  # before this solve (info["factorizations"])
     updated = getattr(cache["precondition"], "updates", 0)
-    v = np.zeros(program.n_variables) if start is None else (start - sets.shift) / sets.scale
-    if start is not None and sets.coupling is None:  # the last answer may be outside this program's sets (a Picard
-        v = _project(v, sets)  # step's smaller radii), and the convergence argument needs v₀ in them
-    g = gradient(v)
-    if start is None:
-        v = _project(v - c * g, sets)
-        g = gradient(v)
     def natural(v, g):
         """:func:`_natural` with this solve's step lengths."""
         return _natural(v, g, c, sets, program.q)
@@ -547,7 +568,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             break
         if steps == max_iter:
             break
-        empty = steps == 0 and start is None and sets.coupling is None and matrix is None  # see FIRST_FORCING
+        empty = steps == 0 and start is None and coarse is None and sets.coupling is None and matrix is None
         target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
         target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
         newton, iterations, known = newton_point(v, np.zeros_like(y) if empty else y, target, empty)
@@ -594,7 +615,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     info = {"products": products[0], "cg_iterations": cg_total, "natural_residual": residual, "residuals": history,
             "steps": kinds, "descent": descent, "grown": faces[0], "fixed_steps": fixed_steps,
             "factorizations": getattr(cache["precondition"], "factorizations", 0) - factorized,
-            "updates": getattr(cache["precondition"], "updates", 0) - updated}
+            "updates": getattr(cache["precondition"], "updates", 0) - updated,
+            "coarse": None if coarse is None else coarse[1]}
     if sets.coupling is not None:  # the program of the radii reached: x is its answer
         b = program.b.copy()
         b[form.ball_radius_rows] = info["radii"] = sets.radii(v)
@@ -607,6 +629,97 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         status = "inaccurate"
     return ConicSolution(x=x, z=z, s=program.b - program.A @ x, status=status, solver_status=word, iterations=steps,
                          solve_time=time.perf_counter() - began, solver="newton-cg", info=info)
+
+
+def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter: int,
+                  verbose: bool) -> tuple[np.ndarray, dict] | None:
+    """x of the answer of ``program`` restricted to x = shift + scale ⊙ Q v_c, solved to COARSE_TOL (COARSE_SETS), and
+    that solve's products (K solves, as this program's), Newton steps, faces grown, refactorizations and updates: Q
+    copies each coarse set to the sets of its aggregate (:func:`_aggregates`, bounds and balls apart), so a feasible
+    v_c is a feasible x (a coarse ball's radius is its aggregate's least), and P_c = Q̃ᵀ P Q̃ (Q̃ = diag(scale) Q)
+    carries P's approximation with G's rows summed alike (Q̃ᵀ G). None where P has no approximation or one without
+    coarse functions beyond a slab (H may be K itself: the coarse approximation would cost a factorization of K, see
+    REUSE; a 3-D clamped plate's Tresca dual at 2·10³ DOFs was then certified at 3e-10 against 1e-10), where some
+    variable is in no set, where the sets are too few for the coarse program to be much smaller, or where the
+    projected gradient's point ``v`` holds at 0 no more bounds than an aggregate has (no zone to find at its scale)."""
+    approximation = getattr(program.P, "approximation", None)
+    groups = [members for members in (sets.bounds[:, None], sets.balls) if members.size]
+    counted = sum(members.size for members in groups)
+    if (approximation is None or approximation.slab in (None, approximation.H.shape[0])
+            or counted < program.n_variables or sum(map(len, groups)) < 4 * COARSE_SETS
+            or (v[sets.bounds] == 0).sum() * COARSE_SETS <= sets.bounds.size):
+        return None
+    G = sp.csr_matrix(approximation.G)
+    rows, columns, cones, offset = [], [], [], 0
+    bounds, radius = 0, np.zeros(0)  # the coarse bounds' count, the coarse balls' radii
+    for members in groups:  # bounds (one variable each), then balls (p each)
+        aggregate = _aggregates(G[members[:, 0]], COARSE_SETS)
+        count, p = aggregate.max() + 1, members.shape[1]
+        rows.append(members.ravel())
+        columns.append((offset + aggregate[:, None] * p + np.arange(p)).ravel())
+        if members is sets.balls:
+            radius = np.full(count, np.inf)
+            np.minimum.at(radius, aggregate, sets.radius)
+            cones += [soc(1 + p)] * count
+        else:
+            bounds = count
+            cones.append(nonnegative(count))
+        offset += count * p
+    Q = sp.csr_matrix((sets.scale[np.concatenate(rows)], (np.concatenate(rows), np.concatenate(columns))),
+                      shape=(program.n_variables, offset))  # Q̃ = diag(scale) Q
+    P = _Coarse(program.P, Q, _coarse_approximation(approximation, sp.csr_matrix(Q.T @ G)))
+    q = program.q if not sets.shift.any() else program.q + program.P.matvec(sets.shift)
+    p = sets.balls.shape[1]
+    A = [-sp.eye(bounds, offset)] + [sp.vstack([sp.csr_matrix((1, offset)), -sp.eye(p, offset, bounds + k * p)])
+                                     for k in range(radius.size)]  # each ball: its radius row, −I on its variables
+    b = np.concatenate([np.zeros(bounds)] + [np.concatenate([[r], np.zeros(p)]) for r in radius])
+    coarse = ConicProgram(P, Q.T @ q, sp.vstack(A).tocsc(), b, tuple(cones))
+    solution = newton_cg(coarse, bound_form_of(coarse), None, COARSE_TOL, max_iter, verbose)
+    info = {key: solution.info[key] for key in ("products", "grown", "factorizations", "updates")}
+    info.update(products=info["products"] + int(sets.shift.any()), steps=solution.iterations)
+    return sets.shift + Q @ solution.x, info
+
+
+def _coarse_approximation(approximation, G: sp.csr_matrix):
+    """The coarse program's approximation A = G H⁻¹ Gᵀ (G: P's approximation's rows summed) as a dense matrix, in the
+    approximation's form with H = I and G = V Λ^½ (A = V Λ Vᵀ: A may be singular, where summed rows are dependent or
+    empty, as a 3-D clamped plate's friction rows on its symmetry planes): A from one factorization of H and a solve with
+    G's few rows as right-hand sides (COARSE_BLOCK at a time). With G's summed rows in a factorization of H + Gᵀ D⁻¹ G,
+    each aggregate filled a block as wide as its DOFs: the pair at 1.4·10⁶ DOFs, Signorini, its peak memory 1.72 →
+    2.44 × the linear solve's."""
+    factors = approximation.factorize(approximation.H)
+    dense = np.zeros((G.shape[0], G.shape[0]))
+    for first in range(0, G.shape[0], COARSE_BLOCK):
+        rows = slice(first, first + COARSE_BLOCK)
+        dense[:, rows] = G @ factors.solve(G[rows].T.toarray())
+    del factors
+    values, vectors = np.linalg.eigh(0.5 * (dense + dense.T))
+    root = sp.csr_matrix(vectors * np.sqrt(np.maximum(values, 0.0)))
+    return replace(approximation, G=root, H=sp.eye(G.shape[0], format="csr"), slab=None)
+
+
+def _aggregates(rows: sp.csr_matrix, count: int) -> np.ndarray:
+    """Each row's aggregate: ``count`` runs of rows, consecutive in a reverse Cuthill–McKee order of the graph of
+    rows sharing a column (on a 2-D contact face, the nodes along it)."""
+    pattern = sp.csr_matrix((np.ones(rows.nnz), rows.indices, rows.indptr), shape=rows.shape)
+    order = reverse_cuthill_mckee(sp.csr_matrix(pattern @ pattern.T), symmetric_mode=True)
+    aggregate = np.empty(rows.shape[0], dtype=int)
+    aggregate[order] = np.arange(rows.shape[0]) * count // rows.shape[0]
+    return aggregate
+
+
+class _Coarse(spla.LinearOperator):
+    """x_c ↦ Q̃ᵀ P Q̃ x_c (see :func:`_coarse_start`); ``approximation`` that of P with G's rows summed by Q̃."""
+
+    def __init__(self, P, Q: sp.csr_matrix, approximation):
+        super().__init__(float, (Q.shape[1], Q.shape[1]))
+        self._P, self._Q, self._Qt = P, Q, sp.csr_matrix(Q.T)
+        self.approximation = approximation
+
+    def _matvec(self, x):
+        return self._Qt @ self._P.matvec(self._Q @ x)
+
+    _rmatvec = _matvec
 
 
 class _Preconditioner:

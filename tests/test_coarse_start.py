@@ -1,0 +1,76 @@
+"""A solve from no start with P an operator that carries an approximation first solves the program restricted to
+aggregates of neighbouring sets, and starts from that answer (solvers/newton_cg.py, COARSE_SETS): the first step's faces
+then move the fronts of the opening and slip zones within an aggregate instead of finding them a front at a time."""
+
+import numpy as np
+import pytest
+
+import convexcontact as cc
+from convexcontact.solvers import newton_cg
+from convexcontact.studies.benchmarks.bench import scene_of
+
+
+def solved(monkeypatch, scene, formulation):
+    """The model's result and newton-cg's top-level solves (not the coarse program's)."""
+    solves, depth = [], [0]
+    solve = newton_cg.newton_cg
+
+    def wrapped(*args, **kwargs):
+        depth[0] += 1
+        try:
+            solution = solve(*args, **kwargs)
+        finally:
+            depth[0] -= 1
+        if not depth[0]:
+            solves.append(solution)
+        return solution
+
+    monkeypatch.setattr(newton_cg, "newton_cg", wrapped)
+    model = cc.prepare(scene, formulation)
+    return model.solve(), solves
+
+
+@pytest.mark.parametrize("coarse", [True, False])
+def test_the_pair_s_tresca_dual_from_the_coarse_answer(monkeypatch, coarse):
+    """2·10⁴ DOFs, forced matrix-free (148 nodes; 52 of 148 bounds at 0 at the projected gradient's point): from no
+    start 5 Newton steps, 97 products and 12 refactorizations of the preconditioner; from the answer restricted to 64 +
+    64 aggregates 3 steps and 72 products (the coarse program's included), 5 refactorizations in all."""
+    if not coarse:
+        monkeypatch.setattr(newton_cg, "COARSE_SETS", 10**9)  # the sets too few: before
+    result, [solution] = solved(monkeypatch, scene_of("two-body", 2, "tresca", 2e4), "dual-matrix-free")
+    assert result.solved and result.certificate.worst <= 1e-10
+    info = solution.info
+    assert (info["coarse"] is not None) == coarse
+    refactorized = info["factorizations"] + (info["coarse"] or {}).get("factorizations", 0)
+    assert (solution.iterations, info["products"], refactorized) == ((3, 72, 5) if coarse else (5, 97, 12))
+
+
+def test_no_coarse_program_where_the_loads_alone_open_no_aggregate(monkeypatch):
+    """The clamped strip 20 : 1 (10⁵ DOFs, Tresca, auto: matrix-free, 1001 nodes) is all in contact: the projected
+    gradient's point holds 2 bounds at 0 (by the clamps), fewer than an aggregate's 16, so no coarse program (it cost
+    10 products there, 17 → 27, and left the fine path as it was)."""
+    result, [solution] = solved(monkeypatch, scene_of("strip-clamped-20", 2, "tresca", 1e5), "auto")
+    assert result.solved and solution.info["coarse"] is None
+    assert solution.info["products"] == 17
+
+
+def test_the_coarse_answer_is_feasible_and_constant_on_aggregates():
+    """The restriction x = Q x_c copies each coarse set to its aggregate, with the least radius: the start lies in the
+    fine program's sets (bounds ≥ 0, |λ_T| ≤ s for every point) and takes few distinct values."""
+    model = cc.prepare(scene_of("two-body", 2, "tresca", 2e4), "dual-matrix-free")
+    program = model.program
+    form = newton_cg.bound_form_of(program)
+    sets = newton_cg._bounds(program, form)
+    radius = sets.radius * np.linspace(0.5, 1.5, sets.radius.size)  # radii that differ inside an aggregate
+    b = program.b.copy()
+    b[form.ball_radius_rows] = radius
+    program = program.updated(b=b)
+    sets = newton_cg._bounds(program, form)
+    v = np.zeros(program.n_variables)  # every bound at 0: a zone to find
+    start = newton_cg._coarse_start(program, sets, v, 100, False)
+    assert start is not None
+    x, info = start
+    assert info["steps"] < 100  # solved: not stopped at max_iter
+    assert (x[form.bound_vars] >= 0).all()
+    assert (np.abs(x[form.ball_vars[:, 0]]) <= radius * (1 + 1e-12)).all()
+    assert np.unique(x[form.bound_vars]).size <= newton_cg.COARSE_SETS
