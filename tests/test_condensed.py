@@ -8,6 +8,7 @@ import pytest
 
 import convexcontact as cc
 from convexcontact.cli import main
+from convexcontact.drivers import rules
 from convexcontact.scene.description import Coulomb, SceneError
 from convexcontact.scene.library import hertz_punch, pressure_patch
 from convexcontact.studies.benchmarks import bench
@@ -42,6 +43,19 @@ def test_auto_keeps_the_primal_where_condensing_does_not_pay_or_cannot_work():
         model = cc.prepare(scene)
         assert model.formulation == "primal" and words in model.reason
         assert model.solve("clarabel").status == "solved"
+
+
+def test_auto_condenses_a_small_3d_face_with_friction_where_the_primal_is_not_polished():
+    """Two coarse P1 caps (108 DOFs; rows on their partly covered slave nodes touch 42 columns, over a quarter of the
+    DOFs): with friction the primal's cones are not in the polish's bound form and Clarabel left the friction law at
+    2.1e-7 (Tresca) where the dense dual's newton-cg certifies it to round-off; Signorini's primal is polished and kept."""
+    from convexcontact.scene.bodies_library import two_spheres
+
+    for law, formulation in ((cc.Tresca(slip_bound=0.005), "dual"), (Coulomb(friction=0.2), "dual"), (None, "primal")):
+        scene = two_spheres(cells=2, moduli=(1.0, 3.0), **({"law": law} if law else {}))
+        model = cc.prepare(scene)
+        assert 4 * rules.contact_columns(model.fem).size > model.fem.n_free and model.formulation == formulation
+        assert model.solve().certificate.worst <= 1e-12
 
 
 def test_a_singular_stiffness_falls_back_to_the_primal_under_auto_and_is_an_error_when_asked_for():
