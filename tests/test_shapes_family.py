@@ -24,12 +24,10 @@ FAILING: dict = {}
 """Cases that are not solved today, and why: none since newton-cg damps its Newton systems after a far point (the
 3-D pair's Coulomb row, matrix-free; docs/performance.md, "The 3-D pair from the stick start"). That row hangs on the
 local diagonal's estimates of near-null rows: with one layer of patches on 3-D faces it stalled again."""
-PRIMAL_3D = ("auto condenses no 3-D body whose contact nodes carry over a quarter of its DOFs; the sparse primal's "
-             "second-order cones are not in the polish's bound form, and Clarabel alone certifies 3-D friction to "
-             "~1e-7 (at the bench's sizes, 1e4 DOFs and up, auto takes a dual on these shapes)")
-UNCERTIFIED = {(3, shape, law, "auto"): PRIMAL_3D for shape in ("flat", "plate-free-20", "plate-clamped-20")
-               for law in ("tresca", "coulomb")}
-"""Cases solved short of the issue's certificate today, and why."""
+UNCERTIFIED: dict = {}
+"""Cases solved short of the issue's certificate today, and why: none since auto condenses 3-D friction where the
+contact nodes carry over a quarter of the DOFs (the flat block and the plates here, Tresca and Coulomb: the sparse
+primal's cones are not in the polish's bound form and Clarabel alone left 6e-9–3.4e-7; rules.choose_formulation)."""
 
 
 def cases(known: dict):
