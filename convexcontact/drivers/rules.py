@@ -119,7 +119,7 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
                           "force-controlled obstacle or a regularized friction has no matrix-free dual)")
     # Not for 3-D friction with a bound form: the primal's second-order cones are not in the polish's bound form and
     # Clarabel leaves their law at 1e-8–3e-7, where newton-cg's dense dual certifies it to round-off, in less time on
-    # the sizes this rule reaches (docs/performance.md, "auto's primal on small 3-D faces"; 2-D intervals are polished)
+    # the sizes this rule reaches (docs/performance.md, "The family in 3-D and with Coulomb"; 2-D intervals are polished)
     cones = fem.dim == 3 and isinstance(law, (Tresca, Coulomb)) and matrix_free_applies(fem, law)
     if 4 * columns > fem.n_free and not cones:
         return "primal", f"the contact nodes carry {columns} of the {fem.n_free} DOFs: too many to gain by condensing"
