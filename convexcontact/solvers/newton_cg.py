@@ -26,7 +26,8 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
 
 Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
 way; a solve from no start with P an operator takes the empty face's first (FIRST_FORCING), which (a) or (b) judges
-as any other.
+as any other. Nor does it ask anything of v₀ beyond the sets: where P carries an approximation with coarse functions,
+a solve from no start begins at the answer of the program on aggregated sets (COARSE_SETS), feasible by construction.
 With fixed radii it is Newton's point on the face the natural map holds at v, then on the face it holds at that point
 (the primal-dual active set update: the sets the point leaves held, those whose multipliers point inward released,
 an interval moved to the end its multiplier pushes it to), solved for again until the face stays, at most GROW times
