@@ -74,3 +74,16 @@ def test_the_coarse_answer_is_feasible_and_constant_on_aggregates():
     assert (x[form.bound_vars] >= 0).all()
     assert (np.abs(x[form.ball_vars[:, 0]]) <= radius * (1 + 1e-12)).all()
     assert np.unique(x[form.bound_vars]).size <= newton_cg.COARSE_SETS
+
+
+def test_no_coarse_program_where_the_rows_form_no_line(monkeypatch):
+    """The 3-D pair of spheres at 10⁵ DOFs, forced matrix-free (511 bounds; 16 breadth-first levels against 200 of
+    717 on the 2-D pair at 10⁵): its opening zone is a few nodes across, and the coarse program cost more than it saved
+    (Tresca 72 → 95 products, the same 5 Newton steps), so newton_cg.LINE leaves the path of no coarse start."""
+    result, [solution] = solved(monkeypatch, scene_of("two-body", 3, "tresca", 1e5), "dual-matrix-free")
+    assert result.solved and result.certificate.worst <= 1e-10
+    assert solution.info["coarse"] is None and (solution.iterations, solution.info["products"]) == (5, 72)
+    program = cc.prepare(scene_of("two-body", 2, "tresca", 1e5), "dual-matrix-free").program
+    sets = newton_cg._bounds(program, newton_cg.bound_form_of(program))
+    G = program.P.approximation.G.tocsr()
+    assert newton_cg._aggregates(G[sets.bounds], newton_cg.COARSE_SETS) is not None  # the 2-D face: a line

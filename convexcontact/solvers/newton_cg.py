@@ -63,7 +63,7 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from scipy.sparse.csgraph import reverse_cuthill_mckee
+from scipy.sparse.csgraph import reverse_cuthill_mckee, shortest_path
 
 from .. import blas
 from ..conic import ConicProgram, ConicSolution, nonnegative, soc
@@ -260,6 +260,13 @@ move the fronts within it (docs/performance.md, "The first step on aggregated ro
 COARSE_TOL = 1e-3
 """The coarse program's tolerance (COARSE_SETS): its answer is a start, constant on each aggregate (1e-2 on the pair
 at 10⁵ DOFs forced matrix-free, Tresca: 82 → 108 products)."""
+LINE = 8
+"""The coarse start (COARSE_SETS) only where the sets' rows form a line: the breadth-first levels of their graph from
+the reverse Cuthill–McKee order's start number at least 1 / LINE of the rows (the 2-D pair at 2·10⁴ / 5·10⁴ DOFs: 44
+of 148, 98 of 345 bounds; the 3-D pair of spheres at 10⁵: 16 of 511). On a 3-D face the opening and slip zones are a
+few nodes across and the fine faces from no start are few: there the coarse program's own 26–49 products outweighed
+what it saved (forced matrix-free at 10⁵–3·10⁵ DOFs: Tresca 72–75 → 95, Coulomb 68 → 82 products; compact patches in
+place of RCM's bands were no better; docs/performance.md, "The coarse start on the 3-D rows at 3·10⁵ DOFs")."""
 COARSE_BLOCK = 16
 """Right-hand sides per solve with H's factors where the coarse approximation is formed (:func:`_coarse_approximation`):
 each block is H's size × COARSE_BLOCK numbers (at 1.4·10⁶ DOFs ~50 MB)."""
@@ -641,8 +648,9 @@ def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter:
     carries P's approximation with G's rows summed alike (Q̃ᵀ G). None where P has no approximation or one without
     coarse functions beyond a slab (H may be K itself: the coarse approximation would cost a factorization of K, see
     REUSE; a 3-D clamped plate's Tresca dual at 2·10³ DOFs was then certified at 3e-10 against 1e-10), where some
-    variable is in no set, where the sets are too few for the coarse program to be much smaller, or where the
-    projected gradient's point ``v`` holds at 0 no more bounds than an aggregate has (no zone to find at its scale)."""
+    variable is in no set, where the sets are too few for the coarse program to be much smaller, where the
+    projected gradient's point ``v`` holds at 0 no more bounds than an aggregate has (no zone to find at its scale), or
+    where the sets' rows do not form a line (LINE)."""
     approximation = getattr(program.P, "approximation", None)
     groups = [members for members in (sets.bounds[:, None], sets.balls) if members.size]
     counted = sum(members.size for members in groups)
@@ -655,6 +663,8 @@ def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter:
     bounds, radius = 0, np.zeros(0)  # the coarse bounds' count, the coarse balls' radii
     for members in groups:  # bounds (one variable each), then balls (p each)
         aggregate = _aggregates(G[members[:, 0]], COARSE_SETS)
+        if aggregate is None:  # not a line (LINE)
+            return None
         count, p = aggregate.max() + 1, members.shape[1]
         rows.append(members.ravel())
         columns.append((offset + aggregate[:, None] * p + np.arange(p)).ravel())
@@ -699,14 +709,19 @@ def _coarse_approximation(approximation, G: sp.csr_matrix):
     return replace(approximation, G=root, H=sp.eye(G.shape[0], format="csr"), slab=None)
 
 
-def _aggregates(rows: sp.csr_matrix, count: int) -> np.ndarray:
+def _aggregates(rows: sp.csr_matrix, count: int) -> np.ndarray | None:
     """Each row's aggregate: ``count`` runs of rows, consecutive in a reverse Cuthill–McKee order of the graph of
-    rows sharing a column (on a 2-D contact face, the nodes along it)."""
+    rows sharing a column (on a 2-D contact face, the nodes along it); None where that graph is no line (LINE)."""
     pattern = sp.csr_matrix((np.ones(rows.nnz), rows.indices, rows.indptr), shape=rows.shape)
-    order = reverse_cuthill_mckee(sp.csr_matrix(pattern @ pattern.T), symmetric_mode=True)
+    graph = sp.csr_matrix(pattern @ pattern.T)
+    order = reverse_cuthill_mckee(graph, symmetric_mode=True)
+    distance = shortest_path(graph, unweighted=True, indices=order[-1])  # levels from RCM's start
+    if (distance[np.isfinite(distance)].max() + 1) * LINE < rows.shape[0]:
+        return None
     aggregate = np.empty(rows.shape[0], dtype=int)
     aggregate[order] = np.arange(rows.shape[0]) * count // rows.shape[0]
     return aggregate
+
 
 
 class _Coarse(spla.LinearOperator):
