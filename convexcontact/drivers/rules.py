@@ -11,7 +11,7 @@ from .. import solvers
 from ..conic import ConicProgram
 from ..fem.assembly import FEModel
 from ..fem.factorization import saddle_applies
-from ..scene.description import Coulomb, Tresca, compliance_of
+from ..scene.description import Coulomb, compliance_of, has_friction
 
 INCOMPRESSIBLE = 1e5
 """λ/μ (ν ≈ 0.499995) from which "auto" keeps the primal: beyond what was measured. Below it the dual is certified
@@ -120,8 +120,8 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
     # Not for 3-D friction with a bound form: the primal's second-order cones are not in the polish's bound form and
     # Clarabel leaves their law at 1e-8–3e-7, where newton-cg's dense dual certifies it to round-off, in less time on
     # the sizes this rule reaches (docs/performance.md, "The family in 3-D and with Coulomb"; 2-D intervals are polished)
-    cones = fem.dim == 3 and isinstance(law, (Tresca, Coulomb)) and matrix_free_applies(fem, law)
-    if 4 * columns > fem.n_free and not cones:
+    unpolished = fem.dim == 3 and has_friction(law) and matrix_free_applies(fem, law)
+    if 4 * columns > fem.n_free and not unpolished:
         return "primal", f"the contact nodes carry {columns} of the {fem.n_free} DOFs: too many to gain by condensing"
     return "dual", (f"{unknowns} contact unknowns beside {fem.n_free} DOFs: K is condensed onto Γ_C once "
                     f"(Delassus operator W){reuse}, then the program is small and dense")
