@@ -317,6 +317,27 @@ def test_where_most_points_slip_at_the_stick_start_newton_starts_from_the_tresca
     assert tresca < newton_steps(cc.prepare(scene, "dual-matrix-free")) and len(bounds) == 1
 
 
+def test_where_a_coarse_program_begins_the_stick_start_its_answer_is_the_start(monkeypatch):
+    """The 2-D pair at 2·10⁴ DOFs, forced matrix-free: the stick start's program is solved from the coarse program's
+    answer (COARSE_SETS), which is the stick start itself (STICK_START counts it as its Newton step): no fine Newton
+    step, 53 products with W against 58 (49 of them the coarse program's), and the Tresca start's bounds are F G S λ_N
+    of that answer's pressure. At 1.4·10⁶ DOFs the fine step was 50 of the stick start's 89 products."""
+    trials, bounds = [], []
+    trial, tresca_start = newton_cg.Session.trial, picard.tresca_start
+    monkeypatch.setattr(newton_cg.Session, "trial", lambda self, b, steps: trials.append(answer := trial(self, b, steps))
+                        or answer)
+    monkeypatch.setattr(picard, "tresca_start", lambda model, newton, radii: bounds.append(radii) or
+                        tresca_start(model, newton, radii))
+    model = cc.prepare(two_body_scene("coulomb", 2e4), "dual-matrix-free")
+    result = model.solve()
+    assert result.status == "solved" and result.certificate.worst <= 1e-10
+    [stuck], [bound] = trials, bounds
+    assert stuck.info["coarse"] is not None and stuck.iterations == 0
+    assert stuck.info["products"] == stuck.info["coarse"]["products"] + 4  # probes, two gradients
+    np.testing.assert_allclose(bound, picard.pressure_map(model)[0](model.recover(stuck).pressure), rtol=1e-10,
+                               atol=1e-14)
+
+
 def test_the_tresca_start_is_solved_only_to_a_start_s_tolerance(monkeypatch):
     """The Tresca start only places Newton's Coulomb solve, whose first residual is the pressure's change (the pair:
     1e-3 at 3.2·10⁵ DOFs): solved to START_TOL, not to the session's 1e-12, on the 2-D pair at 1.1·10⁴ DOFs (W an

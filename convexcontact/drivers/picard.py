@@ -74,7 +74,13 @@ clamped strip 400 : 1 at 10⁵ DOFs 42 + 65, 3 → 15 + 33, 3; at 2·10⁴ 24 + 
 tall block 10 + 126, 7 → 10 + 61, 5; flat block 9 + 44, 6 → 9 + 36, 5; the pair of spheres at 10⁴ 47 + 8372, 11 →
 106 + 156, 9; but the 2-D pair at 2·10⁴ 48 + 87, 6 → 46 + 117, 7. Not where W is a matrix: there the first point is
 no empty face's (FIRST_FORCING), and from the stick point the 3-D tall block at 2·10⁴ DOFs stalled after 5 Newton
-steps (the Picard map answered) where it takes 6 from the frictionless start."""
+steps (the Picard map answered) where it takes 6 from the frictionless start. Where the stick program's solve begins
+from newton-cg's coarse program (COARSE_SETS: the 2-D pair), that answer is the step (:meth:`Session.trial`): the fine
+step after it took 50 of the stick start's 89 products on the pair at 1.4·10⁶ DOFs, and the Tresca start and Newton's
+Coulomb solve after it were no shorter for it. Products stick start + Tresca start + Newton (docs/performance.md,
+"The stick start from the coarse answer alone"): the pair at 1.4·10⁶ DOFs 89 + 90 + 135 = 314 → 43 + 82 + 66 = 191,
+3.2·10⁵ 51 + 49 + 57 = 157 → 40 + 44 + 59 = 143; forced matrix-free at 10⁵ 138 → 106, 5·10⁴ 193 → 175, but 2·10⁴
+199 → 235 (Newton's Coulomb solve 112 → 156 products: its path has plateaus whichever start)."""
 TRESCA_SLIP = 0.5
 """Where more than this fraction of the stick start's points lie outside their Coulomb disc (most slip: its point is
 far from the answer's), one Tresca solve with the slip bounds F G S λ_N of the stick start's pressure follows it

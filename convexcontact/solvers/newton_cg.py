@@ -351,10 +351,11 @@ class Session:
 
     def trial(self, b: np.ndarray, max_iter: int) -> ConicSolution:
         """At most ``max_iter`` Newton steps from no start on this session's program with the bounds ``b`` (a start for
-        another solve: the stick start of :func:`~convexcontact.drivers.picard.newton_session`), with this session's
-        preconditioner; the session's program and start are left as they were."""
+        another solve: the stick start of :func:`~convexcontact.drivers.picard.newton_session`), the coarse program's
+        answer one of them where it begins the solve (COARSE_SETS), with this session's preconditioner; the session's
+        program and start are left as they were."""
         return newton_cg(self.program.updated(b=b), self._form, None, self._tol, max_iter, self._verbose, None,
-                         self._cache)
+                         self._cache, coarse_step=True)
 
     def coupled(self, coupling: sp.spmatrix, max_iter: int = 30) -> ConicSolution:
         """:func:`coupled` from the last answer, with this session's preconditioner; the session's program then
@@ -402,9 +403,12 @@ def solve(program: ConicProgram, **options) -> ConicSolution:
 
 
 def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_iter: int, verbose=False,
-              progress=None, cache: dict | None = None, coupling: sp.spmatrix | None = None) -> ConicSolution:
+              progress=None, cache: dict | None = None, coupling: sp.spmatrix | None = None,
+              coarse_step: bool = False) -> ConicSolution:
     """Newton's method on the natural map from ``start`` (x; None: the projected gradient step from 0);
-    ``cache`` keeps the preconditioner for the next solve of a session; ``coupling``: see :func:`coupled`."""
+    ``cache`` keeps the preconditioner for the next solve of a session; ``coupling``: see :func:`coupled`;
+    ``coarse_step``: the coarse program's answer, where one begins the solve (COARSE_SETS), counts as one of
+    ``max_iter``'s Newton steps (a trial's, :meth:`Session.trial`)."""
     began = time.perf_counter()
     P = _operator(program.P)
     sets = _bounds(program, form, coupling)
@@ -438,6 +442,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if coarse is not None:
             v = _project((coarse[0] - sets.shift) / sets.scale, sets)
             products[0] += coarse[1]["products"]
+            max_iter -= coarse_step
         g = gradient(v)
     cache = {} if cache is None else cache
     if "precondition" not in cache:
