@@ -340,26 +340,24 @@ def test_where_a_coarse_program_begins_the_stick_start_its_answer_is_the_start(m
 
 def test_the_tresca_start_is_solved_only_to_a_start_s_tolerance(monkeypatch):
     """The Tresca start only places Newton's Coulomb solve, whose first residual is the pressure's change (the pair:
-    1e-3 at 3.2·10⁵ DOFs): solved to START_TOL, not to the session's 1e-12, on the 2-D pair at 1.1·10⁴ DOFs (W an
-    operator) it takes one Newton step fewer (3 → 2) and Newton's Coulomb solve from it the same steps and
-    certificate."""
+    1.5e-3 at 3.2·10⁵ DOFs, 5.8e-4 at 1.4·10⁶): on the 2-D pair at 1.1·10⁴ DOFs (W an operator) solved to TRESCA_TOL
+    it takes 1 Newton step, to START_TOL (before) 2, to the session's 1e-12 3, and Newton's Coulomb solve from each
+    the same 2 steps and a certified answer."""
     solves = []
     solve = newton_cg.Session.solve
     monkeypatch.setattr(newton_cg.Session, "solve", lambda self, *tol: solves.append(answer := solve(self, *tol)) or
                         answer)
     scene = two_body_scene("coulomb", 6e3)
 
-    def run():
+    def run(tol):
+        monkeypatch.setattr(picard, "TRESCA_TOL", tol)
         solves.clear()
         result = cc.prepare(scene, "dual-matrix-free").solve()
         assert result.status == "solved" and result.certificate.worst <= 1e-10
         assert len(solves) == 1 and solves[0].solved  # the Tresca start, the session's one solve
         return solves[0].iterations, len(result.extra["history"][0]["newton_residuals"]) - 1
 
-    start, coulomb = run()
-    monkeypatch.setattr(picard, "START_TOL", newton_cg.TOL)  # to the session's tolerance
-    tight = run()
-    assert start < tight[0] and coulomb == tight[1]
+    assert [run(tol) for tol in (picard.TRESCA_TOL, picard.START_TOL, newton_cg.TOL)] == [(1, 2), (2, 2), (3, 2)]
 
 
 def test_a_stall_is_left_by_the_fixed_point_map_s_step(monkeypatch):
