@@ -77,10 +77,11 @@ no empty face's (FIRST_FORCING), and from the stick point the 3-D tall block at 
 steps (the Picard map answered) where it takes 6 from the frictionless start. Where the stick program's solve begins
 from newton-cg's coarse program (COARSE_SETS: the 2-D pair), that answer is the step (:meth:`Session.trial`): the fine
 step after it took 50 of the stick start's 89 products on the pair at 1.4·10⁶ DOFs, and the Tresca start and Newton's
-Coulomb solve after it were no shorter for it. Products stick start + Tresca start + Newton (docs/performance.md,
-"The stick start from the coarse answer alone"; the Tresca start then to START_TOL): the pair at 1.4·10⁶ DOFs 89 + 90 + 135 = 314 → 43 + 82 + 66 = 191,
-3.2·10⁵ 51 + 49 + 57 = 157 → 40 + 44 + 59 = 143; forced matrix-free at 10⁵ 138 → 106, 5·10⁴ 193 → 175, but 2·10⁴
-199 → 235 (Newton's Coulomb solve 112 → 156 products: its path has plateaus whichever start)."""
+Coulomb solve after it were no shorter for it. Products stick start + Tresca start + Newton, the Tresca start then to
+START_TOL (docs/performance.md, "The stick start from the coarse answer alone"): the pair at 1.4·10⁶ DOFs 89 + 90 +
+135 = 314 → 43 + 82 + 66 = 191, 3.2·10⁵ 51 + 49 + 57 = 157 → 40 + 44 + 59 = 143; forced matrix-free at 10⁵ 138 →
+106, 5·10⁴ 193 → 175, but 2·10⁴ 199 → 235 (Newton's Coulomb solve 112 → 156 products: its path has plateaus whichever
+start)."""
 TRESCA_SLIP = 0.5
 """Where more than this fraction of the stick start's points lie outside their Coulomb disc (most slip: its point is
 far from the answer's), one Tresca solve with the slip bounds F G S λ_N of the stick start's pressure follows it
