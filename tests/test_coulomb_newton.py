@@ -17,7 +17,7 @@ from convexcontact.formulations.dual import normal_multipliers, stick_guess
 from convexcontact.scene.description import Coulomb, SceneError
 from convexcontact.scene.library import punch_3d, whole_face
 from convexcontact.solvers import newton_cg
-from convexcontact.studies.benchmarks.bench import two_body_scene
+from convexcontact.studies.benchmarks.bench import scene_of, two_body_scene
 
 
 def coulomb_like(rng, nodes: int, size: int, friction: float):
@@ -358,6 +358,18 @@ def test_the_tresca_start_is_solved_only_to_a_start_s_tolerance(monkeypatch):
         return solves[0].iterations, len(result.extra["history"][0]["newton_residuals"]) - 1
 
     assert [run(tol) for tol in (picard.TRESCA_TOL, picard.START_TOL, newton_cg.TOL)] == [(1, 2), (2, 2), (3, 2)]
+
+
+@pytest.mark.parametrize("release", [True, False])
+def test_newton_s_coulomb_faces_on_intervals_are_the_natural_map_s(monkeypatch, release):
+    """The 2-D block at 10⁵ DOFs (W a matrix): where Newton's point on the Coulomb problem is refused, its faces are the
+    natural map's at that point (RELEASE_MOVING: released and flipped intervals, as with fixed radii), and Newton's
+    Coulomb solve takes 6 steps; with faces only grown by the sets the point leaves (before) it crawled for 11."""
+    monkeypatch.setattr(newton_cg, "RELEASE_MOVING", release)
+    result = cc.prepare(scene_of("block", 2, "coulomb", 1e5), "auto").solve()
+    assert result.status == "solved" and result.certificate.worst <= 1e-10
+    [step] = result.extra["history"]
+    assert step["coulomb_newton"] and len(step["newton_residuals"]) - 1 == (6 if release else 11)
 
 
 def test_a_stall_is_left_by_the_fixed_point_map_s_step(monkeypatch):
