@@ -172,10 +172,11 @@ map's at that point, as with fixed radii (:func:`_released`: sets whose multipli
 moved to the end its multiplier pushes it to), not only grown by the sets it leaves (:func:`_grown`): a grown face held
 a node at the wrong end of its interval, Newton's point was refused again, and the steps crawled on a plateau (2-D pair
 at 3.2·10⁵ DOFs: a refused step cost 25–37 products against 9–14 for a taken one). Newton's Coulomb solve, steps /
-products, grown → released (docs/performance.md, "The stick start from the coarse answer alone"): the 2-D block at
-10⁵ DOFs (W a matrix) 11 / 65 → 6 / 36, the tall block 9 / 96 → 3 / 33, the pair 7 / 34 → 6 / 37; the pair forced
-matrix-free at 2·10⁴ 7 / 156 → 6 / 136, 5·10⁴ 7 / 109 → 5 / 63, 10⁵ 3 / 30 both, `auto` at 3.2·10⁵ 4 / 59 → 3 / 49;
-the strips unchanged (no face grown). Not on discs (3-D): the tall block at 3·10⁴ DOFs 12 / 63 → 12 / 97, and a
+products, grown → released (docs/performance.md, "Coulomb's starts on the pair from the coarse answer"): the 2-D
+block at 10⁵ DOFs (W a matrix) 11 / 65 → 6 / 36, the tall block 9 / 96 → 3 / 33, the pair 7 / 34 → 6 / 37; the pair
+forced matrix-free at 2·10⁴ 7 / 156 → 6 / 136, 5·10⁴ 7 / 109 → 5 / 63, 10⁵ 3 / 30 both, `auto` at 3.2·10⁵ 4 / 59 →
+3 / 49, but at 1.4·10⁶ 6 / 66 → 6 / 81 (the same plateau, each face a gradient more); the strips unchanged (no face
+grown). Not on discs (3-D): the tall block at 3·10⁴ DOFs 12 / 63 → 12 / 97, and a
 disc program that stalls without the fixed-point step (tests/test_coulomb_newton.py) no longer stalled."""
 GRADIENT_LENGTHS = 0.5 ** np.arange(8)
 """Where radii move and Newton's points were refused, the fractions of the projected gradient's step tried (the first
