@@ -989,12 +989,12 @@ def _released(y: np.ndarray, newton: np.ndarray, g: np.ndarray, c, sets: _Bounds
               then: np.ndarray, now: np.ndarray):
     """The face the natural map holds at ``newton``, Newton's point on the face y holds (``g`` = ∇f there; the balls'
     radii ``then`` where y's face was held, ``now`` at Newton's point: the same where radii are fixed): the primal-dual
-    active set update (GROW), y' = newton − c g on the sets y holds (c g: their
-    multipliers), newton on the others (whose multipliers the Newton system set to 0). It holds the sets the point
-    leaves (as :func:`_grown`), releases those whose multiplier points inward, and moves an interval (a ball of one
-    variable) to the end its multiplier pushes it to; a set ``released`` before in this step (a mask over the
-    variables, updated here) stays as y holds it, and a ball of more variables held in both keeps y's point (its
-    tangent basis: REUSE). (y', whether a set was released), or (None, False) where the face is y's."""
+    active set update (GROW), y' = newton − c g on the sets y holds (c g: their multipliers), newton on the others
+    (whose multipliers the Newton system set to 0). It holds the sets the point leaves (as :func:`_grown`), releases
+    those whose multiplier points inward, and moves an interval (a ball of one variable) to the end its multiplier
+    pushes it to; a set ``released`` before in this step (a mask over the variables, updated here) stays as y holds
+    it, and a ball of more variables held in both keeps y's point (its tangent basis: REUSE). (y', whether a set was
+    released), or (None, False) where the face is y's."""
     held = np.zeros(y.size, bool)
     held[sets.bounds[y[sets.bounds] < 0]] = True
     on = np.linalg.norm(y[sets.balls], axis=1) > then
