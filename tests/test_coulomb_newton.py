@@ -17,7 +17,7 @@ from convexcontact.formulations.dual import normal_multipliers, stick_guess
 from convexcontact.scene.description import Coulomb, SceneError
 from convexcontact.scene.library import punch_3d, whole_face
 from convexcontact.solvers import newton_cg
-from convexcontact.studies.benchmarks.bench import two_body_scene
+from convexcontact.studies.benchmarks.bench import scene_of, two_body_scene
 
 
 def coulomb_like(rng, nodes: int, size: int, friction: float):
@@ -317,28 +317,59 @@ def test_where_most_points_slip_at_the_stick_start_newton_starts_from_the_tresca
     assert tresca < newton_steps(cc.prepare(scene, "dual-matrix-free")) and len(bounds) == 1
 
 
+def test_where_a_coarse_program_begins_the_stick_start_its_answer_is_the_start(monkeypatch):
+    """The 2-D pair at 2·10⁴ DOFs, forced matrix-free: the stick start's program is solved from the coarse program's
+    answer (COARSE_SETS), which is the stick start itself (STICK_START counts it as its Newton step): no fine Newton
+    step, 53 products with W against 58 (49 of them the coarse program's), and the Tresca start's bounds are F G S λ_N
+    of that answer's pressure. At 1.4·10⁶ DOFs the fine step was 50 of the stick start's 89 products."""
+    trials, bounds = [], []
+    trial, tresca_start = newton_cg.Session.trial, picard.tresca_start
+    monkeypatch.setattr(newton_cg.Session, "trial", lambda self, b, steps: trials.append(answer := trial(self, b, steps))
+                        or answer)
+    monkeypatch.setattr(picard, "tresca_start", lambda model, newton, radii: bounds.append(radii) or
+                        tresca_start(model, newton, radii))
+    model = cc.prepare(two_body_scene("coulomb", 2e4), "dual-matrix-free")
+    result = model.solve()
+    assert result.status == "solved" and result.certificate.worst <= 1e-10
+    [stuck], [bound] = trials, bounds
+    assert stuck.info["coarse"] is not None and stuck.iterations == 0
+    assert stuck.info["products"] == stuck.info["coarse"]["products"] + 4  # probes, two gradients
+    np.testing.assert_allclose(bound, picard.pressure_map(model)[0](model.recover(stuck).pressure), rtol=1e-10,
+                               atol=1e-14)
+
+
 def test_the_tresca_start_is_solved_only_to_a_start_s_tolerance(monkeypatch):
     """The Tresca start only places Newton's Coulomb solve, whose first residual is the pressure's change (the pair:
-    1e-3 at 3.2·10⁵ DOFs): solved to START_TOL, not to the session's 1e-12, on the 2-D pair at 1.1·10⁴ DOFs (W an
-    operator) it takes one Newton step fewer (3 → 2) and Newton's Coulomb solve from it the same steps and
-    certificate."""
+    1.5e-3 at 3.2·10⁵ DOFs, 5.8e-4 at 1.4·10⁶): on the 2-D pair at 1.1·10⁴ DOFs (W an operator) solved to TRESCA_TOL
+    it takes 1 Newton step, to START_TOL (before) 2, to the session's 1e-12 3, and Newton's Coulomb solve from each
+    the same 2 steps and a certified answer."""
     solves = []
     solve = newton_cg.Session.solve
     monkeypatch.setattr(newton_cg.Session, "solve", lambda self, *tol: solves.append(answer := solve(self, *tol)) or
                         answer)
     scene = two_body_scene("coulomb", 6e3)
 
-    def run():
+    def run(tol):
+        monkeypatch.setattr(picard, "TRESCA_TOL", tol)
         solves.clear()
         result = cc.prepare(scene, "dual-matrix-free").solve()
         assert result.status == "solved" and result.certificate.worst <= 1e-10
         assert len(solves) == 1 and solves[0].solved  # the Tresca start, the session's one solve
         return solves[0].iterations, len(result.extra["history"][0]["newton_residuals"]) - 1
 
-    start, coulomb = run()
-    monkeypatch.setattr(picard, "START_TOL", newton_cg.TOL)  # to the session's tolerance
-    tight = run()
-    assert start < tight[0] and coulomb == tight[1]
+    assert [run(tol) for tol in (picard.TRESCA_TOL, picard.START_TOL, newton_cg.TOL)] == [(1, 2), (2, 2), (3, 2)]
+
+
+@pytest.mark.parametrize("release", [True, False])
+def test_newton_s_coulomb_faces_on_intervals_are_the_natural_map_s(monkeypatch, release):
+    """The 2-D block at 10⁵ DOFs (W a matrix): where Newton's point on the Coulomb problem is refused, its faces are the
+    natural map's at that point (RELEASE_MOVING: released and flipped intervals, as with fixed radii), and Newton's
+    Coulomb solve takes 6 steps; with faces only grown by the sets the point leaves (before) it crawled for 11."""
+    monkeypatch.setattr(newton_cg, "RELEASE_MOVING", release)
+    result = cc.prepare(scene_of("block", 2, "coulomb", 1e5), "auto").solve()
+    assert result.status == "solved" and result.certificate.worst <= 1e-10
+    [step] = result.extra["history"]
+    assert step["coulomb_newton"] and len(step["newton_residuals"]) - 1 == (6 if release else 11)
 
 
 def test_a_stall_is_left_by_the_fixed_point_map_s_step(monkeypatch):

@@ -17,8 +17,8 @@ from convexcontact.studies.benchmarks.bench import scene_of
 
 def grown_only(monkeypatch):
     """The faces before: only grown by the sets Newton's point leaves (newton_cg._grown)."""
-    monkeypatch.setattr(newton_cg, "_released", lambda y, newton, g, c, sets, released: (
-        newton_cg._grown(y, newton, sets, sets.radius), False))
+    monkeypatch.setattr(newton_cg, "_released", lambda y, newton, g, c, sets, released, then, now: (
+        newton_cg._grown(y, newton, sets, then), False))
 
 
 @pytest.mark.parametrize("grown", [False, True])
@@ -57,17 +57,17 @@ def test_the_face_at_newton_s_point_flips_and_releases_and_releases_once():
     newton = np.array([0.0, 0.0, -0.2, 1.0, -1.0])
     g = np.array([-1.0, 2.0, 0.0, 3.0, -0.5])
     released = np.zeros(5, bool)
-    face, any_released = newton_cg._released(y, newton, g, 1.0, at, released)
+    face, any_released = newton_cg._released(y, newton, g, 1.0, at, released, at.radius, at.radius)
     assert any_released and released.tolist() == [True, False, False, False, True]
     assert face[0] >= 0 and face[1] < 0 and face[2] < 0  # bound 0 released, 1 held, 2 held (the point left it)
     assert face[3] < -1 and -1 <= face[4] <= 1  # interval 3 flipped to −1, 4 released
     # the face stays: Newton's point on it, the same multipliers' signs
     assert newton_cg._released(face, np.array([0.1, 0.0, 0.0, -1.0, 0.3]), np.array([0, 2, 1, 3, 0]), 1.0, at,
-                               released) == (None, False)
+                               released, at.radius, at.radius) == (None, False)
     # a set released once in the step is held as the last face held it, where its multiplier says release again
     again = y.copy()
     again[0] = -1.0
-    face, any_released = newton_cg._released(again, newton, g, 1.0, at, released)
+    face, any_released = newton_cg._released(again, newton, g, 1.0, at, released, at.radius, at.radius)
     assert not any_released and face[0] == -1.0 and face[4] == -3.0 and face[3] < -1
 
 

@@ -74,7 +74,14 @@ clamped strip 400 : 1 at 10⁵ DOFs 42 + 65, 3 → 15 + 33, 3; at 2·10⁴ 24 + 
 tall block 10 + 126, 7 → 10 + 61, 5; flat block 9 + 44, 6 → 9 + 36, 5; the pair of spheres at 10⁴ 47 + 8372, 11 →
 106 + 156, 9; but the 2-D pair at 2·10⁴ 48 + 87, 6 → 46 + 117, 7. Not where W is a matrix: there the first point is
 no empty face's (FIRST_FORCING), and from the stick point the 3-D tall block at 2·10⁴ DOFs stalled after 5 Newton
-steps (the Picard map answered) where it takes 6 from the frictionless start."""
+steps (the Picard map answered) where it takes 6 from the frictionless start. Where the stick program's solve begins
+from newton-cg's coarse program (COARSE_SETS: the 2-D pair), that answer is the step (:meth:`Session.trial`): the fine
+step after it took 50 of the stick start's 89 products on the pair at 1.4·10⁶ DOFs, and the Tresca start and Newton's
+Coulomb solve after it were no shorter for it. Products stick start + Tresca start + Newton, the Tresca start then to
+START_TOL (docs/performance.md, "Coulomb's starts on the pair from the coarse answer"): the pair at 1.4·10⁶ DOFs
+89 + 90 + 135 = 314 → 43 + 82 + 66 = 191, 3.2·10⁵ 51 + 49 + 57 = 157 → 40 + 44 + 59 = 143; forced matrix-free at 10⁵
+138 → 106, 5·10⁴ 193 → 175, but 2·10⁴ 199 → 235 (Newton's Coulomb solve 112 → 156 products: its path has plateaus
+whichever start)."""
 TRESCA_SLIP = 0.5
 """Where more than this fraction of the stick start's points lie outside their Coulomb disc (most slip: its point is
 far from the answer's), one Tresca solve with the slip bounds F G S λ_N of the stick start's pressure follows it
@@ -84,6 +91,14 @@ at 2·10⁴ DOFs (74 % outside) 45 + 208, 9 → 45 + 30 + 108, 7; at 10⁵ (66 %
 clamped and free strips (under 1 % outside): there the Tresca solve cost 21–30 products and saved none. Only where
 the balls are intervals (2-D): the 3-D pair of spheres at 10⁴ DOFs (every point outside) took 128 + 160, 9 from the
 stick start and 128 + 32 + 16,602, 13 from the Tresca answer."""
+TRESCA_TOL = 1e-4
+"""Natural residual the Tresca start (TRESCA_SLIP) is solved to: below the first residual of Newton's Coulomb solve
+after it, the pressure's change from the stick start's (the 2-D pair, forced matrix-free at 2·10⁴ / 5·10⁴ / 10⁵ DOFs,
+`auto` at 3.2·10⁵ / 1.4·10⁶: 7.4e-3, 9.0e-3, 4.0e-3, 1.5e-3, 5.8e-4), the Tresca answer's last digits go unused:
+Newton's Coulomb path was the same in each of these rows from an answer to START_TOL, and the Tresca start took one
+step fewer in four of them (products 26 → 25, 30 → 25, 32 → 25, 44 → 35, 82 → 75; docs/performance.md, "Coulomb's
+starts on the pair from the coarse answer"). It was START_TOL (1e-8) before; 1e-6, measured then on one row (6 products
+fewer at 1.4·10⁶), was not taken."""
 STICK_RADIUS = np.sqrt(np.finfo(float).max)
 """The slip bound of the stick start: one no multiplier reaches (its square still finite)."""
 
@@ -376,7 +391,7 @@ def tresca_start(model: Model, newton, radii: np.ndarray):
     pressure; TRESCA_SLIP): its answer, if solved, becomes the start of Newton's Coulomb solve, whose coupling
     replaces these bounds."""
     newton.update(b=model.bound_update(radii)["b"])
-    newton.solve(START_TOL)
+    newton.solve(TRESCA_TOL)
 
 
 def radius_coupling(model: Model, linear: sp.spmatrix) -> sp.csr_matrix:

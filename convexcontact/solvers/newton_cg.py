@@ -166,6 +166,18 @@ only (steps / products / faces grown, 2·10⁴ DOFs unless said; docs/performanc
 Coulomb row"): GROW_MOVING = 1: tall block stalled after 16 steps, strip 400 : 1 at 5·10⁴ 6 / 208 / 5; 2: tall 12 /
 134 / 22; 3: block 13 → 9 / 38 / 12, tall (stalled after 18 before) 2 / 13 / 4, clamped plate 5 / 51 / 3, strip
 400 : 1 at 5·10⁴ 3 / 67 / 2; 10 (GROW): block 6 / 23 / 7, tall 1 / 10 / 4, clamped plate 5 / 75 / 10."""
+RELEASE_MOVING = True
+"""Where radii move and the balls are intervals (2-D), the refused Newton point's faces (GROW_MOVING) are the natural
+map's at that point, as with fixed radii (:func:`_released`: sets whose multiplier points inward released, an interval
+moved to the end its multiplier pushes it to), not only grown by the sets it leaves (:func:`_grown`): a grown face held
+a node at the wrong end of its interval, Newton's point was refused again, and the steps crawled on a plateau (2-D pair
+at 3.2·10⁵ DOFs: a refused step cost 25–37 products against 9–14 for a taken one). Newton's Coulomb solve, steps /
+products, grown → released (docs/performance.md, "Coulomb's starts on the pair from the coarse answer"): the 2-D
+block at 10⁵ DOFs (W a matrix) 11 / 65 → 6 / 36, the tall block 9 / 96 → 3 / 33, the pair 7 / 34 → 6 / 37; the pair
+forced matrix-free at 2·10⁴ 7 / 156 → 6 / 136, 5·10⁴ 7 / 109 → 5 / 63, 10⁵ 3 / 30 both, `auto` at 3.2·10⁵ 4 / 59 →
+3 / 49, but at 1.4·10⁶ 6 / 66 → 6 / 81 (the same plateau, each face a gradient more); the strips unchanged (no face
+grown). Not on discs (3-D): the tall block at 3·10⁴ DOFs 12 / 63 → 12 / 97, and a
+disc program that stalls without the fixed-point step (tests/test_coulomb_newton.py) no longer stalled."""
 GRADIENT_LENGTHS = 0.5 ** np.arange(8)
 """Where radii move and Newton's points were refused, the fractions of the projected gradient's step tried (the first
 whose natural residual is below the step's is taken). The step lengths c (0.1 / P̃_jj) are those of a segment on which
@@ -351,10 +363,11 @@ class Session:
 
     def trial(self, b: np.ndarray, max_iter: int) -> ConicSolution:
         """At most ``max_iter`` Newton steps from no start on this session's program with the bounds ``b`` (a start for
-        another solve: the stick start of :func:`~convexcontact.drivers.picard.newton_session`), with this session's
-        preconditioner; the session's program and start are left as they were."""
+        another solve: the stick start of :func:`~convexcontact.drivers.picard.newton_session`), the coarse program's
+        answer one of them where it begins the solve (COARSE_SETS), with this session's preconditioner; the session's
+        program and start are left as they were."""
         return newton_cg(self.program.updated(b=b), self._form, None, self._tol, max_iter, self._verbose, None,
-                         self._cache)
+                         self._cache, coarse_step=True)
 
     def coupled(self, coupling: sp.spmatrix, max_iter: int = 30) -> ConicSolution:
         """:func:`coupled` from the last answer, with this session's preconditioner; the session's program then
@@ -402,9 +415,12 @@ def solve(program: ConicProgram, **options) -> ConicSolution:
 
 
 def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_iter: int, verbose=False,
-              progress=None, cache: dict | None = None, coupling: sp.spmatrix | None = None) -> ConicSolution:
+              progress=None, cache: dict | None = None, coupling: sp.spmatrix | None = None,
+              coarse_step: bool = False) -> ConicSolution:
     """Newton's method on the natural map from ``start`` (x; None: the projected gradient step from 0);
-    ``cache`` keeps the preconditioner for the next solve of a session; ``coupling``: see :func:`coupled`."""
+    ``cache`` keeps the preconditioner for the next solve of a session; ``coupling``: see :func:`coupled`;
+    ``coarse_step``: the coarse program's answer, where one begins the solve (COARSE_SETS), counts as one of
+    ``max_iter``'s Newton steps (a trial's, :meth:`Session.trial`)."""
     began = time.perf_counter()
     P = _operator(program.P)
     sets = _bounds(program, form, coupling)
@@ -438,6 +454,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if coarse is not None:
             v = _project((coarse[0] - sets.shift) / sets.scale, sets)
             products[0] += coarse[1]["products"]
+            max_iter -= coarse_step
         g = gradient(v)
     cache = {} if cache is None else cache
     if "precondition" not in cache:
@@ -511,14 +528,16 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         return newton, iterations, known
 
     def grown_point(v, y, newton, target, face=None, limit=None, known=None):
-        """Newton's point on the face y holds, updated to the face the natural map holds at that point (fixed radii:
-        :func:`_released`, ∇f there ``known`` or one product) or, where radii move, grown by the sets the point leaves
-        (:func:`_grown`), each solve started from the last point, projected, until the face stays (at most ``limit``
-        times, GROW by default; see GROW); the point, the CG iterations it took and ∇f there where known."""
+        """Newton's point on the face y holds, updated to the face the natural map holds at that point (fixed radii, or
+        moving radii on intervals, RELEASE_MOVING: :func:`_released`, ∇f there ``known`` or one product) or, where
+        radii move on balls of more variables, grown by the sets the point leaves (:func:`_grown`), each solve started
+        from the last point, projected, until the face stays (at most ``limit`` times, GROW by default; see GROW); the
+        point, the CG iterations it took and ∇f there where known."""
         iterations, at, released, moved = 0, v, np.zeros(v.size, bool), False
         for _ in range(GROW if limit is None else limit):
-            if sets.coupling is None:
-                y, more = _released(y, newton, gradient(newton) if known is None else known, c, sets, released)
+            if sets.coupling is None or (RELEASE_MOVING and sets.balls.shape[1] == 1):
+                y, more = _released(y, newton, gradient(newton) if known is None else known, c, sets, released,
+                                    sets.radii(at), sets.radii(newton))
                 moved = moved or more
             else:
                 y = _grown(y, newton, sets, sets.radii(at))
@@ -966,26 +985,28 @@ def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds, radius: np.ndarray)
     return grown
 
 
-def _released(y: np.ndarray, newton: np.ndarray, g: np.ndarray, c, sets: _Bounds, released: np.ndarray):
-    """The face the natural map holds at ``newton``, Newton's point on the face y holds (fixed radii; ``g`` = ∇f
-    there): the primal-dual active set update (GROW), y' = newton − c g on the sets y holds (c g: their
-    multipliers), newton on the others (whose multipliers the Newton system set to 0). It holds the sets the point
-    leaves (as :func:`_grown`), releases those whose multiplier points inward, and moves an interval (a ball of one
-    variable) to the end its multiplier pushes it to; a set ``released`` before in this step (a mask over the
-    variables, updated here) stays as y holds it, and a ball of more variables held in both keeps y's point (its
-    tangent basis: REUSE). (y', whether a set was released), or (None, False) where the face is y's."""
+def _released(y: np.ndarray, newton: np.ndarray, g: np.ndarray, c, sets: _Bounds, released: np.ndarray,
+              then: np.ndarray, now: np.ndarray):
+    """The face the natural map holds at ``newton``, Newton's point on the face y holds (``g`` = ∇f there; the balls'
+    radii ``then`` where y's face was held, ``now`` at Newton's point: the same where radii are fixed): the primal-dual
+    active set update (GROW), y' = newton − c g on the sets y holds (c g: their multipliers), newton on the others
+    (whose multipliers the Newton system set to 0). It holds the sets the point leaves (as :func:`_grown`), releases
+    those whose multiplier points inward, and moves an interval (a ball of one variable) to the end its multiplier
+    pushes it to; a set ``released`` before in this step (a mask over the variables, updated here) stays as y holds
+    it, and a ball of more variables held in both keeps y's point (its tangent basis: REUSE). (y', whether a set was
+    released), or (None, False) where the face is y's."""
     held = np.zeros(y.size, bool)
     held[sets.bounds[y[sets.bounds] < 0]] = True
-    on = np.linalg.norm(y[sets.balls], axis=1) > sets.radius
+    on = np.linalg.norm(y[sets.balls], axis=1) > then
     held[sets.balls[on].ravel()] = True
     face = np.where(held, newton - c * g, newton)
     again = np.zeros(y.size, bool)
     again[sets.bounds] = face[sets.bounds] >= 0
-    again[sets.balls[np.linalg.norm(face[sets.balls], axis=1) <= sets.radius].ravel()] = True
+    again[sets.balls[np.linalg.norm(face[sets.balls], axis=1) <= now].ravel()] = True
     again &= held & released
     face[again] = y[again]
     bounds_then, bounds_now = y[sets.bounds] < 0, face[sets.bounds] < 0
-    on_now = np.linalg.norm(face[sets.balls], axis=1) > sets.radius
+    on_now = np.linalg.norm(face[sets.balls], axis=1) > now
     kept = sets.balls[on & on_now]
     if sets.balls.shape[1] > 1:
         face[kept] = y[kept]
