@@ -194,7 +194,7 @@ class Approximation:
         factorization (symmetric indefinite, H's block pivoted as H alone, as :class:`Saddle`'s K); else H's factors
         (``factorize``) and a solve with G's rows as right-hand sides. The pair at 1.4·10⁶ DOFs (H 3.2·10⁵ DOFs, 64
         rows): 1.17–1.27 s against 1.82–2.39 s for H's factors and the solves, 16 right-hand sides at a time; the
-        factors' fill 1.5 % more, no more peak."""
+        factors' fill 1.5 % more, the contact phase's peak within 10 MB of its 2.36 GB."""
         G = sp.csr_matrix(G)
         if _pardiso() is None:
             return self.factorize(self.H).schur(G)
