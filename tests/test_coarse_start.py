@@ -87,3 +87,24 @@ def test_no_coarse_program_where_the_rows_form_no_line(monkeypatch):
     sets = newton_cg._bounds(program, newton_cg.bound_form_of(program))
     G = program.P.approximation.G.tocsr()
     assert newton_cg._aggregates(G[sets.bounds], newton_cg.COARSE_SETS) is not None  # the 2-D face: a line
+
+
+@pytest.mark.parametrize("pardiso", [True, False])
+def test_the_coarse_approximation_is_g_h_inverse_g_t_from_one_factorization(monkeypatch, pardiso):
+    """The coarse start's A = G H⁻¹ Gᵀ (G: the approximation's rows summed over aggregates) from PARDISO's Schur
+    complement of [H Gᵀ; G 0] (or, without PARDISO, H's factors and a solve) equals an independent sparse solve."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from convexcontact.fem import factorization
+
+    if not pardiso:
+        monkeypatch.setattr(factorization, "_pardiso", lambda: None)
+    model = cc.prepare(scene_of("two-body", 2, "tresca", 2e4), "dual-matrix-free")
+    approximation = model.program.P.approximation
+    m = approximation.G.shape[0]
+    summed = sp.csr_matrix((np.ones(m), (np.arange(m) * 64 // m, np.arange(m))), shape=(64, m)) @ approximation.G
+    expected = summed @ spla.spsolve(sp.csc_matrix(approximation.H), summed.T.toarray())
+    reduced = approximation.reduced(summed)
+    assert np.array_equal(reduced, reduced.T)
+    np.testing.assert_allclose(reduced, expected, rtol=0, atol=1e-9 * np.abs(expected).max())

@@ -21,6 +21,7 @@ pair's matrix-free dual at scale").
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Callable
 
@@ -66,21 +67,23 @@ def grid_functions(points: np.ndarray, components: np.ndarray, spacing) -> sp.cs
 def _hats(points: np.ndarray, components: np.ndarray, box: tuple, spacing) -> tuple:
     """The grid of ``spacing`` over the ``box`` (its least and greatest corners, dim × 1, holding the points): each
     point's 2^dim columns and hat values (n × 2^dim, as in :func:`grid_functions`) and the grid's nodes along each
-    axis."""
+    axis. A corner's columns are the cell's first node's plus the corner's offset, its values a product of the axes'
+    two weights: a loop over corners and axes with n-long temporaries for each took 1.5 × as long (7·10⁵ points: 27
+    against 18 ms); the pair's far functions at 1.4·10⁶ DOFs (54 grids) 2.76–3.33 → 2.69–3.28 s."""
     dim, n = points.shape
     low, high = box
     spacing = _per_axis(spacing, dim)
     scaled = (points - low) / spacing
-    cell = np.floor(scaled).astype(np.int64)
-    local = scaled - cell
+    cell = np.floor(scaled)
+    weights = np.stack([1.0 - (scaled - cell), scaled - cell])  # side × axis × point
     shape = np.floor((high - low) / spacing).astype(np.int64).ravel() + 2  # the cells of the farthest point, + 2
-    columns, values = np.empty((n, 2**dim), dtype=np.int64), np.empty((n, 2**dim))
-    for j, corner in enumerate(itertools.product((0, 1), repeat=dim)):
-        weight, node = np.ones(n), np.zeros(n, dtype=np.int64)
-        for axis, side in enumerate(corner):
-            weight *= local[axis] if side else 1.0 - local[axis]
-            node = node * shape[axis] + cell[axis] + side
-        columns[:, j], values[:, j] = node * dim + components, weight
+    strides = np.cumprod(np.concatenate([[1], shape[:0:-1]]))[::-1]  # C order
+    corners = np.array(list(itertools.product((0, 1), repeat=dim)), dtype=np.int64)  # 2^dim × dim
+    first = (strides @ cell.astype(np.int64)) * dim + components
+    columns = np.ascontiguousarray((first + (corners @ strides)[:, None] * dim).T)
+    values = np.empty((n, 2**dim))
+    for j, corner in enumerate(corners):
+        values[:, j] = functools.reduce(np.multiply, weights[corner, np.arange(dim)])
     return columns, values, shape
 
 

@@ -188,6 +188,21 @@ class Approximation:
             return local_diagonal(self.H, self.G)
         return local_diagonal(self.H[:slab, :slab], self.G[:, :slab])
 
+    def reduced(self, G: sp.spmatrix) -> np.ndarray:
+        """G H⁻¹ Gᵀ (dense, symmetric) for a few rows G on H's columns (the coarse start's summed rows,
+        solvers/newton_cg.py): with PARDISO the Schur complement of [H Gᵀ; G 0] onto G's rows, formed by one sparse
+        factorization (symmetric indefinite, H's block pivoted as H alone, as :class:`Saddle`'s K); else H's factors
+        (``factorize``) and a solve with G's rows as right-hand sides. The pair at 1.4·10⁶ DOFs (H 3.2·10⁵ DOFs, 64
+        rows): 1.17–1.27 s against 1.82–2.39 s for H's factors and the solves, 16 right-hand sides at a time; the
+        factors' fill 1.5 % more, the contact phase's peak within 10 MB of its 2.36 GB."""
+        G = sp.csr_matrix(G)
+        if _pardiso() is None:
+            return self.factorize(self.H).schur(G)
+        m, n = G.shape
+        zeros = sp.csr_matrix((np.zeros(m), np.arange(m), np.arange(m + 1)), shape=(m, m))  # stored: PARDISO's rule
+        A = sp.bmat([[sp.triu(self.H), G.T], [None, zeros]], format="csr")
+        return _symmetrized(_pardiso_factors(A, schur=np.arange(n, n + m), mtype=_pardiso().SADDLE).S, -1.0)
+
 
 def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None, whole: Callable | None = None) -> Approximation:
     """K on the DOFs within a few layers of B's columns (the rest clamped), and B on them: the same Delassus

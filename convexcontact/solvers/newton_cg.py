@@ -279,9 +279,6 @@ of 148, 98 of 345 bounds; the 3-D pair of spheres at 10⁵: 16 of 511). On a 3-D
 few nodes across and the fine faces from no start are few: there the coarse program's own 26–49 products outweighed
 what it saved (forced matrix-free at 10⁵–3·10⁵ DOFs: Tresca 72–75 → 95, Coulomb 68 → 82 products; compact patches in
 place of RCM's bands were no better; docs/performance.md, "The coarse start on the 3-D rows at 3·10⁵ DOFs")."""
-COARSE_BLOCK = 16
-"""Right-hand sides per solve with H's factors where the coarse approximation is formed (:func:`_coarse_approximation`):
-each block is H's size × COARSE_BLOCK numbers (at 1.4·10⁶ DOFs ~50 MB)."""
 UPDATE_SOLVES = 12
 """Largest number of the update's terms not met since the factorization (each a solve with the factors, ≈ 7 ms on the
 pair at 2.8·10⁵ DOFs, against ≈ 0.1 s for a refactorization): a term of the last update keeps its solve."""
@@ -713,17 +710,11 @@ def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter:
 def _coarse_approximation(approximation, G: sp.csr_matrix):
     """The coarse program's approximation A = G H⁻¹ Gᵀ (G: P's approximation's rows summed) as a dense matrix, in the
     approximation's form with H = I and G = V Λ^½ (A = V Λ Vᵀ: A may be singular, where summed rows are dependent or
-    empty, as a 3-D clamped plate's friction rows on its symmetry planes): A from one factorization of H and a solve with
-    G's few rows as right-hand sides (COARSE_BLOCK at a time). With G's summed rows in a factorization of H + Gᵀ D⁻¹ G,
-    each aggregate filled a block as wide as its DOFs: the pair at 1.4·10⁶ DOFs, Signorini, its peak memory 1.72 →
-    2.44 × the linear solve's."""
-    factors = approximation.factorize(approximation.H)
-    dense = np.zeros((G.shape[0], G.shape[0]))
-    for first in range(0, G.shape[0], COARSE_BLOCK):
-        rows = slice(first, first + COARSE_BLOCK)
-        dense[:, rows] = G @ factors.solve(G[rows].T.toarray())
-    del factors
-    values, vectors = np.linalg.eigh(0.5 * (dense + dense.T))
+    empty, as a 3-D clamped plate's friction rows on its symmetry planes): A from the approximation's ``reduced`` (one
+    sparse factorization with G's few rows as its Schur block, or H's and a solve with them). With G's summed rows in a
+    factorization of H + Gᵀ D⁻¹ G, each aggregate filled a block as wide as its DOFs: the pair at 1.4·10⁶ DOFs,
+    Signorini, its peak memory 1.72 → 2.44 × the linear solve's."""
+    values, vectors = np.linalg.eigh(approximation.reduced(G))
     root = sp.csr_matrix(vectors * np.sqrt(np.maximum(values, 0.0)))
     return replace(approximation, G=root, H=sp.eye(G.shape[0], format="csr"), slab=None)
 
