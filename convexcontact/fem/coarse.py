@@ -211,9 +211,9 @@ def independent(stiffness: sp.spmatrix) -> np.ndarray:
     (:func:`_least_pivot`) has no pivot below INDEPENDENT (the one-body shapes: the dense factorization took 0.4 of
     the 1.25 s of CPU of the free strip 100 : 1's formulation at 10⁵ DOFs), else those a pivoted Cholesky
     factorization (LAPACK's pstrf) keeps with pivots above INDEPENDENT: the block they keep is definite, either
-    factorization its check (:func:`~convexcontact.fem.factorization.slab` factorizes it no more). A sparse selection (dropping the LDLᵀ's
-    small pivots and factorizing again) was tried on the pair at 7.7·10⁵ DOFs: after 20 rounds it kept 2,131 of
-    3,632 functions and a singular set, where pstrf keeps 3,270."""
+    factorization its check (:func:`~convexcontact.fem.factorization.slab` factorizes it no more). A sparse
+    selection (dropping the LDLᵀ's small pivots and factorizing again) was tried on the pair at 7.7·10⁵ DOFs: after
+    20 rounds it kept 2,131 of 3,632 functions and a singular set, where pstrf keeps 3,270."""
     scale = 1.0 / np.sqrt(np.maximum(stiffness.diagonal(), np.finfo(float).tiny))
     stiffness = sp.csr_matrix(sp.diags(scale) @ stiffness @ sp.diags(scale))
     blocks = connected_components(stiffness, directed=False)[1]
