@@ -84,6 +84,22 @@ def test_dependent_coarse_functions_are_dropped_by_the_slab():
     assert np.abs(delassus(twice) - delassus(once)).max() <= 1e-10 * np.abs(delassus(once)).max()
 
 
+def test_the_slab_factorizes_no_block_of_functions(monkeypatch):
+    """The functions kept are definite in K's energy by :func:`independent`'s own factorization (every pivot above
+    INDEPENDENT; the functions given twice too): the slab factorizes nothing more (before, the kept block once
+    again), and K on slab + functions is definite."""
+    fem, B = strip(31, 12)
+    far = body_far_functions(fem)
+    factorized = []
+    monkeypatch.setattr(factorization, "factorize", lambda *args, **kwargs: factorized.append(args))
+    for coarse in (far, lambda inside, contact: sp.hstack([far(inside, contact)] * 2).tocsr()):
+        approximation = factorization.slab(fem.K, B, coarse)
+        assert approximation.H.shape[0] > approximation.slab
+        eigenvalues = la.eigvalsh(approximation.H.toarray())
+        assert eigenvalues.min() > 1e-12 * eigenvalues.max()
+    assert not factorized
+
+
 @pytest.mark.parametrize("backend", ["pardiso", "superlu"])
 def test_refactorize_solves_with_the_new_values(backend):
     """New values on the first matrix's pattern (part of it): the same answers as a fresh factorization; an entry

@@ -127,9 +127,8 @@ def graded_grids(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, 
     for k, grid in enumerate(spacings):
         own = level <= k
         hats, weights, shape = _hats(points[:, own], components[own], box, grid)
-        peak = np.zeros(int(shape.prod()) * dim)
-        np.maximum.at(peak, hats.ravel(), weights.ravel())
-        keep = peak >= KEEP
+        keep = np.zeros(int(shape.prod()) * dim, dtype=bool)
+        keep[hats[weights >= KEEP]] = True  # a hat's peak over the points reaches KEEP where one value does
         if k < top:  # the nodes of the kept columns only: on a graded body a fine grid's box holds far more
             # nodes than its points reach (the pair at 3.2·10⁵ DOFs: 766,480 columns for 34,508 points)
             kept = np.flatnonzero(keep)
@@ -211,9 +210,10 @@ def independent(stiffness: sp.spmatrix) -> np.ndarray:
     DENSE_COLUMNS functions), scaled to a unit diagonal: all of a block where a sparse LDLᵀ of it
     (:func:`_least_pivot`) has no pivot below INDEPENDENT (the one-body shapes: the dense factorization took 0.4 of
     the 1.25 s of CPU of the free strip 100 : 1's formulation at 10⁵ DOFs), else those a pivoted Cholesky
-    factorization (LAPACK's pstrf) keeps with pivots above INDEPENDENT. A sparse selection (dropping the LDLᵀ's
-    small pivots and factorizing again) was tried on the pair at 7.7·10⁵ DOFs: after 20 rounds it kept 2,131 of
-    3,632 functions and a singular set, where pstrf keeps 3,270."""
+    factorization (LAPACK's pstrf) keeps with pivots above INDEPENDENT: the block they keep is definite, either
+    factorization its check (:func:`~convexcontact.fem.factorization.slab` factorizes it no more). A sparse
+    selection (dropping the LDLᵀ's small pivots and factorizing again) was tried on the pair at 7.7·10⁵ DOFs: after
+    20 rounds it kept 2,131 of 3,632 functions and a singular set, where pstrf keeps 3,270."""
     scale = 1.0 / np.sqrt(np.maximum(stiffness.diagonal(), np.finfo(float).tiny))
     stiffness = sp.csr_matrix(sp.diags(scale) @ stiffness @ sp.diags(scale))
     blocks = connected_components(stiffness, directed=False)[1]
