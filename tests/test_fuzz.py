@@ -311,3 +311,17 @@ def test_forces_within_the_adjacent_faces_conditioning_on_a_degenerate_gauss_tre
         assert answer.status == "solved"
         error = np.abs(answer.contact.forces - reference.contact.forces).max() / np.abs(reference.contact.forces).max()
         assert error <= answer.certificate.worst / np.sqrt(sigma), name
+
+
+@pytest.mark.xfail(strict=True, reason="the long profile's find of 2026-11-27 (late): newton-cg stops at max_iter on the "
+                   "matrix-free dual of a stiff slave on a 1000 x softer master (issue 25, docs/performance.md)")
+def test_the_long_profile_s_stiff_on_soft_cylinders_on_the_matrix_free_dual():
+    """Two cylinders of radius 3, E 100 above (ν 0) on 0.1 below (ν 0.25), h 0.01 / 0.017, Tresca s = 1.07e-3, the
+    backs approached by 0.0107: newton-cg stops at max_iter on the dense dual too (50 steps; ``auto`` then hands it to
+    Clarabel on that dual, 7e-14); the matrix-free dual, forced, stops at max_iter (natural residual ~4e-4, ~10 s). Found by the long profile on the tree of 2026-11-27 and on the tree before that
+    session's merges alike."""
+    scene = cc.bodies_library.two_cylinders(h=0.01, radii=(3.0, 3.0), moduli=(100.0, 0.1), nu=(0.0, 0.25),
+                                            approach=0.010746078283213174, master_h=0.017,
+                                            law=cc.Tresca(slip_bound=0.0010746078283213176))
+    result = cc.prepare(scene, "dual-matrix-free").solve()
+    assert result.status == "solved" and result.certificate.worst <= 1e-10
