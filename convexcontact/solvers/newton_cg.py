@@ -733,7 +733,6 @@ def _aggregates(rows: sp.csr_matrix, count: int) -> np.ndarray | None:
     return aggregate
 
 
-
 class _Coarse(spla.LinearOperator):
     """x_c ↦ Q̃ᵀ P Q̃ x_c (see :func:`_coarse_start`); ``approximation`` that of P with G's rows summed by Q̃."""
 
