@@ -21,6 +21,7 @@ import convexcontact as cc
 from convexcontact import solvers
 from convexcontact.results.certificate import certify
 from convexcontact.scene.description import Box
+from convexcontact.solvers import newton_cg
 from convexcontact.solvers.cone_polish import bound_form
 
 AGREEMENT = 1e3
@@ -313,15 +314,30 @@ def test_forces_within_the_adjacent_faces_conditioning_on_a_degenerate_gauss_tre
         assert error <= answer.certificate.worst / np.sqrt(sigma), name
 
 
-@pytest.mark.xfail(strict=True, reason="the long profile's find of 2026-11-27 (late): newton-cg stops at max_iter on the "
-                   "matrix-free dual of a stiff slave on a 1000 x softer master (issue 25, docs/performance.md)")
-def test_the_long_profile_s_stiff_on_soft_cylinders_on_the_matrix_free_dual():
-    """Two cylinders of radius 3, E 100 above (ν 0) on 0.1 below (ν 0.25), h 0.01 / 0.017, Tresca s = 1.07e-3, the
-    backs approached by 0.0107: newton-cg stops at max_iter on the dense dual too (50 steps; ``auto`` then hands it to
-    Clarabel on that dual, 7e-14); the matrix-free dual, forced, stops at max_iter (natural residual ~4e-4, ~10 s). Found by the long profile on the tree of 2026-11-27 and on the tree before that
-    session's merges alike."""
-    scene = cc.bodies_library.two_cylinders(h=0.01, radii=(3.0, 3.0), moduli=(100.0, 0.1), nu=(0.0, 0.25),
-                                            approach=0.010746078283213174, master_h=0.017,
-                                            law=cc.Tresca(slip_bound=0.0010746078283213176))
-    result = cc.prepare(scene, "dual-matrix-free").solve()
+def stiff_on_soft():
+    """The long profile's find of 2026-11-27 (late), below."""
+    return cc.bodies_library.two_cylinders(h=0.01, radii=(3.0, 3.0), moduli=(100.0, 0.1), nu=(0.0, 0.25),
+                                           approach=0.010746078283213174, master_h=0.017,
+                                           law=cc.Tresca(slip_bound=0.0010746078283213176))
+
+
+@pytest.mark.parametrize("formulation", ["dual", "dual-matrix-free"])
+def test_the_long_profile_s_stiff_on_soft_cylinders(formulation):
+    """The long profile's find of 2026-11-27 (late): two cylinders of radius 3, E 100 above (ν 0) on 0.1 below
+    (ν 0.25), h 0.01 / 0.017, Tresca s = 1.07e-3, the backs approached by 0.0107 — W's eigenvalues 1.8e-7 … 29.
+    newton-cg stopped at max_iter on the dense and the matrix-free dual alike: Newton's point on the natural map's
+    face left the intervals of 15 nodes (up to 7.9 × their bound) and was refused, and the projected gradient crawled
+    (~0.6 % a step). Newton's point on the face binding at v (newton_cg.FACE_SEARCH) solves it."""
+    model = cc.prepare(stiff_on_soft(), formulation)
+    result = model.solve("newton-cg")
     assert result.status == "solved" and result.certificate.worst <= 1e-10
+
+
+def test_without_the_binding_face_s_point_the_stiff_on_soft_cylinders_crawl(monkeypatch):
+    """The find's dense dual without that point (FACE_SEARCH = 0: every refused Newton point a gradient step) stops at
+    max_iter: the face's point is what solves it, not a change elsewhere."""
+    program = cc.prepare(stiff_on_soft(), "dual").program
+    solved = newton_cg.solve(program, max_iter=40)
+    assert solved.status == "solved" and solved.info["steps"]["face"] > 0
+    monkeypatch.setattr(newton_cg, "FACE_SEARCH", 0)
+    assert newton_cg.solve(program, max_iter=40).status == "failed"

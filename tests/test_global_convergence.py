@@ -187,3 +187,28 @@ def test_a_session_starts_inside_the_sets_of_its_new_program():
     answer = session.solve()
     reference = solvers.solve(ConicProgram(problem.P, problem.q, problem.A, b, problem.cones), "clarabel")
     assert answer.status == "solved" and np.abs(answer.x - reference.x).max() < 1e-7
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from([1, 2, 3]))
+def test_the_binding_face_holds_exactly_the_sets_within_epsilon_that_the_gradient_pushes_out(seed, size):
+    """newton_cg._binding (FACE_SEARCH): the sets newton_cg._step holds for its y are Bertsekas' ε-active binding sets
+    at v — a bound with v ≤ ε and ∂f/∂v > 0, a ball with ‖v‖ ≥ ρ − ε and vᵀ∇f < 0 — and every other variable keeps v."""
+    rng = np.random.default_rng(seed)
+    bounds, balls, epsilon = 6, 5, 0.1
+    radius = rng.uniform(0.5, 2.0, balls)
+    v_bounds = rng.choice([0.0, 0.05, 1.0], bounds)
+    directions = unit_rows(rng.standard_normal((balls, size)))
+    v_balls = directions * (radius * rng.choice([1 - 1e-12, 0.95, 0.5], balls))[:, None]  # inside by more than round-off
+    v, g = np.concatenate([v_bounds, v_balls.ravel(), rng.standard_normal(2)]), rng.standard_normal(bounds + balls * size + 2)
+    sets = newton_cg._Bounds(np.ones(v.size), np.zeros(v.size), np.arange(bounds),
+                             bounds + np.arange(balls * size).reshape(balls, size), radius)
+    y = newton_cg._binding(v, g, 0.3, sets, epsilon)
+    held_bounds = y[:bounds] < 0
+    assert (held_bounds == ((v_bounds <= epsilon) & (g[:bounds] > 0))).all()
+    g_balls = g[sets.balls]
+    held_balls = np.linalg.norm(y[sets.balls], axis=1) > radius
+    assert (held_balls == ((np.linalg.norm(v_balls, axis=1) >= radius - epsilon)
+                           & (np.einsum("ij,ij->i", v_balls, g_balls) < 0))).all()
+    free = np.concatenate([~held_bounds, np.repeat(~held_balls, size), [True, True]])
+    assert (y[free] == v[free]).all()

@@ -37,8 +37,8 @@ def test_the_pair_s_tresca_dual_applied_matrix_free_takes_newton_s_point_at_ever
     result = model.solve()
     assert result.formulation == model.formulation and result.certificate.worst <= 1e-10
     [solution] = solves
-    assert solution.info["steps"] == ({"residual": 6, "segment": 1, "arc": 0, "gradient": 0} if grown else
-                                      {"residual": 5, "segment": 0, "arc": 0, "gradient": 0})
+    assert solution.info["steps"] == ({"residual": 6, "segment": 1, "arc": 0, "gradient": 0, "face": 0} if grown else
+                                      {"residual": 5, "segment": 0, "arc": 0, "gradient": 0, "face": 0})
 
 
 def sets(n_bounds: int, n_intervals: int, slip: float) -> newton_cg._Bounds:

@@ -20,9 +20,10 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
 
 (a) takes Newton's point where its natural residual is below ACCEPT × the least so far and f there is at most f(v₀):
     at most log(r₀/tol) / log(1/ACCEPT) such steps before the residual is below tol; or
-(b) lowers f by at least σ|κ(v)|: Newton's point or a point towards it where one does with σ = ARMIJO, else the
-    least f on the segment [v, p(v)], which does with σ = min(½, 1/(2λ)), λ the largest eigenvalue of C^½ P̃ C^½
-    (the exact line search of a quadratic on a feasible segment; no bound of P is needed to take it).
+(b) lowers f by at least σ|κ(v)|: Newton's point, a point towards it or towards Newton's point on the face binding
+    at v (FACE_SEARCH) where one does with σ = ARMIJO, else the least f on the segment [v, p(v)], which does with
+    σ = min(½, 1/(2λ)), λ the largest eigenvalue of C^½ P̃ C^½ (the exact line search of a quadratic on a feasible
+    segment; no bound of P is needed to take it).
 
 Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
 way; a solve from no start with P an operator takes the empty face's first (FIRST_FORCING), which (a) or (b) judges
@@ -178,6 +179,19 @@ forced matrix-free at 2·10⁴ 7 / 156 → 6 / 136, 5·10⁴ 7 / 109 → 5 / 63,
 3 / 49, but at 1.4·10⁶ 6 / 66 → 6 / 81 (the same plateau, each face a gradient more); the strips unchanged (no face
 grown). Not on discs (3-D): the tall block at 3·10⁴ DOFs 12 / 63 → 12 / 97, and a
 disc program that stalls without the fixed-point step (tests/test_coulomb_newton.py) no longer stalled."""
+FACE_SEARCH = 12
+"""Points Π(v + α(Newton's point on the face binding at v − v)), α = 1, ½, …, 2⁻¹¹ (:func:`_binding`), tried where
+neither the segment nor the arc towards Newton's point lowers f enough and the step before was such a fallback too
+(``face`` or ``gradient``): there the projected gradient alone crawls. The fuzz long profile's stiff slave cylinder on
+a 1000 × softer master (Tresca, 150 unknowns, W's eigenvalues 1.8e-7 … 29): Newton's point on the natural map's face
+left the intervals of 15 nodes by up to 7.9 × their bound, was refused on 99 of 100 steps, and the projected gradient
+gained ~0.6 % a step: max_iter on the dense and the matrix-free dual; now solved in 6 Newton steps / 102 products
+(dense) and 33 / 1,666 (matrix-free). Tried after every refused arc, not only a second one: 15 / 7 steps there, but
+the 3-D pair at 10⁵ DOFs forced matrix-free, whose one gradient step gains half its κ, 72 → 80 products. So, of the
+bench family's 156 rows up to 10⁵ DOFs (2-D) and 2·10⁴ (3-D), only two coarse programs' paths move: the 2-D pair at
+10⁵ forced matrix-free 119 → 130 products, the clamped strip 400 : 1 at 2·10⁴ 15 → 14. Only after a crawl (the
+residual above STALL × the last) as well: 34 / 44 Newton steps there (docs/performance.md, "The crawl on a stiff
+slave over a soft master")."""
 GRADIENT_LENGTHS = 0.5 ** np.arange(8)
 """Where radii move and Newton's points were refused, the fractions of the projected gradient's step tried (the first
 whose natural residual is below the step's is taken). The step lengths c (0.1 / P̃_jj) are those of a segment on which
@@ -486,12 +500,13 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         alpha = min(1.0, max(0.0, -slope / curve)) if curve > 0 else float(slope < 0)
         return v + alpha * d, g + alpha * Pd, alpha * slope + 0.5 * alpha**2 * curve
 
-    def descend(v, g, towards, residual, cauchy, risen, known=None):
+    def descend(v, g, towards, residual, cauchy, risen, known, epsilon, target):
         """The step from v to Newton's point ``towards`` or towards it (see "Convergence" in the module's docstring):
         Π(``towards``) where its natural residual is below ``residual`` and f there is at most f(v₀) (f − f(v₀) =
         ``risen`` at v); else the first point that lowers f by ARMIJO × |``cauchy``|, the projected gradient's
-        first-order decrease, of: the least f on the segment to Π(``towards``), the projection arc towards it (ARC);
-        else the least f on the projected gradient's segment. The point, ∇f there, f's change and which point it is.
+        first-order decrease, of: the least f on the segment to Π(``towards``), the projection arc towards it (ARC),
+        the arc towards Newton's point on the face binding at v (:func:`_binding`, ``epsilon``; FACE_SEARCH); else
+        the least f on the projected gradient's segment. The point, ∇f there, f's change and which point it is.
         One order whether P is a matrix or an operator (see ARC)."""
         end = _project(towards, sets)  # the points themselves are returned: v + (w − v) would leave bounds by round-off
         g_end, change, Pd = move(v, g, end, known if np.array_equal(end, towards) else None)
@@ -505,7 +520,25 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             gw, change, _ = move(v, g, w)
             if change <= ARMIJO * cauchy:
                 return w, gw, change, "arc"
+        face = face_step(v, g, cauchy, epsilon, target) if descent and descent[-1][0] in ("face", "gradient") else None
+        if face is not None:
+            return (*face, "face")
         return (*gradient_step(v, g), "gradient")
+
+    def face_step(v, g, cauchy, epsilon, target):
+        """The first point of the projection arc towards Newton's point on the face of the sets binding at v within
+        ``epsilon`` (:func:`_binding`; CG to ``target``) that lowers f by ARMIJO × |``cauchy``| (FACE_SEARCH), ∇f
+        there and f's change; else None."""
+        nonlocal cg_total
+        newton, iterations, known = _step(P, affine, sets, v, _binding(v, g, c, sets, epsilon), c, target,
+                                          products, cache["precondition"], matrix)
+        cg_total += iterations
+        for alpha in 0.5 ** np.arange(FACE_SEARCH):
+            w = _project(v + alpha * (newton - v), sets)
+            gw, change, _ = move(v, g, w, known if np.array_equal(w, newton) else None)
+            if change <= ARMIJO * cauchy:
+                return w, gw, change
+        return None
 
     def gradient_step(v, g):
         """The least f on the segment from v to the natural map's point Π(v − c∇f), ∇f there and f's change."""
@@ -566,7 +599,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
 
     residual = first = None
     best, history = np.inf, []
-    risen, kinds, descent = 0.0, dict.fromkeys(("residual", "segment", "arc", "gradient"), 0), []
+    risen, kinds, descent = 0.0, dict.fromkeys(("residual", "segment", "arc", "gradient", "face"), 0), []
     steps = cg_total = 0
     faces = [0]  # the faces grown (see GROW)
     fixed_steps = 0  # the fixed-point map's steps taken where radii move (see FIXED_STEPS)
@@ -628,7 +661,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         # near the answer f's changes are round-off, and the segment alone stalled a 3-D Tresca dual at 2e-10), else a
         # point that lowers f at least as a fraction of the projected gradient's step does (see "Convergence")
         cauchy = g @ (_project(y, sets) - v)
-        v, g, change, kind = descend(v, g, newton, ACCEPT * best, cauchy, risen, known)
+        v, g, change, kind = descend(v, g, newton, ACCEPT * best, cauchy, risen, known, residual * size, target)
         if kind in ("segment", "gradient") and natural(v, g)[0] > STALL * residual:
             v, g, more = gradient_step(v, g)
             change += more
@@ -973,6 +1006,20 @@ def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds, radius: np.ndarray)
     grown = y.copy()
     grown[bounds], grown[balls] = newton[bounds], newton[balls]
     return grown
+
+
+def _binding(v: np.ndarray, g: np.ndarray, c, sets: _Bounds, epsilon: float) -> np.ndarray:
+    """y for :func:`_step` whose held sets are those binding at v (Bertsekas' ε-active set, SIAM J. Control Optim.
+    20, 1982): within ``epsilon`` of their boundary with −∇f pointing out (a ball held through v − c∇f, put outside
+    it: the point's direction and the tangent curvature of :func:`_step`); every other set free (y = v inside them)."""
+    y = v.copy()
+    y[sets.bounds[(v[sets.bounds] <= epsilon) & (g[sets.bounds] > 0)]] = -1.0
+    radius, ball = sets.radii(v), v[sets.balls]
+    out = (np.linalg.norm(ball, axis=1) >= radius - epsilon) & (np.einsum("ij,ij->i", ball, g[sets.balls]) < 0)
+    point = ball[out] - (c[sets.balls[out]] if np.ndim(c) else c) * g[sets.balls[out]]
+    norm = np.linalg.norm(point, axis=1)
+    y[sets.balls[out]] = point * (np.maximum(norm, (1 + 1e-8) * radius[out]) / np.maximum(norm, 1e-300))[:, None]
+    return y
 
 
 def _released(y: np.ndarray, newton: np.ndarray, g: np.ndarray, c, sets: _Bounds, released: np.ndarray,
