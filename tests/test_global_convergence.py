@@ -191,24 +191,28 @@ def test_a_session_starts_inside_the_sets_of_its_new_program():
 
 @settings(max_examples=50, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.sampled_from([1, 2, 3]))
-def test_the_binding_face_holds_exactly_the_sets_within_epsilon_that_the_gradient_pushes_out(seed, size):
-    """newton_cg._binding (FACE_SEARCH): the sets newton_cg._step holds for its y are Bertsekas' ε-active binding sets
-    at v — a bound with v ≤ ε and ∂f/∂v > 0, a ball with ‖v‖ ≥ ρ − ε and vᵀ∇f < 0 — and every other variable keeps v."""
+def test_the_face_step_holds_the_sets_near_their_boundary_and_stops_where_a_free_one_is_met(seed, size):
+    """newton_cg._working (FACE): newton_cg._step holds exactly the sets within ε of their boundary (a bound with
+    v ≤ ε, a ball with ‖v‖ ≥ ρ − ε, at v's direction), every other variable keeps v; newton_cg._feasible_length: the
+    largest α ≤ 1 that keeps v + αd in every free set, where one of them is met (or α = 1)."""
     rng = np.random.default_rng(seed)
     bounds, balls, epsilon = 6, 5, 0.1
     radius = rng.uniform(0.5, 2.0, balls)
     v_bounds = rng.choice([0.0, 0.05, 1.0], bounds)
-    directions = unit_rows(rng.standard_normal((balls, size)))
-    v_balls = directions * (radius * rng.choice([1 - 1e-12, 0.95, 0.5], balls))[:, None]  # inside by more than round-off
-    v, g = np.concatenate([v_bounds, v_balls.ravel(), rng.standard_normal(2)]), rng.standard_normal(bounds + balls * size + 2)
+    v_balls = unit_rows(rng.standard_normal((balls, size))) * (radius * rng.choice([1 - 1e-12, 0.95, 0.5], balls))[:, None]
+    v = np.concatenate([v_bounds, v_balls.ravel(), rng.standard_normal(2)])
     sets = newton_cg._Bounds(np.ones(v.size), np.zeros(v.size), np.arange(bounds),
                              bounds + np.arange(balls * size).reshape(balls, size), radius)
-    y = newton_cg._binding(v, g, 0.3, sets, epsilon)
-    held_bounds = y[:bounds] < 0
-    assert (held_bounds == ((v_bounds <= epsilon) & (g[:bounds] > 0))).all()
-    g_balls = g[sets.balls]
-    held_balls = np.linalg.norm(y[sets.balls], axis=1) > radius
-    assert (held_balls == ((np.linalg.norm(v_balls, axis=1) >= radius - epsilon)
-                           & (np.einsum("ij,ij->i", v_balls, g_balls) < 0))).all()
+    y = newton_cg._working(v, sets, epsilon)
+    held_bounds, held_balls = y[:bounds] < 0, np.linalg.norm(y[sets.balls], axis=1) > radius
+    assert (held_bounds == (v_bounds <= epsilon)).all()
+    assert (held_balls == (np.linalg.norm(v_balls, axis=1) >= radius - epsilon)).all()
+    assert np.allclose(unit_rows(y[sets.balls[held_balls]]), unit_rows(v_balls[held_balls]))
     free = np.concatenate([~held_bounds, np.repeat(~held_balls, size), [True, True]])
     assert (y[free] == v[free]).all()
+    d = rng.standard_normal(v.size)
+    alpha = newton_cg._feasible_length(v, d, sets, y)
+    w = v + alpha * d
+    slack = np.concatenate([w[:bounds][~held_bounds], (radius - np.linalg.norm(w[sets.balls], axis=1))[~held_balls]])
+    assert 0 <= alpha <= 1 and (slack >= -1e-12).all()
+    assert alpha == 1 or np.abs(slack).min() <= 1e-12

@@ -20,10 +20,10 @@ projection's variational inequality gives κ(v) ≤ −‖p(v) − v‖²_{C⁻�
 
 (a) takes Newton's point where its natural residual is below ACCEPT × the least so far and f there is at most f(v₀):
     at most log(r₀/tol) / log(1/ACCEPT) such steps before the residual is below tol; or
-(b) lowers f by at least σ|κ(v)|: Newton's point, a point towards it or towards Newton's point on the face binding
-    at v (FACE_SEARCH) where one does with σ = ARMIJO, else the least f on the segment [v, p(v)], which does with
-    σ = min(½, 1/(2λ)), λ the largest eigenvalue of C^½ P̃ C^½ (the exact line search of a quadratic on a feasible
-    segment; no bound of P is needed to take it).
+(b) lowers f by at least σ|κ(v)|: Newton's point, a point towards it or towards Newton's point on the face of the
+    sets near their boundary at v (FACE) where one does with σ = ARMIJO, else the least f on the segment [v, p(v)],
+    which does with σ = min(½, 1/(2λ)), λ the largest eigenvalue of C^½ P̃ C^½ (the exact line search of a quadratic
+    on a feasible segment; no bound of P is needed to take it).
 
 Newton's point is only the trial point of (a) and (b): the argument asks nothing of it, so it may be computed in any
 way; a solve from no start with P an operator takes the empty face's first (FIRST_FORCING), which (a) or (b) judges
@@ -179,19 +179,19 @@ forced matrix-free at 2·10⁴ 7 / 156 → 6 / 136, 5·10⁴ 7 / 109 → 5 / 63,
 3 / 49, but at 1.4·10⁶ 6 / 66 → 6 / 81 (the same plateau, each face a gradient more); the strips unchanged (no face
 grown). Not on discs (3-D): the tall block at 3·10⁴ DOFs 12 / 63 → 12 / 97, and a
 disc program that stalls without the fixed-point step (tests/test_coulomb_newton.py) no longer stalled."""
-FACE_SEARCH = 12
-"""Points Π(v + α(Newton's point on the face binding at v − v)), α = 1, ½, …, 2⁻¹¹ (:func:`_binding`), tried where
-neither the segment nor the arc towards Newton's point lowers f enough and the step before was such a fallback too
-(``face`` or ``gradient``): there the projected gradient alone crawls. The fuzz long profile's stiff slave cylinder on
-a 1000 × softer master (Tresca, 150 unknowns, W's eigenvalues 1.8e-7 … 29): Newton's point on the natural map's face
-left the intervals of 15 nodes by up to 7.9 × their bound, was refused on 99 of 100 steps, and the projected gradient
-gained ~0.6 % a step: max_iter on the dense and the matrix-free dual; now solved in 6 Newton steps / 102 products
-(dense) and 33 / 1,666 (matrix-free). Tried after every refused arc, not only a second one: 15 / 7 steps there, but
-the 3-D pair at 10⁵ DOFs forced matrix-free, whose one gradient step gains half its κ, 72 → 80 products. So, of the
-bench family's 156 rows up to 10⁵ DOFs (2-D) and 2·10⁴ (3-D), only two coarse programs' paths move: the 2-D pair at
-10⁵ forced matrix-free 119 → 130 products, the clamped strip 400 : 1 at 2·10⁴ 15 → 14. Only after a crawl (the
-residual above STALL × the last) as well: 34 / 44 Newton steps there (docs/performance.md, "The crawl on a stiff
-slave over a soft master")."""
+FACE = True
+"""After a step that took no Newton point (a segment, arc, face or gradient step), the face step first: Newton's point
+on the face that holds every set within ε (the natural residual) of its boundary, the least f on the segment towards
+it as far as the free sets allow (the working set of a primal active-set method: f falls monotonically, and the set
+that stops the segment joins the face of the next such step; sets leave it through Newton's points on the natural
+map's faces, the segment and the gradient steps). Where W is ill-conditioned the natural map's faces cycle and the
+projected gradient crawls: the fuzz long profile's stiff slave cylinder on a 1000 × softer master (Tresca, 150
+unknowns, W's eigenvalues 1.8e-7 … 29) had Newton's point leave the intervals of 15 nodes by up to 7.9 × their bound
+and refused on 99 of 100 steps, the projected gradient gaining ~0.6 % a step: max_iter on the dense and the
+matrix-free dual. Measured (docs/performance.md, "The crawl on a stiff slave over a soft master"): Bertsekas'
+ε-binding face (the sets whose gradient points out) with a projected search left free sets a few 1e-8 inside their
+bounds that its Newton point pushed far out, and stalled or took 33–44 steps; the working set with the segment cut
+where a free set's boundary is met solves every such pair found."""
 GRADIENT_LENGTHS = 0.5 ** np.arange(8)
 """Where radii move and Newton's points were refused, the fractions of the projected gradient's step tried (the first
 whose natural residual is below the step's is taken). The step lengths c (0.1 / P̃_jj) are those of a segment on which
@@ -504,14 +504,17 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         """The step from v to Newton's point ``towards`` or towards it (see "Convergence" in the module's docstring):
         Π(``towards``) where its natural residual is below ``residual`` and f there is at most f(v₀) (f − f(v₀) =
         ``risen`` at v); else the first point that lowers f by ARMIJO × |``cauchy``|, the projected gradient's
-        first-order decrease, of: the least f on the segment to Π(``towards``), the projection arc towards it (ARC),
-        the arc towards Newton's point on the face binding at v (:func:`_binding`, ``epsilon``; FACE_SEARCH); else
+        first-order decrease, of: after a step that was no Newton point, the face step (:func:`face_step`, ``epsilon``,
+        ``target``; FACE); the least f on the segment to Π(``towards``), the projection arc towards it (ARC); else
         the least f on the projected gradient's segment. The point, ∇f there, f's change and which point it is.
         One order whether P is a matrix or an operator (see ARC)."""
         end = _project(towards, sets)  # the points themselves are returned: v + (w − v) would leave bounds by round-off
         g_end, change, Pd = move(v, g, end, known if np.array_equal(end, towards) else None)
         if risen + change <= 0 and natural(end, g_end)[0] < residual:
             return end, g_end, change, "residual"
+        face = face_step(v, g, cauchy, epsilon, target) if FACE and descent and descent[-1][0] != "residual" else None
+        if face is not None:
+            return (*face, "face")
         on_segment = least_on_segment(v, g, end, Pd)
         if on_segment[2] <= ARMIJO * cauchy:
             return (*on_segment, "segment")
@@ -520,25 +523,22 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             gw, change, _ = move(v, g, w)
             if change <= ARMIJO * cauchy:
                 return w, gw, change, "arc"
-        face = face_step(v, g, cauchy, epsilon, target) if descent and descent[-1][0] in ("face", "gradient") else None
-        if face is not None:
-            return (*face, "face")
         return (*gradient_step(v, g), "gradient")
 
     def face_step(v, g, cauchy, epsilon, target):
-        """The first point of the projection arc towards Newton's point on the face of the sets binding at v within
-        ``epsilon`` (:func:`_binding`; CG to ``target``) that lowers f by ARMIJO × |``cauchy``| (FACE_SEARCH), ∇f
-        there and f's change; else None."""
+        """The least f on the segment from v towards Newton's point on the face that holds every set within
+        ``epsilon`` of its boundary where it is (:func:`_working`; CG to ``target``), as far as the other sets allow
+        (:func:`_feasible_length`; a held ball's tangent move projected back onto its sphere), ∇f there and f's
+        change, where that lowers f by ARMIJO × |``cauchy``|; else None (FACE)."""
         nonlocal cg_total
-        newton, iterations, known = _step(P, affine, sets, v, _binding(v, g, c, sets, epsilon), c, target,
-                                          products, cache["precondition"], matrix)
+        held = _working(v, sets, epsilon)
+        newton, iterations, known = _step(P, affine, sets, v, held, c, target, products, cache["precondition"], matrix)
         cg_total += iterations
-        for alpha in 0.5 ** np.arange(FACE_SEARCH):
-            w = _project(v + alpha * (newton - v), sets)
-            gw, change, _ = move(v, g, w, known if np.array_equal(w, newton) else None)
-            if change <= ARMIJO * cauchy:
-                return w, gw, change
-        return None
+        alpha = _feasible_length(v, newton - v, sets, held)
+        end = _project(v + alpha * (newton - v), sets)
+        _, _, Pd = move(v, g, end, known if np.array_equal(end, newton) else None)
+        w, gw, change = least_on_segment(v, g, end, Pd)
+        return (w, gw, change) if change <= ARMIJO * cauchy else None
 
     def gradient_step(v, g):
         """The least f on the segment from v to the natural map's point Π(v − c∇f), ∇f there and f's change."""
@@ -1008,18 +1008,29 @@ def _grown(y: np.ndarray, newton: np.ndarray, sets: _Bounds, radius: np.ndarray)
     return grown
 
 
-def _binding(v: np.ndarray, g: np.ndarray, c, sets: _Bounds, epsilon: float) -> np.ndarray:
-    """y for :func:`_step` whose held sets are those binding at v (Bertsekas' ε-active set, SIAM J. Control Optim.
-    20, 1982): within ``epsilon`` of their boundary with −∇f pointing out (a ball held through v − c∇f, put outside
-    it: the point's direction and the tangent curvature of :func:`_step`); every other set free (y = v inside them)."""
+def _working(v: np.ndarray, sets: _Bounds, epsilon: float) -> np.ndarray:
+    """y for :func:`_step` that holds every set within ``epsilon`` of its boundary where v is (a bound at 0, a ball on
+    its sphere in v's direction, put just outside it: no tangent curvature) and leaves every other set free (y = v)."""
     y = v.copy()
-    y[sets.bounds[(v[sets.bounds] <= epsilon) & (g[sets.bounds] > 0)]] = -1.0
+    y[sets.bounds[v[sets.bounds] <= epsilon]] = -1.0
     radius, ball = sets.radii(v), v[sets.balls]
-    out = (np.linalg.norm(ball, axis=1) >= radius - epsilon) & (np.einsum("ij,ij->i", ball, g[sets.balls]) < 0)
-    point = ball[out] - (c[sets.balls[out]] if np.ndim(c) else c) * g[sets.balls[out]]
-    norm = np.linalg.norm(point, axis=1)
-    y[sets.balls[out]] = point * (np.maximum(norm, (1 + 1e-8) * radius[out]) / np.maximum(norm, 1e-300))[:, None]
+    norm = np.linalg.norm(ball, axis=1)
+    near = (norm >= radius - epsilon) & (norm > 0)
+    y[sets.balls[near]] = ball[near] * ((1 + 1e-8) * radius[near] / norm[near])[:, None]
     return y
+
+
+def _feasible_length(v: np.ndarray, d: np.ndarray, sets: _Bounds, held: np.ndarray) -> float:
+    """The largest α ≤ 1 with v + αd in every set that ``held`` (:func:`_working`) leaves free."""
+    bounds = sets.bounds[(held[sets.bounds] >= 0) & (d[sets.bounds] < 0)]
+    alpha = min(1.0, (v[bounds] / -d[bounds]).min(initial=np.inf))
+    free = np.linalg.norm(held[sets.balls], axis=1) <= sets.radii(v)
+    x, e, radius = v[sets.balls[free]], d[sets.balls[free]], sets.radii(v)[free]
+    a, b = np.einsum("ij,ij->i", e, e), np.einsum("ij,ij->i", x, e)
+    slack = np.maximum(radius**2 - np.einsum("ij,ij->i", x, x), 0.0)  # ‖x + αe‖ = ρ: aα² + 2bα − slack = 0
+    a, b, slack = a[a > 0], b[a > 0], slack[a > 0]
+    root = np.sqrt(b**2 + a * slack)  # its positive root, without cancellation whatever b's sign
+    return min(alpha, np.where(b > 0, slack / np.maximum(b + root, 1e-300), (root - b) / a).min(initial=np.inf))
 
 
 def _released(y: np.ndarray, newton: np.ndarray, g: np.ndarray, c, sets: _Bounds, released: np.ndarray,
