@@ -8,11 +8,19 @@ import pytest
 import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from scipy.sparse.csgraph import connected_components
 
 import convexcontact as cc
 from convexcontact import solvers
 from convexcontact.fem import factorization
-from convexcontact.fem.coarse import Functions, body_far_functions, graded_functions, graded_grids, grid_functions
+from convexcontact.fem.coarse import (
+    Functions,
+    bodies,
+    body_far_functions,
+    graded_functions,
+    graded_grids,
+    grid_functions,
+)
 from convexcontact.fem.factorization import Approximation, Delassus, factorize
 from convexcontact.formulations import contact_weights
 from convexcontact.scene.description import Signorini, Tresca
@@ -53,6 +61,19 @@ def test_graded_functions_are_the_kept_hats_through_one_grid_a_point(dim):
     assert len(spacings) >= 4 and functions.shape == direct.shape
     assert (functions.nodes.getnnz(axis=1) <= 2**dim).all() and direct.getnnz(axis=1).max() > 3 * 2**dim
     np.testing.assert_allclose((functions.nodes @ functions.combination).toarray(), direct.toarray(), atol=1e-14)
+
+
+def test_bodies_are_the_connected_components_numbered_by_their_first_dofs():
+    """Three bodies' DOFs interleaved: the bodies are K's connected components, numbered in the order of their first
+    DOFs (as scipy's undirected search numbers them)."""
+    rng = np.random.default_rng(5)
+    blocks = [sp.random(n, n, density=0.3, random_state=rng) for n in (7, 11, 5)]
+    K = sp.block_diag([block + block.T + sp.eye(block.shape[0]) for block in blocks]).tocsr()
+    order = rng.permutation(K.shape[0])
+    K = K[order][:, order]
+    expected = connected_components(K, directed=False)[1]
+    np.testing.assert_array_equal(bodies(K), expected)
+    assert set(expected) == {0, 1, 2}
 
 
 def strip(nodes=61, height=24):
