@@ -138,10 +138,14 @@ def graded_grids(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, 
     top = level.max(initial=0)
     fitted = fitted_spacing(points, spacing)  # the finest grid's sides on the body's (the coarser ones nest in it)
     box = points.min(axis=1, keepdims=True), points.max(axis=1, keepdims=True)
+    order = np.argsort(level, kind="stable")  # each grid's points (its own and the finer grids') a leading run
+    ends = np.searchsorted(level[order], np.arange(top + 1), side="right")
+    scaled = (points[:, order] - box[0]) / _per_axis(fitted, dim)  # in the finest grid's cells
+    components = components[order]
     spacings, keeps = [fitted * 2**k for k in range(top + 1)], []
-    for k, grid in enumerate(spacings):
-        own = level <= k
-        hats, weights, shape = _hats(points[:, own], components[own], box, grid)
+    for k, grid in enumerate(spacings):  # grid k's cells are 2^k of the finest's: the points there scaled exactly
+        shape = _grid_shape(box, _per_axis(grid, dim))
+        hats, weights = _corners(scaled[:, :ends[k]] / 2.0**k, components[:ends[k]], shape)
         keep = np.zeros(int(shape.prod()) * dim, dtype=bool)
         keep[hats[weights >= KEEP]] = True  # a hat's peak over the points reaches KEEP where one value does
         if k < top:  # the nodes of the kept columns only: on a graded body a fine grid's box holds far more
