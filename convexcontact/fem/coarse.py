@@ -206,7 +206,9 @@ def _combination(used: np.ndarray, starts: np.ndarray, shapes: list, keeps: list
     columns (numbered from the grids' ``starts``): a column of grid m (a node and component) against the kept columns
     of grid m and the coarser ones, the node in grid k's cells its index over 2^(k − m), exact."""
     dim = shapes[0].size
-    number = np.cumsum(np.concatenate(keeps)) - 1  # each grid column's function, where kept
+    kept = [np.flatnonzero(keep) for keep in keeps]  # a function's number: its place among them (a cumulative sum
+    # over the grids' columns took 0.27 s at 1.4·10⁶ DOFs: the finest grids' boxes hold far more nodes than are kept)
+    firsts = np.cumsum([0] + list(map(len, kept)))
     grid = np.searchsorted(starts, used, side="right") - 1
     rows, columns, values = [], [], []
     for m in np.unique(grid):
@@ -217,10 +219,10 @@ def _combination(used: np.ndarray, starts: np.ndarray, shapes: list, keeps: list
             hats, weights = _corners(index / 2.0 ** (k - m), local % dim, shapes[k])
             entries = keeps[k][hats] & (weights != 0)
             rows.append(np.repeat(mine, entries.sum(axis=1)))
-            columns.append(number[hats[entries] + starts[k]])
+            columns.append(firsts[k] + np.searchsorted(kept[k], hats[entries]))
             values.append(weights[entries])
     return sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))),
-                         shape=(used.size, int(sum(keep.sum() for keep in keeps))))
+                         shape=(used.size, firsts[-1]))
 
 
 def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, bodies: np.ndarray) -> Callable:
