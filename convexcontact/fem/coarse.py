@@ -86,8 +86,8 @@ def _corners(scaled: np.ndarray, components: np.ndarray, shape: np.ndarray) -> t
     node) on a grid of ``shape`` nodes. A corner's columns are the cell's first node's plus the corner's offset, its
     values a product of the axes' two weights: a loop over corners and axes with n-long temporaries for each took
     1.5 × as long (7·10⁵ points: 27 against 18 ms; the pair's far functions at 1.4·10⁶ DOFs, 54 grids, 2.76–3.33 →
-    2.69–3.28 s). A point on the grid's last node (a node of a finer grid,
-    :func:`_factored`) is in the last cell, its weights there 0 and 1."""
+    2.69–3.28 s). A point on the grid's last node (a finer grid's node, :func:`_combination`) is in the last cell,
+    its weights there 0 and 1."""
     dim, n = scaled.shape
     cell = np.minimum(np.floor(scaled), (shape - 2)[:, None])
     weights = np.stack([1.0 - (scaled - cell), scaled - cell])  # side × axis × point

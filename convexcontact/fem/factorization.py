@@ -208,9 +208,9 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None, whole: 
 
     ``coarse(inside, contact)`` (the slab's mask, B's columns) may give functions of the DOFs, zero on the slab
     (n × c, as :class:`~convexcontact.fem.coarse.Functions`, see :func:`~convexcontact.fem.coarse.far_functions`):
-    the rest of the body then moves with them instead of being clamped, K on slab + functions (a Galerkin approximation of K) has the long waves too, and
-    CG needs fewer iterations still; only beyond a slab of COARSE_LAYERS layers or more. Functions that leave that
-    K singular (dependent on the rest) are dropped.
+    the rest of the body then moves with them instead of being clamped, K on slab + functions (a Galerkin
+    approximation of K) has the long waves too, and CG needs fewer iterations still; only beyond a slab of
+    COARSE_LAYERS layers or more. Functions that leave that K singular (dependent on the rest) are dropped.
 
     A body too thin for COARSE_LAYERS layers is its own approximation (G = B, H = K: exact, one more factorization
     of K's size, by ``whole``). A strip clamped at its ends has W's long waves from beam bending, which neither a
