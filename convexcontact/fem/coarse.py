@@ -185,7 +185,7 @@ def _factored(points: np.ndarray, components: np.ndarray, grids: tuple) -> Funct
     dim, n = points.shape
     shapes = [_grid_shape(box, _per_axis(grid, dim)) for grid in spacings]
     starts = np.cumsum([0] + [int(shape.prod()) * dim for shape in shapes])  # the grids' columns numbered in a row
-    rows, columns, values = [], [], []
+    rows, columns, values, used = [], [], [], []
     left = np.arange(n)  # the points no finer grid's kept functions reach
     for k, (grid, keep) in enumerate(zip(spacings, keeps, strict=True)):
         hats, weights, _ = _hats(points[:, left], components[left], box, grid)
@@ -193,11 +193,16 @@ def _factored(points: np.ndarray, components: np.ndarray, grids: tuple) -> Funct
         reached = (keep[hats] & nonzero).any(axis=1)
         hats, nonzero = hats[reached], nonzero[reached]
         rows.append(np.repeat(left[reached], nonzero.sum(axis=1)))
-        columns.append(hats[nonzero] + starts[k])
         values.append(weights[reached][nonzero])
+        mine = np.zeros(keep.size, dtype=bool)  # the grid's columns used, marked: np.unique of all the grids'
+        mine[hats[nonzero]] = True  # (a sort) took 0.22–0.34 s of the foundation's at 1.4·10⁶ DOFs, these 0.03 s
+        mine = np.flatnonzero(mine)
+        columns.append(sum(map(len, used)) + np.searchsorted(mine, hats[nonzero]))
+        used.append(mine + starts[k])
         left = left[~reached]
-    used, columns = np.unique(np.concatenate(columns), return_inverse=True)
-    nodes = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), columns)), shape=(n, used.size))
+    used = np.concatenate(used)
+    nodes = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))),
+                          shape=(n, used.size))
     return Functions(nodes, _combination(used, starts, shapes, keeps))
 
 
