@@ -8,11 +8,19 @@ import pytest
 import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from scipy.sparse.csgraph import connected_components
 
 import convexcontact as cc
 from convexcontact import solvers
 from convexcontact.fem import factorization
-from convexcontact.fem.coarse import body_far_functions, grid_functions
+from convexcontact.fem.coarse import (
+    Functions,
+    bodies,
+    body_far_functions,
+    graded_functions,
+    graded_grids,
+    grid_functions,
+)
 from convexcontact.fem.factorization import Approximation, Delassus, factorize
 from convexcontact.formulations import contact_weights
 from convexcontact.scene.description import Signorini, Tresca
@@ -37,6 +45,35 @@ def test_grid_functions_reproduce_linear_fields(dim):
     for component in range(dim):  # each column holds one component
         rows = functions[components == component]
         assert not (abs(functions[components != component]).sum(axis=0).A1 * abs(rows).sum(axis=0).A1).any()
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_graded_functions_are_the_kept_hats_through_one_grid_a_point(dim):
+    """On cells graded over two decades, the graded functions F = nodes · combination are every grid's kept hats
+    evaluated at every point (F built directly, as before), with one grid's 2^dim hats a point in ``nodes``."""
+    rng = np.random.default_rng(dim)
+    points = rng.uniform(0.0, 1.0, (dim, 4000))
+    components = rng.integers(0, dim, 4000)
+    sizes = 0.01 * 100.0 ** points[0]
+    _, spacings, keeps = graded_grids(points, components, sizes, 0.03)
+    functions = graded_functions(points, components, sizes, 0.03)
+    direct = sp.hstack([grid_functions(points, components, spacing)[:, keep] for spacing, keep in zip(spacings, keeps)])
+    assert len(spacings) >= 4 and functions.shape == direct.shape
+    assert (functions.nodes.getnnz(axis=1) <= 2**dim).all() and direct.getnnz(axis=1).max() > 3 * 2**dim
+    np.testing.assert_allclose((functions.nodes @ functions.combination).toarray(), direct.toarray(), atol=1e-14)
+
+
+def test_bodies_are_the_connected_components_numbered_by_their_first_dofs():
+    """Three bodies' DOFs interleaved: the bodies are K's connected components, numbered in the order of their first
+    DOFs (as scipy's undirected search numbers them)."""
+    rng = np.random.default_rng(5)
+    blocks = [sp.random(n, n, density=0.3, random_state=rng) for n in (7, 11, 5)]
+    K = sp.block_diag([block + block.T + sp.eye(block.shape[0]) for block in blocks]).tocsr()
+    order = rng.permutation(K.shape[0])
+    K = K[order][:, order]
+    expected = connected_components(K, directed=False)[1]
+    np.testing.assert_array_equal(bodies(K), expected)
+    assert set(expected) == {0, 1, 2}
 
 
 def strip(nodes=61, height=24):
@@ -66,13 +103,23 @@ def test_coarse_functions_give_the_slab_the_long_waves():
     assert coarse.max() < 1.3
 
 
+def twice_each(far):
+    """``far``'s coarse functions, each given twice."""
+
+    def coarse(inside, contact):
+        functions = far(inside, contact)
+        return Functions(functions.nodes, sp.hstack([functions.combination] * 2, format="csr"))
+
+    return coarse
+
+
 def test_dependent_coarse_functions_are_dropped_by_the_slab():
     """Functions that would make K on slab + functions singular (here each function given twice) are dropped by the
     slab's own check, one of each pair: the approximation of W is the one with each function once (the copies kept
     may be either of a pair, so H is the same up to the order of its last columns)."""
     fem, B = strip(31, 12)
     far = body_far_functions(fem)
-    twice = factorization.slab(fem.K, B, lambda inside, contact: sp.hstack([far(inside, contact)] * 2).tocsr())
+    twice = factorization.slab(fem.K, B, twice_each(far))
     once = factorization.slab(fem.K, B, far)
     clamped = factorization.slab(fem.K, B)
     assert once.H.shape[0] > clamped.H.shape[0]
@@ -92,7 +139,7 @@ def test_the_slab_factorizes_no_block_of_functions(monkeypatch):
     far = body_far_functions(fem)
     factorized = []
     monkeypatch.setattr(factorization, "factorize", lambda *args, **kwargs: factorized.append(args))
-    for coarse in (far, lambda inside, contact: sp.hstack([far(inside, contact)] * 2).tocsr()):
+    for coarse in (far, twice_each(far)):
         approximation = factorization.slab(fem.K, B, coarse)
         assert approximation.H.shape[0] > approximation.slab
         eigenvalues = la.eigvalsh(approximation.H.toarray())

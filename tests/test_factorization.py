@@ -152,3 +152,27 @@ def test_auto_takes_pardiso_and_the_import_stays_lazy():
     root = str(Path(__file__).resolve().parents[1])
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([root, os.environ.get("PYTHONPATH", "")]))
     subprocess.run([sys.executable, "-c", code], check=True, cwd=root, env=env)
+
+
+
+def test_pardiso_takes_the_upper_triangle_as_scipy_s_triu_gives_it():
+    """The upper triangle PARDISO factorizes, read off K's rows: scipy's ``triu`` entry for entry (stored zeros, an
+    empty row and unsorted columns included), its columns sorted."""
+    pytest.importorskip("pypardiso")
+    from convexcontact.fem.pardiso import _upper_triangle
+
+    rng = np.random.default_rng(4)
+    pattern = rng.random((40, 40)) < 0.2
+    pattern[7] = False  # an empty row
+    row, column = np.nonzero(pattern)
+    data = rng.standard_normal(row.size)
+    data[::7] = 0.0  # stored zeros
+    order = np.lexsort((rng.random(row.size), row))  # each row's columns shuffled
+    K = sp.csr_matrix((data[order], column[order], np.concatenate([[0], np.cumsum(pattern.sum(axis=1))])),
+                      shape=pattern.shape)
+    assert not K.has_sorted_indices
+    U, expected = _upper_triangle(K), sp.triu(K, format="csr")
+    expected.sort_indices()
+    assert (U.data == 0).any() and U.nnz == expected.nnz
+    for got, want in ((U.indptr, expected.indptr), (U.indices, expected.indices), (U.data, expected.data)):
+        np.testing.assert_array_equal(got, want)

@@ -68,7 +68,7 @@ def test_fitted_grid_interpolates_linear_fields_beyond_the_slab(strip):
     fem, K, B = model.fem, model.fem.K, model.program.P.B
     far, captured = coarse.body_far_functions(fem), []
     factorization.slab(K, B, lambda inside, contact: captured.append(far(inside, contact)) or captured[-1])
-    functions = sp.csc_matrix(captured[0])
+    functions = sp.csc_matrix(captured[0].nodes @ captured[0].combination)
     beyond = np.asarray(abs(functions).sum(axis=1)).ravel() > 0
     points = fem.basis.doflocs[:, fem.free]
     for field in points:

@@ -24,6 +24,7 @@ from __future__ import annotations
 import functools
 import itertools
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -67,16 +68,29 @@ def grid_functions(points: np.ndarray, components: np.ndarray, spacing) -> sp.cs
 def _hats(points: np.ndarray, components: np.ndarray, box: tuple, spacing) -> tuple:
     """The grid of ``spacing`` over the ``box`` (its least and greatest corners, dim × 1, holding the points): each
     point's 2^dim columns and hat values (n × 2^dim, as in :func:`grid_functions`) and the grid's nodes along each
-    axis. A corner's columns are the cell's first node's plus the corner's offset, its values a product of the axes'
-    two weights: a loop over corners and axes with n-long temporaries for each took 1.5 × as long (7·10⁵ points: 27
-    against 18 ms); the pair's far functions at 1.4·10⁶ DOFs (54 grids) 2.76–3.33 → 2.69–3.28 s."""
-    dim, n = points.shape
+    axis (:func:`_corners`)."""
+    spacing = _per_axis(spacing, points.shape[0])
+    shape = _grid_shape(box, spacing)
+    return (*_corners((points - box[0]) / spacing, components, shape), shape)
+
+
+def _grid_shape(box: tuple, spacing: np.ndarray) -> np.ndarray:
+    """The nodes along each axis of the grid of ``spacing`` (dim × 1) over the ``box``: the cells of its farthest
+    corner, + 2."""
     low, high = box
-    spacing = _per_axis(spacing, dim)
-    scaled = (points - low) / spacing
-    cell = np.floor(scaled)
+    return np.floor((high - low) / spacing).astype(np.int64).ravel() + 2
+
+
+def _corners(scaled: np.ndarray, components: np.ndarray, shape: np.ndarray) -> tuple:
+    """The columns and hat values (n × 2^dim) of points at ``scaled`` (dim × n, in grid cells from the grid's first
+    node) on a grid of ``shape`` nodes. A corner's columns are the cell's first node's plus the corner's offset, its
+    values a product of the axes' two weights: a loop over corners and axes with n-long temporaries for each took
+    1.5 × as long (7·10⁵ points: 27 against 18 ms; the pair's far functions at 1.4·10⁶ DOFs, 54 grids, 2.76–3.33 →
+    2.69–3.28 s). A point on the grid's last node (a finer grid's node, :func:`_combination`) is in the last cell,
+    its weights there 0 and 1."""
+    dim, n = scaled.shape
+    cell = np.minimum(np.floor(scaled), (shape - 2)[:, None])
     weights = np.stack([1.0 - (scaled - cell), scaled - cell])  # side × axis × point
-    shape = np.floor((high - low) / spacing).astype(np.int64).ravel() + 2  # the cells of the farthest point, + 2
     strides = np.cumprod(np.concatenate([[1], shape[:0:-1]]))[::-1]  # C order
     corners = np.array(list(itertools.product((0, 1), repeat=dim)), dtype=np.int64)  # 2^dim × dim
     first = (strides @ cell.astype(np.int64)) * dim + components
@@ -84,7 +98,7 @@ def _hats(points: np.ndarray, components: np.ndarray, box: tuple, spacing) -> tu
     values = np.empty((n, 2**dim))
     for j, corner in enumerate(corners):
         values[:, j] = functools.reduce(np.multiply, weights[corner, np.arange(dim)])
-    return columns, values, shape
+    return columns, values
 
 
 def _per_axis(spacing, dim: int) -> np.ndarray:
@@ -106,12 +120,13 @@ def fitted_spacing(points: np.ndarray, spacing: float) -> np.ndarray:
     return np.where(extent > 0, extent / cells, spacing)
 
 
-def graded_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, spacing: float) -> sp.csr_matrix:
+def graded_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, spacing: float) -> Functions:
     """Hats of grids of ``spacing`` · 2^k, k = 0, 1, …: a point's own grid is the finest whose spacing is at least
     CELLS × its cells' size (``sizes``); a grid's hat is kept where it reaches KEEP at a point of that grid or of a
     finer one, and on every grid but the coarsest only at the nodes the next coarser grid lacks (nested grids: a
-    coarse hat is a sum of fine ones). The grids' kept columns side by side (:func:`graded_grids`)."""
-    return _built(points, components, graded_grids(points, components, sizes, spacing))
+    coarse hat is a sum of fine ones). The grids' kept columns side by side (:func:`graded_grids`), as
+    :class:`Functions`."""
+    return _factored(points, components, graded_grids(points, components, sizes, spacing))
 
 
 def graded_grids(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, spacing: float) -> tuple:
@@ -123,10 +138,14 @@ def graded_grids(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, 
     top = level.max(initial=0)
     fitted = fitted_spacing(points, spacing)  # the finest grid's sides on the body's (the coarser ones nest in it)
     box = points.min(axis=1, keepdims=True), points.max(axis=1, keepdims=True)
+    order = np.argsort(level, kind="stable")  # each grid's points (its own and the finer grids') a leading run
+    ends = np.searchsorted(level[order], np.arange(top + 1), side="right")
+    scaled = (points[:, order] - box[0]) / _per_axis(fitted, dim)  # in the finest grid's cells
+    components = components[order]
     spacings, keeps = [fitted * 2**k for k in range(top + 1)], []
-    for k, grid in enumerate(spacings):
-        own = level <= k
-        hats, weights, shape = _hats(points[:, own], components[own], box, grid)
+    for k, grid in enumerate(spacings):  # grid k's cells are 2^k of the finest's: the points there scaled exactly
+        shape = _grid_shape(box, _per_axis(grid, dim))
+        hats, weights = _corners(scaled[:, :ends[k]] / 2.0**k, components[:ends[k]], shape)
         keep = np.zeros(int(shape.prod()) * dim, dtype=bool)
         keep[hats[weights >= KEEP]] = True  # a hat's peak over the points reaches KEEP where one value does
         if k < top:  # the nodes of the kept columns only: on a graded body a fine grid's box holds far more
@@ -137,19 +156,78 @@ def graded_grids(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, 
     return box, spacings, keeps
 
 
-def _built(points: np.ndarray, components: np.ndarray, grids: tuple) -> sp.csr_matrix:
-    """The kept columns of ``grids`` (:func:`graded_grids`) at the points, a row's nonzeros only: a matrix per grid
-    converted to columns, sliced and stacked, and each grid's hats found twice, took 5.9 of the 11 s of the coarse
-    functions of the pair at 1.4·10⁶ DOFs."""
+@dataclass(frozen=True)
+class Functions:
+    """Coarse functions F = ``nodes`` ``combination``: ``nodes`` (n × p) the hats of one grid at each point, the finest
+    grid whose kept functions reach it, and ``combination`` (p × c) each function's values at those grids' nodes
+    (nested grids: a coarser hat is, on a finer grid's cells, the sum of the finer hats weighted by its values at
+    their nodes). A point of a graded body carries its own grid's functions and every coarser one's (the pair at
+    1.4·10⁶ DOFs: F 1.77·10⁷ nonzeros, ~19 a row); ``nodes`` 2^dim a row and ``combination`` few, so that K's energy
+    on F is ``combinationᵀ (nodesᵀ K nodes) combination``: 0.48 against 2.7 s for Fᵀ K F there."""
+
+    nodes: sp.csr_matrix
+    combination: sp.csr_matrix
+
+    @property
+    def shape(self) -> tuple:
+        return self.nodes.shape[0], self.combination.shape[1]
+
+    def kept(self, columns: np.ndarray) -> Functions:
+        """These ``columns`` of F only."""
+        return Functions(self.nodes, self.combination[:, columns])
+
+
+def _factored(points: np.ndarray, components: np.ndarray, grids: tuple) -> Functions:
+    """The kept columns of ``grids`` (:func:`graded_grids`) at the points as :class:`Functions`. Building F itself,
+    every grid's hats at every point (a matrix per grid, stacked), took 1.45 s of the foundation's coarse functions in
+    the pair at 1.4·10⁶ DOFs (12 grids, 3,902 functions on 4.7·10⁵ DOFs), these 0.39 s."""
     box, spacings, keeps = grids
-    blocks = []
-    for grid, keep in zip(spacings, keeps, strict=True):
-        hats, weights, _ = _hats(points, components, box, grid)
-        entries = keep[hats] & (weights != 0)  # a point on a grid line: a zero weight, not stored
-        indptr = np.concatenate([[0], np.cumsum(entries.sum(axis=1))])
-        blocks.append(sp.csr_matrix((weights[entries], (np.cumsum(keep) - 1)[hats[entries]], indptr),
-                                    shape=(points.shape[1], int(keep.sum()))))
-    return sp.hstack(blocks, format="csr")
+    dim, n = points.shape
+    shapes = [_grid_shape(box, _per_axis(grid, dim)) for grid in spacings]
+    starts = np.cumsum([0] + [int(shape.prod()) * dim for shape in shapes])  # the grids' columns numbered in a row
+    rows, columns, values, used = [], [], [], []
+    left = np.arange(n)  # the points no finer grid's kept functions reach
+    for k, (grid, keep) in enumerate(zip(spacings, keeps, strict=True)):
+        hats, weights, _ = _hats(points[:, left], components[left], box, grid)
+        nonzero = weights != 0  # a point on a grid line: a zero weight, not stored
+        reached = (keep[hats] & nonzero).any(axis=1)
+        hats, nonzero = hats[reached], nonzero[reached]
+        rows.append(np.repeat(left[reached], nonzero.sum(axis=1)))
+        values.append(weights[reached][nonzero])
+        mine = np.zeros(keep.size, dtype=bool)  # the grid's columns used, marked: np.unique of all the grids'
+        mine[hats[nonzero]] = True  # (a sort) took 0.22–0.34 s of the foundation's at 1.4·10⁶ DOFs, these 0.03 s
+        mine = np.flatnonzero(mine)
+        columns.append(sum(map(len, used)) + np.searchsorted(mine, hats[nonzero]))
+        used.append(mine + starts[k])
+        left = left[~reached]
+    used = np.concatenate(used)
+    nodes = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))),
+                          shape=(n, used.size))
+    return Functions(nodes, _combination(used, starts, shapes, keeps))
+
+
+def _combination(used: np.ndarray, starts: np.ndarray, shapes: list, keeps: list) -> sp.csr_matrix:
+    """The values of the grids' kept functions (numbered as :func:`graded_grids` keeps them) at the ``used`` grid
+    columns (numbered from the grids' ``starts``): a column of grid m (a node and component) against the kept columns
+    of grid m and the coarser ones, the node in grid k's cells its index over 2^(k − m), exact."""
+    dim = shapes[0].size
+    kept = [np.flatnonzero(keep) for keep in keeps]  # a function's number: its place among them (a cumulative sum
+    # over the grids' columns took 0.27 s at 1.4·10⁶ DOFs: the finest grids' boxes hold far more nodes than are kept)
+    firsts = np.cumsum([0] + list(map(len, kept)))
+    grid = np.searchsorted(starts, used, side="right") - 1
+    rows, columns, values = [], [], []
+    for m in np.unique(grid):
+        mine = np.flatnonzero(grid == m)
+        local = used[mine] - starts[m]
+        index = np.stack(np.unravel_index(local // dim, tuple(shapes[m]))).astype(float)
+        for k in range(m, len(shapes)):
+            hats, weights = _corners(index / 2.0 ** (k - m), local % dim, shapes[k])
+            entries = keeps[k][hats] & (weights != 0)
+            rows.append(np.repeat(mine, entries.sum(axis=1)))
+            columns.append(firsts[k] + np.searchsorted(kept[k], hats[entries]))
+            values.append(weights[entries])
+    return sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))),
+                         shape=(used.size, firsts[-1]))
 
 
 def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, bodies: np.ndarray) -> Callable:
@@ -159,8 +237,8 @@ def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray,
     its contact DOFs) and at least CELLS of the cells there, coarser where that would give a body more than
     DENSE_COLUMNS functions (the slab keeps those independent in K's energy: :func:`independent`)."""
 
-    def coarse(inside: np.ndarray, contact: np.ndarray) -> sp.csr_matrix:
-        columns = []
+    def coarse(inside: np.ndarray, contact: np.ndarray) -> Functions:
+        nodes, combinations = [], []
         for body in np.unique(bodies[contact]):
             mine = bodies == body
             rest = np.flatnonzero(~inside & mine)
@@ -177,14 +255,15 @@ def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray,
                     break
                 tried.append((spacing, count))
                 spacing = coarser(tried, points.shape[0])
-            functions = _built(points[:, rest], components[rest], grids)
+            functions = _factored(points[:, rest], components[rest], grids)
+            own = functions.nodes
             indptr = np.zeros(inside.size + 1, dtype=np.int64)
-            indptr[rest + 1] = np.diff(functions.indptr)  # the body's rows among all DOFs
-            columns.append(sp.csr_matrix((functions.data, functions.indices, np.cumsum(indptr)),
-                                         shape=(inside.size, functions.shape[1])))
-        if not columns:
-            return sp.csr_matrix((inside.size, 0))
-        return sp.hstack(columns, format="csr")
+            indptr[rest + 1] = np.diff(own.indptr)  # the body's rows among all DOFs
+            nodes.append(sp.csr_matrix((own.data, own.indices, np.cumsum(indptr)), shape=(inside.size, own.shape[1])))
+            combinations.append(functions.combination)
+        if not nodes:
+            return Functions(sp.csr_matrix((inside.size, 0)), sp.csr_matrix((0, 0)))
+        return Functions(sp.hstack(nodes, format="csr"), sp.block_diag(combinations, format="csr"))
 
     return coarse
 
@@ -259,5 +338,11 @@ def body_far_functions(fem) -> Callable:
     for component, dofs in enumerate(fem.basis.split_indices()):
         components[dofs] = component
     points = fem.basis.doflocs[:, fem.free]
-    bodies = connected_components(fem.K, directed=False)[1]
-    return far_functions(points, components[fem.free], dof_cell_sizes(fem), bodies)
+    return far_functions(points, components[fem.free], dof_cell_sizes(fem), bodies(fem.K))
+
+
+def bodies(K: sp.spmatrix) -> np.ndarray:
+    """Each DOF's body: the connected components of K's graph. K's pattern is symmetric, so they are its strong
+    components, which scipy finds without the transpose its undirected search forms (the pair at 1.4·10⁶ DOFs: 0.12
+    against 0.94 s), numbered alike (in the order of their first DOFs)."""
+    return connected_components(K, directed=True, connection="strong")[1]

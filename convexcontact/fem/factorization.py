@@ -207,10 +207,10 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None, whole: 
     layers) and only its long ones wrong; as a preconditioner it leaves CG few iterations.
 
     ``coarse(inside, contact)`` (the slab's mask, B's columns) may give functions of the DOFs, zero on the slab
-    (n × c, see :func:`~convexcontact.fem.coarse.far_functions`): the rest of the body then moves with them
-    instead of being clamped, K on slab + functions (a Galerkin approximation of K) has the long waves too, and
-    CG needs fewer iterations still; only beyond a slab of COARSE_LAYERS layers or more. Functions that leave that
-    K singular (dependent on the rest) are dropped.
+    (n × c, as :class:`~convexcontact.fem.coarse.Functions`, see :func:`~convexcontact.fem.coarse.far_functions`):
+    the rest of the body then moves with them instead of being clamped, K on slab + functions (a Galerkin
+    approximation of K) has the long waves too, and CG needs fewer iterations still; only beyond a slab of
+    COARSE_LAYERS layers or more. Functions that leave that K singular (dependent on the rest) are dropped.
 
     A body too thin for COARSE_LAYERS layers is its own approximation (G = B, H = K: exact, one more factorization
     of K's size, by ``whole``). A strip clamped at its ends has W's long waves from beam bending, which neither a
@@ -247,9 +247,9 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None, whole: 
         # its factorization there left every pivot above INDEPENDENT (a second one to check it, PARDISO's and an
         # inverse-iteration solve, 0.04 s on the pair's 3,588 functions at 1.4·10⁶ DOFs, never found it singular)
         if keep.size < far.shape[1]:
-            far, block = far[:, keep], block[keep][:, keep]
+            far, block = far.kept(keep), block[keep][:, keep]
         if keep.size:
-            coupling = rows @ far
+            coupling = (rows @ far.nodes) @ far.combination
             H = sp.bmat([[H, coupling], [coupling.T, block]])
             G = sp.hstack([G, sp.csr_matrix((B.shape[0], keep.size))])
     return Approximation(G.tocsr(), H.tocsr(), factorize_sum, index.size)
@@ -307,13 +307,15 @@ CHUNK = 2**17
 MB in the same time."""
 
 
-def _energy(K: sp.csr_matrix, F: sp.csr_matrix) -> sp.csr_matrix:
-    """Fᵀ K F, summed over chunks of CHUNK rows of K."""
-    energy = sp.csr_matrix((F.shape[1], F.shape[1]))
+def _energy(K: sp.csr_matrix, functions) -> sp.csr_matrix:
+    """Fᵀ K F for F = N C (:class:`~convexcontact.fem.coarse.Functions`: N the nodes, C the combination), as
+    Cᵀ (Nᵀ K N) C, Nᵀ K N summed over chunks of CHUNK rows of K."""
+    N, C = functions.nodes, functions.combination
+    energy = sp.csr_matrix((N.shape[1], N.shape[1]))
     for start in range(0, K.shape[0], CHUNK):
         rows = slice(start, start + CHUNK)
-        energy += F[rows].T @ (K[rows] @ F)
-    return energy.tocsr()
+        energy += N[rows].T @ (K[rows] @ N)
+    return (C.T @ energy @ C).tocsr()
 
 
 class Delassus(spla.LinearOperator):

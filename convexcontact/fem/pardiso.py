@@ -132,8 +132,7 @@ class Pardiso:
     """
 
     def __init__(self, K: sp.spmatrix, schur: np.ndarray | None = None, mtype: int = 2):
-        U = sp.triu(K, format="csr")
-        U.sort_indices()
+        U = _upper_triangle(sp.csr_matrix(K))
         n = K.shape[0]
         pt, iparm, perm = np.zeros(64, np.int64), np.zeros(64, np.int32), np.zeros(n, np.int32)
         _library().pardisoinit(pt.ctypes.data_as(_ptr(ctypes.c_int64)), ctypes.byref(_i32(mtype)),
@@ -288,3 +287,17 @@ class Pardiso:
         """With ``schur``, phase 333: x_C = y_C and x_I = L_IIᵀ⁻¹(y_I − L_CIᵀ y_C); from y = forward(f)
         with u_C put on C, x_I = K_II⁻¹(f_I − K_IC u_C)."""
         return self._phase(333, y)
+
+
+def _upper_triangle(K: sp.csr_matrix) -> sp.csr_matrix:
+    """K's stored entries on and above the diagonal (zeros included), columns sorted, read off K's rows: scipy's
+    ``triu`` goes through a COO copy of K, 0.45–1.26 s against 0.13 s on the pair's K at 1.4·10⁶ DOFs (1.9·10⁷
+    entries; on the slab approximation's H, 4.1·10⁶, 0.03–0.07 s either way)."""
+    upper = Pardiso._upper(K, slice(0, K.shape[0]))
+    counts = np.zeros(K.shape[0], dtype=np.int64)
+    stored = np.diff(K.indptr) > 0
+    counts[stored] = np.add.reduceat(upper, K.indptr[:-1][stored])
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(K.indptr.dtype)
+    U = sp.csr_matrix((K.data[upper], K.indices[upper], indptr), shape=K.shape)
+    U.sort_indices()
+    return U
