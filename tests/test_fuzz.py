@@ -322,9 +322,9 @@ STIFF_ON_SOFT = {
     "a scan's": {"radii": (1.0, np.inf), "moduli": (100.0, 0.013431264393365177), "nu": (0.3, 0.25),
                  "approach": 0.01484525404353655, "law": cc.Tresca(slip_bound=0.012014767654718653)},
 }
-"""Stiff slaves on 1000–7500 × softer masters (h 0.01 / 0.017), Tresca: the fuzz long profile's finds of 2026-11-27
-(late) and 2026-11-28, and one of 80 random such pairs (/tmp scan of that session, docs/performance.md, "The crawl
-on a stiff slave over a soft master"); W's eigenvalues spread ~10⁸."""
+"""Stiff slaves on 1000–7500 × softer masters (h 0.01 / 0.017), Tresca: the fuzz long profile's two finds of
+2026-11-27 and one of 160 random such pairs (docs/performance.md, "The crawl on a stiff slave over a soft master");
+W's eigenvalues spread ~10⁸."""
 
 
 def stiff_on_soft(name: str):
@@ -334,8 +334,8 @@ def stiff_on_soft(name: str):
 @pytest.mark.parametrize("name", list(STIFF_ON_SOFT))
 @pytest.mark.parametrize("formulation", ["dual", "dual-matrix-free"])
 def test_stiff_slaves_on_soft_masters_are_solved_by_newton_cg(name, formulation):
-    """newton-cg stopped at max_iter on these (the first on the dense and the matrix-free dual, the others on the
-    matrix-free one, the third on both): Newton's point on the natural map's face left the intervals of up to 15
+    """newton-cg stopped at max_iter on these (the first and the third on the dense and the matrix-free dual, the
+    second on the matrix-free one): Newton's point on the natural map's face left the intervals of up to 15
     nodes by up to 7.9 × their bound and was refused, and the projected gradient and the segments crawled (~0.6 % a
     step). The face step (newton_cg.FACE) solves them."""
     result = cc.prepare(stiff_on_soft(name), formulation).solve("newton-cg")
