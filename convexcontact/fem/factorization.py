@@ -141,9 +141,10 @@ class Factorization(ABC):
         :func:`slab`); where that is the whole body, its matrices are factorized by :meth:`twin`."""
         return Delassus(B, self.solve, None if K is None else replace(slab(K, B, coarse, self.twin), fill=self.fill))
 
-    def twin(self, *terms: sp.spmatrix) -> Factorization:
-        """Factors of the sum of ``terms``, on (part of) K's pattern (see :func:`stored_sum`)."""
-        return factorize(stored_sum(*terms), self.backend)
+    def twin(self, *terms: sp.spmatrix, updated: bool = False) -> Factorization:
+        """Factors of the sum of ``terms``, on (part of) K's pattern (see :func:`stored_sum`); ``updated``: see
+        :func:`factorize`."""
+        return factorize(stored_sum(*terms), self.backend, updated=updated)
 
 
 SLAB = 1 / 3
@@ -167,9 +168,10 @@ products with W against 73), and the approximation is then the whole body (see :
 @dataclass(frozen=True)
 class Approximation:
     """W ≈ G H⁻¹ Gᵀ with H sparse SPD (K on a slab of DOFs next to the contact, its first ``slab`` rows, and on
-    coarse functions beyond it) and G = B on them; ``factorize(H, *terms)`` returns the factors of H + the terms, on
-    a pattern that holds every entry a term stores, zeros included (:func:`stored_sum`), an object with ``solve``
-    and ``refactorize(H, *terms)`` (new values on that pattern, the sum of the terms)."""
+    coarse functions beyond it) and G = B on them; ``factorize(H, *terms, updated=False)`` returns the factors of H +
+    the terms, on a pattern that holds every entry a term stores, zeros included (:func:`stored_sum`), an object with
+    ``solve`` and ``refactorize(H, *terms)`` (new values on that pattern, the sum of the terms; ``updated``: where
+    those change few entries, see :func:`factorize`)."""
 
     G: sp.csr_matrix
     H: sp.csr_matrix
@@ -268,9 +270,9 @@ def _symmetrized(A: np.ndarray, scale: float = 1.0, block: int = 1024) -> np.nda
     return A
 
 
-def factorize_sum(*terms: sp.spmatrix) -> Factorization:
+def factorize_sum(*terms: sp.spmatrix, updated: bool = False) -> Factorization:
     """Factors of the :func:`stored_sum` of ``terms``: an approximation's own (see :class:`Approximation`)."""
-    return factorize(stored_sum(*terms))
+    return factorize(stored_sum(*terms), updated=updated)
 
 
 def same_shape(terms, caller: str) -> None:
@@ -333,12 +335,12 @@ class Delassus(spla.LinearOperator):
 
 
 class _Direct(Factorization):
-    def __init__(self, K: sp.spmatrix, backend: str, dim: int):
+    def __init__(self, K: sp.spmatrix, backend: str, dim: int, updated: bool = False):
         start = time.perf_counter()
         self.backend, self._dim = backend, dim
         self._factors = None
         if backend == "pardiso":
-            self._factors = _pardiso_factors(K)
+            self._factors = _pardiso_factors(K, mtype=_pardiso().UPDATED if updated else 2)
             self._solve, self._block = self._factors.solve, _pardiso().BLOCK
         else:
             self._solve, self._pattern = _superlu(K, dim), _structure(K)
@@ -356,20 +358,21 @@ class _Direct(Factorization):
     def flops(self) -> float | None:
         return None if self._factors is None else self._factors.flops
 
-    def twin(self, *terms: sp.spmatrix) -> Factorization:
+    def twin(self, *terms: sp.spmatrix, updated: bool = False) -> Factorization:
         """Factors of the sum of ``terms``, on (part of) K's pattern (the preconditioner of a body that is its own
         approximation: K and a contact block within K's node blocks): with PARDISO a second numeric factorization on
         K's analysis (:meth:`~convexcontact.fem.pardiso.Pardiso.twin`: no second ordering, nor its memory, and the
         terms placed, not summed: a K-sized sum was Signorini's peak on a clamped plate, 1.90 against 1.78 × the
         linear solve's at 9.4·10⁴ DOFs); else, or where a term has entries outside K's pattern or PARDISO holds its
-        most factorizations, factors of their :func:`stored_sum`."""
+        most factorizations, factors of their :func:`stored_sum` (``updated``: see :func:`factorize`; a twin, on K's
+        SPD analysis, is refactorized whole)."""
         same_shape(terms, "twin")  # before the try: not to be taken for an entry outside the pattern
         try:
             factors = self._factors and self._factors.twin(*terms)
         except ValueError:  # outside K's pattern
             factors = None
         if not factors:
-            return factorize(stored_sum(*terms), self.backend, self._dim)
+            return factorize(stored_sum(*terms), self.backend, self._dim, updated)
         twin = object.__new__(_Direct)
         twin.backend, twin._dim, twin._factors, twin._block = self.backend, self._dim, factors, self._block
         twin._solve, twin.timings = factors.solve, {}
@@ -394,7 +397,7 @@ def _structure(K: sp.spmatrix) -> sp.csr_matrix:
     return sp.csr_matrix((np.ones(K.nnz, dtype=bool), K.indices, K.indptr), shape=K.shape)
 
 
-def factorize(K: sp.spmatrix, backend: str = "auto", dim: int = 2) -> Factorization:
+def factorize(K: sp.spmatrix, backend: str = "auto", dim: int = 2, updated: bool = False) -> Factorization:
     """Factorize the SPD stiffness on the free DOFs.
 
     Parameters
@@ -402,13 +405,17 @@ def factorize(K: sp.spmatrix, backend: str = "auto", dim: int = 2) -> Factorizat
     K : sparse symmetric positive definite (n, n).
     backend : "auto" (PARDISO if pypardiso loads, else SuperLU), "pardiso" or "superlu".
     dim : spatial dimension of the mesh; picks SuperLU's column ordering.
+    updated : factors for many refactorizations that each change few entries: with PARDISO, LU of K whole
+        (:data:`~convexcontact.fem.pardiso.UPDATED`), each refactorization a low-rank update of the factors
+        (:data:`~convexcontact.fem.pardiso.LOW_RANK`), at the cost of a slower first factorization and ~1.9× the
+        fill; SuperLU has no such update and ignores it.
 
     Raises
     ------
     SceneError
         field "dirichlet" if K is (numerically) singular; checking costs one more solve.
     """
-    return _Direct(K, _backend(backend), dim)
+    return _Direct(K, _backend(backend), dim, updated)
 
 
 

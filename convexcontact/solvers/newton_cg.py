@@ -814,7 +814,7 @@ class _Preconditioner:
             return lambda xi: _woodbury(updated, G, d, xi)
         contact = G.T @ sp.diags(1.0 / d) @ G
         if self.factors is None:
-            self.factors = self._factorize(self.H, contact, self._pattern)
+            self.factors = self._factorize(self.H, contact, self._pattern, updated=True)  # faces differ in few terms
             self._pattern = None
         else:
             self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
