@@ -308,20 +308,24 @@ class Pardiso:
 
     def _places(self, K: sp.csr_matrix, rows: slice) -> np.ndarray:
         """Where the held entries of K's ``rows`` sit in the data factorized; ValueError for an entry outside
-        the pattern. Searched among the keys row · n + column of those rows' entries factorized (increasing: rows
-        sorted, then columns), not of all of them: a chunk's temporaries only."""
+        the pattern. Searched among the keys row · n + column of the entries factorized in those of the rows where K
+        has any (increasing: rows sorted, then columns), not of all of them: a chunk's temporaries only, and a contact
+        block's on its rows only (the pair's preconditioner at 1.4·10⁶ DOFs: its keys among all 6.7·10⁶ entries of H
+        took 0.18 s a refactorization)."""
         start, stop = K.indptr[rows.start], K.indptr[rows.stop]
-        row = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), np.diff(K.indptr[rows.start:rows.stop + 1]))
+        counts = np.diff(K.indptr[rows.start:rows.stop + 1])
+        row = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), counts)
         held = self._held(K, rows)
         wanted = row[held] * self.n + K.indices[start:stop][held]
         _, _, n, _, indptr, indices, _, _, _ = self._handle
-        first, last = indptr[rows.start], indptr[rows.stop]
-        keys = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), np.diff(indptr[rows.start:rows.stop + 1]))
-        keys = keys * n + indices[first:last]
+        present = np.flatnonzero(counts) + rows.start
+        lengths = (indptr[present + 1] - indptr[present]).astype(np.int64)
+        positions = np.arange(lengths.sum()) + np.repeat(indptr[present] - (np.cumsum(lengths) - lengths), lengths)
+        keys = np.repeat(present.astype(np.int64), lengths) * n + indices[positions]
         where = np.searchsorted(keys, wanted)
         if (where >= keys.size).any() or (keys[np.minimum(where, keys.size - 1)] != wanted).any():
             raise ValueError("refactorize: the matrix has entries outside the pattern factorized")
-        return where + first
+        return positions[where]
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """K⁻¹ b (phase 33)."""
