@@ -145,9 +145,10 @@ def contact_block(K, C, seed):
 
 
 def test_updated_factors_follow_few_changed_entries(problem, backend, monkeypatch):
-    """Factors ``updated`` (PARDISO's LU of K whole) refactorized for a few faces' contact terms on C: each solves K +
-    that term as a fresh factorization does; with PARDISO each is a low-rank update naming exactly the entries changed
-    since the factors kept (iparm[38] = 1), and a change of every entry a full one (iparm[38] = 0)."""
+    """Factors ``updated`` refactorized for a few faces' contact terms on C: each solves K + that term as a fresh
+    factorization does; with PARDISO the first refactorization is an LU of the sum (mtype UPDATED) on the pattern
+    factorized, each later one a low-rank update naming exactly the entries changed since (iparm[38] = 1), and a
+    change of every entry a full refactorization (iparm[38] = 0)."""
     dim, K, C, _, _ = problem
     C = C[: max(4, C.size // 4)]  # part of the face: few entries change
     terms = [contact_block(K, C, seed) for seed in (1, 2, 3, 1)]
@@ -157,10 +158,12 @@ def test_updated_factors_follow_few_changed_entries(problem, backend, monkeypatc
     if pardiso is not None:
         call = pardiso._call
         monkeypatch.setattr(pardiso, "_call", lambda handle, phase, *rest: calls.append(
-            (phase, int(handle[1][38]), handle[6][:2 * int(handle[6][0]) + 1].copy())) or call(handle, phase, *rest))
+            (phase, handle[7], int(handle[1][38]), handle[6][:2 * int(handle[6][0]) + 1].copy()))
+            or call(handle, phase, *rest))
     factors = factorize(pattern, backend, dim, updated=True)
+    assert pardiso is None or factors._factors._handle[7] == 2  # Cholesky's until refactorized
     b = np.random.default_rng(0).standard_normal(K.shape[0])
-    before = sp.csr_matrix(pattern)
+    before = None
     for term in terms[1:]:
         calls.clear()
         factors.refactorize(K, term)
@@ -168,16 +171,20 @@ def test_updated_factors_follow_few_changed_entries(problem, backend, monkeypatc
         assert np.linalg.norm(matrix @ factors.solve(b) - b) <= 1e-10 * np.linalg.norm(b)
         if pardiso is None:
             continue
-        [(phase, low_rank, entries)] = [c for c in calls if c[0] == 22]
-        changed = sp.coo_matrix(matrix - before)
-        changed.eliminate_zeros()
-        assert (phase, low_rank, entries[0]) == (22, 1, changed.nnz)
-        assert set(zip(entries[1::2], entries[2::2])) == set(zip(changed.row, changed.col))
+        factored = [c for c in calls if c[0] in (12, 22)]
+        if before is None:
+            assert [c[:3] for c in factored] == [(12, pardiso.UPDATED, 0)]
+        else:
+            [(phase, mtype, low_rank, entries)] = factored
+            changed = sp.coo_matrix(matrix - before)
+            changed.eliminate_zeros()
+            assert (phase, mtype, low_rank, entries[0]) == (22, pardiso.UPDATED, 1, changed.nnz)
+            assert set(zip(entries[1::2], entries[2::2])) == set(zip(changed.row, changed.col))
         before = matrix
     if pardiso is not None:
         calls.clear()
         factors.refactorize(2.0 * K, terms[0])  # every entry changed: beyond LOW_RANK
-        assert [c[:2] for c in calls if c[0] == 22] == [(22, 0)]
+        assert [c[:3] for c in calls if c[0] == 22] == [(22, pardiso.UPDATED, 0)]
         matrix = (2.0 * K + terms[0]).tocsr()
         assert np.linalg.norm(matrix @ factors.solve(b) - b) <= 1e-10 * np.linalg.norm(b)
 
