@@ -146,12 +146,12 @@ def contact_block(K, C, seed):
 
 def test_updated_factors_follow_few_changed_entries(problem, backend, monkeypatch):
     """Factors ``updated`` refactorized for a few faces' contact terms on C: each solves K + that term as a fresh
-    factorization does; with PARDISO the first refactorization is an LU of the sum (mtype UPDATED) on the pattern
-    factorized, each later one a low-rank update naming exactly the entries changed since (iparm[38] = 1), and a
-    change of every entry a full refactorization (iparm[38] = 0)."""
+    factorization does; with PARDISO the first refactorization is Cholesky's (CHOLESKY_REFACTORIZATIONS), the second an
+    LU of the sum (mtype UPDATED) on the pattern factorized, each later one a low-rank update naming exactly the
+    entries changed since (iparm[38] = 1), and a change of every entry a full refactorization (iparm[38] = 0)."""
     dim, K, C, _, _ = problem
     C = C[: max(4, C.size // 4)]  # part of the face: few entries change
-    terms = [contact_block(K, C, seed) for seed in (1, 2, 3, 1)]
+    terms = [contact_block(K, C, seed) for seed in (1, 2, 3, 4, 1)]
     pattern = (K + sum(terms)).tocsr()  # every term's entries
     calls = []
     pardiso = factorization._pardiso() if backend == "pardiso" else None
@@ -163,8 +163,9 @@ def test_updated_factors_follow_few_changed_entries(problem, backend, monkeypatc
     factors = factorize(pattern, backend, dim, updated=True)
     assert pardiso is None or factors._factors._handle[7] == 2  # Cholesky's until refactorized
     b = np.random.default_rng(0).standard_normal(K.shape[0])
+    assert factorization.CHOLESKY_REFACTORIZATIONS == 1
     before = None
-    for term in terms[1:]:
+    for k, term in enumerate(terms[1:]):
         calls.clear()
         factors.refactorize(K, term)
         matrix = (K + term).tocsr()
@@ -172,8 +173,8 @@ def test_updated_factors_follow_few_changed_entries(problem, backend, monkeypatc
         if pardiso is None:
             continue
         factored = [c for c in calls if c[0] in (12, 22)]
-        if before is None:
-            assert [c[:3] for c in factored] == [(12, pardiso.UPDATED, 0)]
+        if k < 2:
+            assert [c[:3] for c in factored] == [[(22, 2, 0)], [(12, pardiso.UPDATED, 0)]][k]
         else:
             [(phase, mtype, low_rank, entries)] = factored
             changed = sp.coo_matrix(matrix - before)

@@ -334,12 +334,20 @@ class Delassus(spla.LinearOperator):
     _rmatvec = _matmat = _matvec
 
 
+CHOLESKY_REFACTORIZATIONS = 1
+"""Refactorizations that factors ``updated`` (see :func:`factorize`) make as Cholesky's before they become PARDISO's
+LU: its first factorization costs ~2 Cholesky refactorizations (the pair's preconditioner at 1.4·10⁶ DOFs: 1.2–2.1 s
+against 0.55–0.9 s) and its solves ~1.25 × theirs, which one or two low-rank refactorizations (0.3 s) do not repay:
+the pair's Signorini at 1.4·10⁶ DOFs refactorizes once (its first exact face), and its LU there cost 5.1 s in a loaded
+run against 0.93 s for Cholesky's refactorization."""
+
+
 class _Direct(Factorization):
     def __init__(self, K: sp.spmatrix, backend: str, dim: int, updated: bool = False):
         start = time.perf_counter()
         self.backend, self._dim = backend, dim
         self._factors = None
-        self._updated = updated and backend == "pardiso"  # LU at the first refactorization (see refactorize)
+        self._cholesky = CHOLESKY_REFACTORIZATIONS if updated and backend == "pardiso" else None  # see refactorize
         if backend == "pardiso":
             self._factors = _pardiso_factors(K)
             self._solve, self._block = self._factors.solve, _pardiso().BLOCK
@@ -376,7 +384,7 @@ class _Direct(Factorization):
             return factorize(stored_sum(*terms), self.backend, self._dim, updated)
         twin = object.__new__(_Direct)
         twin.backend, twin._dim, twin._factors, twin._block = self.backend, self._dim, factors, self._block
-        twin._updated = False
+        twin._cholesky = None
         twin._solve, twin.timings = factors.solve, {}
         return twin
 
@@ -384,17 +392,19 @@ class _Direct(Factorization):
         """Factorize new values, K (+ ``more``, summed), on the sparsity pattern of the first K (entries outside it:
         ValueError), without the singularity check: PARDISO keeps its ordering and redoes only the numeric
         factorization, placing each term's entries (their sum is not formed: a K-sized temporary). Factors ``updated``
-        (see :func:`factorize`) become PARDISO's LU of the sum at their first refactorization, on the pattern factorized,
-        the former factors freed first."""
-        if self._updated:
+        (see :func:`factorize`) become PARDISO's LU of the sum after CHOLESKY_REFACTORIZATIONS, on the pattern
+        factorized, the former factors freed first."""
+        if self._cholesky == 0:
             pattern = self._factors.pattern()
             self._factors = self._solve = None
             summed = stored_sum(K, *more, pattern)
             if summed.nnz != pattern.nnz:
                 raise ValueError("refactorize: the matrix has entries outside the pattern factorized")
             self._factors = _pardiso_factors(summed, mtype=_pardiso().UPDATED)
-            self._solve, self._updated = self._factors.solve, False
+            self._solve, self._cholesky = self._factors.solve, None
             return
+        if self._cholesky:
+            self._cholesky -= 1
         if self._factors is not None:
             self._factors.refactorize(K, *more)
             return
@@ -418,8 +428,8 @@ def factorize(K: sp.spmatrix, backend: str = "auto", dim: int = 2, updated: bool
     K : sparse symmetric positive definite (n, n).
     backend : "auto" (PARDISO if pypardiso loads, else SuperLU), "pardiso" or "superlu".
     dim : spatial dimension of the mesh; picks SuperLU's column ordering.
-    updated : factors for refactorizations that each change few entries: with PARDISO, Cholesky's until the first
-        refactorization, then LU of the matrix whole (:data:`~convexcontact.fem.pardiso.UPDATED`, ~1.9 × the fill),
+    updated : factors for refactorizations that each change few entries: with PARDISO, Cholesky's for the first
+        CHOLESKY_REFACTORIZATIONS, then LU of the matrix whole (:data:`~convexcontact.fem.pardiso.UPDATED`, ~1.9 × the fill),
         each later refactorization a low-rank update of it (:data:`~convexcontact.fem.pardiso.LOW_RANK`); factors
         never refactorized keep Cholesky's memory (LU from the first factorization: the strip 400 : 1 clamped at 10⁵
         DOFs, Tresca, never refactorized, peaked at 1.96 × the linear solve's memory against 1.63 ×). The pair's Tresca
