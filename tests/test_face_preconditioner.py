@@ -77,8 +77,8 @@ def test_the_pair_s_refactorizations_are_low_rank_updates_on_the_same_path(monke
     monkeypatch.undo()
     types, numeric, call = [], [], pardiso._call
     monkeypatch.setattr(pardiso, "_call", lambda handle, phase, *rest: (handle[2] > 1000 and (
-        types.append(handle[7]) if phase == 12 else phase == 22 and numeric.append((handle[7], handle[1][38])))) or call(
-        handle, phase, *rest))
+        types.append(handle[7]) if phase == 12 else phase == 22 and numeric.append((handle[7], handle[1][38]))))
+        or call(handle, phase, *rest))
     result, info = solved(cc.prepare(scene, "dual-matrix-free"), monkeypatch, False)
     for name in ("steps", "products", "cg_iterations", "factorizations"):
         assert info[name] == every[name], name

@@ -429,13 +429,14 @@ def factorize(K: sp.spmatrix, backend: str = "auto", dim: int = 2, updated: bool
     backend : "auto" (PARDISO if pypardiso loads, else SuperLU), "pardiso" or "superlu".
     dim : spatial dimension of the mesh; picks SuperLU's column ordering.
     updated : factors for refactorizations that each change few entries: with PARDISO, Cholesky's for the first
-        CHOLESKY_REFACTORIZATIONS, then LU of the matrix whole (:data:`~convexcontact.fem.pardiso.UPDATED`, ~1.9 × the fill),
-        each later refactorization a low-rank update of it (:data:`~convexcontact.fem.pardiso.LOW_RANK`); factors
-        never refactorized keep Cholesky's memory (LU from the first factorization: the strip 400 : 1 clamped at 10⁵
-        DOFs, Tresca, never refactorized, peaked at 1.96 × the linear solve's memory against 1.63 ×). The pair's Tresca
-        preconditioner at 1.4·10⁶ DOFs (13 factorizations, 64 solves), one process: 16.6 and 15.6 s Cholesky's
-        throughout, 13.9 and 13.3 s so (refactorizations 9.4 → 3.7–4.0 s; the LU's factorization and its solves,
-        ~1.25 × Cholesky's, the rest). SuperLU has no such update and ignores it.
+        CHOLESKY_REFACTORIZATIONS, then LU of the matrix whole (:data:`~convexcontact.fem.pardiso.UPDATED`, ~1.9 ×
+        the fill), each later refactorization a low-rank update of it (:data:`~convexcontact.fem.pardiso.LOW_RANK`);
+        factors refactorized less keep Cholesky's memory (LU from the first factorization: the strip 400 : 1 clamped
+        at 10⁵ DOFs, Tresca, never refactorized, peaked at 1.96 × the linear solve's memory against 1.63 ×). The
+        pair's Tresca preconditioner at 1.4·10⁶ DOFs (13 factorizations, 64 solves), one process: 16.6 and 15.6 s
+        Cholesky's throughout, 13.9 and 13.3 s with LU from the first refactorization (refactorizations 9.4 → 3.7–4.0
+        s; the LU's factorization and its solves, ~1.25 × Cholesky's, the rest). SuperLU has no such update and
+        ignores it.
 
     Raises
     ------
