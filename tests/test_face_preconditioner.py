@@ -63,33 +63,6 @@ def test_the_pair_s_path_is_the_refactorized_one(pair, monkeypatch):
     assert np.abs(result.contact.forces - fresh.contact.forces).max() <= 1e-9 * scale
 
 
-@pytest.mark.skipif(factorization._pardiso() is None, reason="PARDISO's low-rank update")
-def test_the_pair_s_refactorizations_are_low_rank_updates_on_the_same_path(monkeypatch):
-    """The 2-D pair's Coulomb dual at 2·10⁴ DOFs, refactorized at every face (no Woodbury updates): Cholesky's factors
-    at the first face and its first refactorization, PARDISO's LU (``updated``) at the second, low-rank updates of it
-    from then on, with the same Newton steps, products, CG iterations and factorizations as with Cholesky's factors
-    refactorized whole, the same answer to rounding."""
-    scene = scene_of("two-body", 2, "coulomb", 2e4)
-    pardiso, init = factorization._pardiso(), factorization._Direct.__init__
-    monkeypatch.setattr(factorization._Direct, "__init__",
-                        lambda self, K, backend, dim, updated=False: init(self, K, backend, dim))
-    whole, every = solved(cc.prepare(scene, "dual-matrix-free"), monkeypatch, False)
-    monkeypatch.undo()
-    types, numeric, call = [], [], pardiso._call
-    monkeypatch.setattr(pardiso, "_call", lambda handle, phase, *rest: (handle[2] > 1000 and (
-        types.append(handle[7]) if phase == 12 else phase == 22 and numeric.append((handle[7], handle[1][38]))))
-        or call(handle, phase, *rest))
-    result, info = solved(cc.prepare(scene, "dual-matrix-free"), monkeypatch, False)
-    for name in ("steps", "products", "cg_iterations", "factorizations"):
-        assert info[name] == every[name], name
-    updated = [low_rank for mtype, low_rank in numeric if mtype == pardiso.UPDATED]
-    assert info["factorizations"] > 3 and types.count(pardiso.UPDATED) >= 1
-    assert updated and set(updated) == {1}  # every refactorization of the LU a low-rank update
-    assert result.certificate.worst <= 1e-10
-    scale = np.abs(whole.contact.forces).max()
-    assert np.abs(result.contact.forces - whole.contact.forces).max() <= 1e-9 * scale
-
-
 def signorini(shape, dim, size, restricted, monkeypatch):
     """Newton's info on the Signorini dual of a bench shape forced matrix-free; ``restricted``: the restriction
     throughout, as before the switch."""

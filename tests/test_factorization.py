@@ -12,7 +12,6 @@ import scipy.sparse.linalg as spla
 import skfem
 from skfem.models.elasticity import lame_parameters, linear_elasticity
 
-from convexcontact.fem import factorization
 from convexcontact.fem.factorization import Condensation, condense, factorize
 from convexcontact.scene.description import SceneError
 
@@ -133,61 +132,6 @@ def test_a_slender_cantilever_is_not_singular(backend):
     for built in (factorize(K, backend), condense(K, tip, backend)):
         u = built.solve(f)
         assert np.linalg.norm(K @ u - f) < 1e-6 and np.abs(u).max() > 1e6  # it bends: F L³/(3EI) = 4e6
-
-
-def contact_block(K, C, seed):
-    """K's pattern on C's rows and columns with random SPD values (a contact term Gᵀ D⁻¹ G of one face)."""
-    rng = np.random.default_rng(seed)
-    block = sp.csr_matrix(K[C][:, C])
-    G = sp.csr_matrix((rng.uniform(0.5, 2.0, block.nnz), block.indices, block.indptr), shape=block.shape)
-    E = sp.csr_matrix((np.ones(C.size), (C, np.arange(C.size))), shape=(K.shape[0], C.size))
-    return sp.csr_matrix(E @ ((G + G.T) / 2 + 20 * sp.eye(C.size)) @ E.T)  # diagonally dominant: SPD
-
-
-def test_updated_factors_follow_few_changed_entries(problem, backend, monkeypatch):
-    """Factors ``updated`` refactorized for a few faces' contact terms on C: each solves K + that term as a fresh
-    factorization does; with PARDISO the first refactorization is Cholesky's (CHOLESKY_REFACTORIZATIONS), the second an
-    LU of the sum (mtype UPDATED) on the pattern factorized, each later one a low-rank update naming exactly the
-    entries changed since (iparm[38] = 1), and a change of every entry a full refactorization (iparm[38] = 0)."""
-    dim, K, C, _, _ = problem
-    C = C[: max(4, C.size // 4)]  # part of the face: few entries change
-    terms = [contact_block(K, C, seed) for seed in (1, 2, 3, 4, 1)]
-    pattern = (K + sum(terms)).tocsr()  # every term's entries
-    calls = []
-    pardiso = factorization._pardiso() if backend == "pardiso" else None
-    if pardiso is not None:
-        call = pardiso._call
-        monkeypatch.setattr(pardiso, "_call", lambda handle, phase, *rest: calls.append(
-            (phase, handle[7], int(handle[1][38]), handle[6][:2 * int(handle[6][0]) + 1].copy()))
-            or call(handle, phase, *rest))
-    factors = factorize(pattern, backend, dim, updated=True)
-    assert pardiso is None or factors._factors._handle[7] == 2  # Cholesky's until refactorized
-    b = np.random.default_rng(0).standard_normal(K.shape[0])
-    assert factorization.CHOLESKY_REFACTORIZATIONS == 1
-    before = None
-    for k, term in enumerate(terms[1:]):
-        calls.clear()
-        factors.refactorize(K, term)
-        matrix = (K + term).tocsr()
-        assert np.linalg.norm(matrix @ factors.solve(b) - b) <= 1e-10 * np.linalg.norm(b)
-        if pardiso is None:
-            continue
-        factored = [c for c in calls if c[0] in (12, 22)]
-        if k < 2:
-            assert [c[:3] for c in factored] == [[(22, 2, 0)], [(12, pardiso.UPDATED, 0)]][k]
-        else:
-            [(phase, mtype, low_rank, entries)] = factored
-            changed = sp.coo_matrix(matrix - before)
-            changed.eliminate_zeros()
-            assert (phase, mtype, low_rank, entries[0]) == (22, pardiso.UPDATED, 1, changed.nnz)
-            assert set(zip(entries[1::2], entries[2::2])) == set(zip(changed.row, changed.col))
-        before = matrix
-    if pardiso is not None:
-        calls.clear()
-        factors.refactorize(2.0 * K, terms[0])  # every entry changed: beyond LOW_RANK
-        assert [c[:3] for c in calls if c[0] == 22] == [(22, pardiso.UPDATED, 0)]
-        matrix = (2.0 * K + terms[0]).tocsr()
-        assert np.linalg.norm(matrix @ factors.solve(b) - b) <= 1e-10 * np.linalg.norm(b)
 
 
 def test_arguments_are_checked():

@@ -33,9 +33,9 @@ def spectrum(approximation, W):
 
 
 def test_the_approximation_s_h_is_structurally_symmetric(pair):
-    """H stores (j, i) wherever it stores (i, j): the preconditioner's LU is made on the pattern of H's Cholesky, built
-    from its upper triangle (pardiso.UPDATED). The functions' energy Cᵀ(Nᵀ K N)C stored one of −1.2e-16 and not its
-    mirror (scipy's products drop sums that cancel), until it was symmetrized."""
+    """H stores (j, i) wherever it stores (i, j), as an SPD matrix's pattern should (a factorization of it whole, an LU
+    on the pattern of its Cholesky, read an entry outside it): the functions' energy Cᵀ(Nᵀ K N)C stored one of −1.2e-16
+    and not its mirror (scipy's products drop sums that cancel), until it was symmetrized."""
     H = pair[0].program.P.approximation.H.tocsr()
     stored = sp.csr_matrix((np.ones(H.nnz), H.indices, H.indptr), shape=H.shape)
     assert (stored != stored.T).nnz == 0

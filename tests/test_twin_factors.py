@@ -138,8 +138,7 @@ def test_the_plate_s_preconditioner_is_k_s_twin_with_the_same_newton_steps(monke
 
     twin, twin_analyses, twin_products, twin_certificate = solved()
     monkeypatch.setattr(factorization._Direct, "twin",
-                        lambda self, *terms, **options: factorization.factorize(factorization.stored_sum(*terms),
-                                                                                self.backend))  # Cholesky's throughout
+                        lambda self, *terms: factorization.factorize(factorization.stored_sum(*terms), self.backend))
     own, own_analyses, own_products, own_certificate = solved()
     assert (twin_analyses, own_analyses) == (0, 1)
     assert twin.status == own.status == "solved" and twin.iterations == own.iterations and twin_products == own_products

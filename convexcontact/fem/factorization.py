@@ -141,10 +141,9 @@ class Factorization(ABC):
         :func:`slab`); where that is the whole body, its matrices are factorized by :meth:`twin`."""
         return Delassus(B, self.solve, None if K is None else replace(slab(K, B, coarse, self.twin), fill=self.fill))
 
-    def twin(self, *terms: sp.spmatrix, updated: bool = False) -> Factorization:
-        """Factors of the sum of ``terms``, on (part of) K's pattern (see :func:`stored_sum`); ``updated``: see
-        :func:`factorize`."""
-        return factorize(stored_sum(*terms), self.backend, updated=updated)
+    def twin(self, *terms: sp.spmatrix) -> Factorization:
+        """Factors of the sum of ``terms``, on (part of) K's pattern (see :func:`stored_sum`)."""
+        return factorize(stored_sum(*terms), self.backend)
 
 
 SLAB = 1 / 3
@@ -168,10 +167,9 @@ products with W against 73), and the approximation is then the whole body (see :
 @dataclass(frozen=True)
 class Approximation:
     """W ≈ G H⁻¹ Gᵀ with H sparse SPD (K on a slab of DOFs next to the contact, its first ``slab`` rows, and on
-    coarse functions beyond it) and G = B on them; ``factorize(H, *terms, updated=False)`` returns the factors of H +
-    the terms, on a pattern that holds every entry a term stores, zeros included (:func:`stored_sum`), an object with
-    ``solve`` and ``refactorize(H, *terms)`` (new values on that pattern, the sum of the terms; ``updated``: where
-    those change few entries, see :func:`factorize`)."""
+    coarse functions beyond it) and G = B on them; ``factorize(H, *terms)`` returns the factors of H + the terms, on
+    a pattern that holds every entry a term stores, zeros included (:func:`stored_sum`), an object with ``solve``
+    and ``refactorize(H, *terms)`` (new values on that pattern, the sum of the terms)."""
 
     G: sp.csr_matrix
     H: sp.csr_matrix
@@ -270,9 +268,9 @@ def _symmetrized(A: np.ndarray, scale: float = 1.0, block: int = 1024) -> np.nda
     return A
 
 
-def factorize_sum(*terms: sp.spmatrix, updated: bool = False) -> Factorization:
+def factorize_sum(*terms: sp.spmatrix) -> Factorization:
     """Factors of the :func:`stored_sum` of ``terms``: an approximation's own (see :class:`Approximation`)."""
-    return factorize(stored_sum(*terms), updated=updated)
+    return factorize(stored_sum(*terms))
 
 
 def same_shape(terms, caller: str) -> None:
@@ -312,8 +310,8 @@ MB in the same time."""
 def _energy(K: sp.csr_matrix, functions) -> sp.csr_matrix:
     """Fᵀ K F for F = N C (:class:`~convexcontact.fem.coarse.Functions`: N the nodes, C the combination), as
     Cᵀ (Nᵀ K N) C, Nᵀ K N summed over chunks of CHUNK rows of K; symmetrized: scipy's products drop the sums that
-    cancel to 0, so round-off stored (i, j) and not (j, i) (−1.2e-16 on the punch's foundation at h 0.005), and the
-    preconditioner's LU on the pattern of H's Cholesky (pardiso.UPDATED) found it outside."""
+    cancel to 0, so round-off stored (i, j) and not (j, i) (−1.2e-16 on the punch's foundation at h 0.005): an H whose
+    pattern is not symmetric, where a factorization of it whole (an LU) read an entry its Cholesky never held."""
     N, C = functions.nodes, functions.combination
     energy = sp.csr_matrix((N.shape[1], N.shape[1]))
     for start in range(0, K.shape[0], CHUNK):
@@ -339,20 +337,11 @@ class Delassus(spla.LinearOperator):
     _rmatvec = _matmat = _matvec
 
 
-CHOLESKY_REFACTORIZATIONS = 1
-"""Refactorizations that factors ``updated`` (see :func:`factorize`) make as Cholesky's before they become PARDISO's
-LU: its first factorization costs ~2 Cholesky refactorizations (the pair's preconditioner at 1.4·10⁶ DOFs: 1.2–2.1 s
-against 0.55–0.9 s) and its solves ~1.25 × theirs, which one or two low-rank refactorizations (0.3 s) do not repay:
-the pair's Signorini at 1.4·10⁶ DOFs refactorizes once (its first exact face), and its LU there cost 5.1 s in a loaded
-run against 0.93 s for Cholesky's refactorization."""
-
-
 class _Direct(Factorization):
-    def __init__(self, K: sp.spmatrix, backend: str, dim: int, updated: bool = False):
+    def __init__(self, K: sp.spmatrix, backend: str, dim: int):
         start = time.perf_counter()
         self.backend, self._dim = backend, dim
         self._factors = None
-        self._cholesky = CHOLESKY_REFACTORIZATIONS if updated and backend == "pardiso" else None  # see refactorize
         if backend == "pardiso":
             self._factors = _pardiso_factors(K)
             self._solve, self._block = self._factors.solve, _pardiso().BLOCK
@@ -372,44 +361,29 @@ class _Direct(Factorization):
     def flops(self) -> float | None:
         return None if self._factors is None else self._factors.flops
 
-    def twin(self, *terms: sp.spmatrix, updated: bool = False) -> Factorization:
+    def twin(self, *terms: sp.spmatrix) -> Factorization:
         """Factors of the sum of ``terms``, on (part of) K's pattern (the preconditioner of a body that is its own
         approximation: K and a contact block within K's node blocks): with PARDISO a second numeric factorization on
         K's analysis (:meth:`~convexcontact.fem.pardiso.Pardiso.twin`: no second ordering, nor its memory, and the
         terms placed, not summed: a K-sized sum was Signorini's peak on a clamped plate, 1.90 against 1.78 × the
         linear solve's at 9.4·10⁴ DOFs); else, or where a term has entries outside K's pattern or PARDISO holds its
-        most factorizations, factors of their :func:`stored_sum` (``updated``: see :func:`factorize`; a twin, on K's
-        SPD analysis, is refactorized whole)."""
+        most factorizations, factors of their :func:`stored_sum`."""
         same_shape(terms, "twin")  # before the try: not to be taken for an entry outside the pattern
         try:
             factors = self._factors and self._factors.twin(*terms)
         except ValueError:  # outside K's pattern
             factors = None
         if not factors:
-            return factorize(stored_sum(*terms), self.backend, self._dim, updated)
+            return factorize(stored_sum(*terms), self.backend, self._dim)
         twin = object.__new__(_Direct)
         twin.backend, twin._dim, twin._factors, twin._block = self.backend, self._dim, factors, self._block
-        twin._cholesky = None
         twin._solve, twin.timings = factors.solve, {}
         return twin
 
     def refactorize(self, K: sp.spmatrix, *more: sp.spmatrix) -> None:
         """Factorize new values, K (+ ``more``, summed), on the sparsity pattern of the first K (entries outside it:
         ValueError), without the singularity check: PARDISO keeps its ordering and redoes only the numeric
-        factorization, placing each term's entries (their sum is not formed: a K-sized temporary). Factors ``updated``
-        (see :func:`factorize`) become PARDISO's LU of the sum after CHOLESKY_REFACTORIZATIONS, on the pattern
-        factorized, the former factors freed first."""
-        if self._cholesky == 0:
-            pattern = self._factors.pattern()
-            self._factors = self._solve = None
-            summed = stored_sum(K, *more, pattern)
-            if summed.nnz != pattern.nnz:
-                raise ValueError("refactorize: the matrix has entries outside the pattern factorized")
-            self._factors = _pardiso_factors(summed, mtype=_pardiso().UPDATED)
-            self._solve, self._cholesky = self._factors.solve, None
-            return
-        if self._cholesky:
-            self._cholesky -= 1
+        factorization, placing each term's entries (their sum is not formed: a K-sized temporary)."""
         if self._factors is not None:
             self._factors.refactorize(K, *more)
             return
@@ -425,7 +399,7 @@ def _structure(K: sp.spmatrix) -> sp.csr_matrix:
     return sp.csr_matrix((np.ones(K.nnz, dtype=bool), K.indices, K.indptr), shape=K.shape)
 
 
-def factorize(K: sp.spmatrix, backend: str = "auto", dim: int = 2, updated: bool = False) -> Factorization:
+def factorize(K: sp.spmatrix, backend: str = "auto", dim: int = 2) -> Factorization:
     """Factorize the SPD stiffness on the free DOFs.
 
     Parameters
@@ -433,22 +407,13 @@ def factorize(K: sp.spmatrix, backend: str = "auto", dim: int = 2, updated: bool
     K : sparse symmetric positive definite (n, n).
     backend : "auto" (PARDISO if pypardiso loads, else SuperLU), "pardiso" or "superlu".
     dim : spatial dimension of the mesh; picks SuperLU's column ordering.
-    updated : factors for refactorizations that each change few entries: with PARDISO, Cholesky's for the first
-        CHOLESKY_REFACTORIZATIONS, then LU of the matrix whole (:data:`~convexcontact.fem.pardiso.UPDATED`, ~1.9 ×
-        the fill), each later refactorization a low-rank update of it (:data:`~convexcontact.fem.pardiso.LOW_RANK`);
-        factors refactorized less keep Cholesky's memory (LU from the first factorization: the strip 400 : 1 clamped
-        at 10⁵ DOFs, Tresca, never refactorized, peaked at 1.96 × the linear solve's memory against 1.63 ×). The
-        pair's Tresca preconditioner at 1.4·10⁶ DOFs (13 factorizations, 64 solves), one process: 16.6 and 15.6 s
-        Cholesky's throughout, 13.9 and 13.3 s with LU from the first refactorization (refactorizations 9.4 → 3.7–4.0
-        s; the LU's factorization and its solves, ~1.25 × Cholesky's, the rest). SuperLU has no such update and
-        ignores it.
 
     Raises
     ------
     SceneError
         field "dirichlet" if K is (numerically) singular; checking costs one more solve.
     """
-    return _Direct(K, _backend(backend), dim, updated)
+    return _Direct(K, _backend(backend), dim)
 
 
 

@@ -112,29 +112,10 @@ one pivot per null direction of a singular W (more dual rows than DOFs they touc
 used."""
 
 
-UPDATED = 11
-"""PARDISO's matrix type for a real nonsymmetric matrix, taken (both triangles stored, LU without scaling or matching)
-for an SPD matrix refactorized many times with few entries changed: with its two-level factorization (iparm[23] = 10)
-it is PARDISO's only one whose low-rank update (iparm[38] = 1, :meth:`Pardiso.refactorize`) recomputes just what the
-changed entries reach; with mtype 2, -2 or 11's classic factorization iparm[38] is ignored (a change list naming the
-wrong entries still gave the new matrix's factors; MKL 2026.2). The pair's preconditioner at 1.4·10⁶ DOFs (H 3.2·10⁵
-rows, 6.7·10⁶ entries; a face changes 677–16,876 of them), one process: LU 3.2·10⁹ flops and 3.6·10⁷ nonzeros against
-Cholesky's 1.9·10⁹ and 1.9·10⁷, its first factorization 1.16 s against 1.40 s, 12 low-rank refactorizations 4.05 s
-against 8.85 s for Cholesky's, a solve 85 ms against 70 ms."""
-
-LOW_RANK = 0.05
-"""Most changed entries, as a fraction of those stored, that :meth:`Pardiso.refactorize` passes as a low-rank update
-(:data:`UPDATED`); beyond, a full numeric factorization. Its cost follows how far the changes reach, not their count:
-on the pair's preconditioner at 3.2·10⁵ DOFs (a full one 0.13–0.23 s), every entry of the contact block changed (4 %,
-on the 4,000 DOFs next to the contact) 0.10 s; entries on DOFs picked at random 0.06 s at 0.1 %, 0.18 s at 1.8 %,
-0.47 s at 11 % and 2.1 s at 96 %."""
-
-
 class Pardiso:
-    """PARDISO factors (of the upper triangle but with :data:`UPDATED`, 0-based) of K: real SPD (mtype 2), or symmetric
-    indefinite (``mtype`` = :data:`SADDLE`) for a saddle-point matrix whose block outside ``schur`` is SPD: that block
-    is factored without scaling, matching or perturbation beyond :data:`PERTURBATION`, as K alone would be; or, for an
-    SPD K whose refactorizations change few entries, LU of K whole (``mtype`` = :data:`UPDATED`).
+    """PARDISO factors (upper triangle, 0-based) of K: real SPD (mtype 2), or symmetric indefinite (``mtype`` =
+    :data:`SADDLE`) for a saddle-point matrix whose block outside ``schur`` is SPD: that block is factored without
+    scaling, matching or perturbation beyond :data:`PERTURBATION`, as K alone would be.
 
     Parameters
     ----------
@@ -151,8 +132,7 @@ class Pardiso:
     """
 
     def __init__(self, K: sp.spmatrix, schur: np.ndarray | None = None, mtype: int = 2):
-        U = sp.csr_matrix(K, copy=True) if mtype == UPDATED else _upper_triangle(sp.csr_matrix(K))  # values ours: below
-        U.sum_duplicates()
+        U = _upper_triangle(sp.csr_matrix(K))
         n = K.shape[0]
         pt, iparm, perm = np.zeros(64, np.int64), np.zeros(64, np.int32), np.zeros(n, np.int32)
         _library().pardisoinit(pt.ctypes.data_as(_ptr(ctypes.c_int64)), ctypes.byref(_i32(mtype)),
@@ -162,8 +142,6 @@ class Pardiso:
         iparm[18] = -1  # report a numeric factorization's flops (flops)
         if mtype == SADDLE:
             iparm[9], iparm[10], iparm[12] = PERTURBATION, 0, 0
-        if mtype == UPDATED:  # SPD: no pivots to move, nor rows to scale
-            iparm[10], iparm[12], iparm[23] = 0, 0, 10
         if schur is not None:
             perm[schur] = 1
             iparm[35] = 2
@@ -175,9 +153,7 @@ class Pardiso:
         self._free = list(range(2, MAXFCT + 1)) if schur is None and mtype == 2 else []  # the twins' numbers
         self._cache: dict = {}  # a term's position -> (its pattern's fingerprint, its places): see refactorize
         S = np.zeros((len(schur), len(schur))) if schur is not None else np.zeros(1)
-        self._current = False  # whether the factors are of the values held (see refactorize)
         self._run(12, np.zeros(1), S, 1)
-        self._current = True
         self.S = S if schur is not None else None  # row-major, symmetric up to rounding
 
     def twin(self, *terms: sp.spmatrix) -> Pardiso | None:
@@ -189,7 +165,7 @@ class Pardiso:
             return None
         pt, iparm, n, data, ia, ja, perm, mtype, _ = self._handle
         twin = object.__new__(Pardiso)
-        twin.n, twin.S, twin._cache, twin._free, twin._current = n, None, {}, [], False
+        twin.n, twin.S, twin._cache, twin._free = n, None, {}, []
         twin._handle = (pt, iparm.copy(), n, np.zeros_like(data), ia, ja, perm, mtype, self._free.pop())
         try:
             twin.refactorize(*terms)
@@ -198,14 +174,6 @@ class Pardiso:
             raise
         weakref.finalize(twin, _release_twin, twin._handle, self._free, self)
         return twin
-
-    def pattern(self) -> sp.csr_matrix:
-        """The pattern factorized, both triangles, its values stored zeros: for factors of another type on it."""
-        _, _, n, data, indptr, indices, _, mtype, _ = self._handle
-        held = sp.csr_matrix((np.ones(data.size), indices, indptr), shape=(n, n))
-        held = held if mtype == UPDATED else held + held.T  # ones: no entry of the sum cancels
-        held.data[:] = 0.0
-        return held
 
     def _run(self, phase: int, b: np.ndarray, x: np.ndarray, nrhs: int) -> None:
         code = _call(self._handle, phase, b, x, nrhs)
@@ -242,57 +210,29 @@ class Pardiso:
         contact block), on the sparsity pattern of the matrix factorized (or part of it): the numeric factorization
         only (phase 22), keeping the ordering — 0.14 s against 0.65 s on a 2-D slab of 1.4·10⁵ DOFs. Where each
         term's entries go is kept while its pattern stays (each Newton step of newton-cg passes H and a contact block
-        of the same patterns): finding it took a third of a refactorization of a 3-D plate's K. With :data:`UPDATED`,
-        a low-rank update where few entries changed (:meth:`_numeric`)."""
+        of the same patterns): finding it took a third of a refactorization of a 3-D plate's K."""
         terms = [_canonical(term) for term in terms]
         places = [self._placed(position, term) for position, term in enumerate(terms)]  # all checked first
         data = self._handle[3]
-        before = data.copy() if self._current and self._handle[7] == UPDATED else None
-        self._current = False
         data[:] = 0.0  # in place: PARDISO holds a pointer to it
         for term, where in zip(terms, places):
             done = 0
             for rows in self._chunks(term):
-                held = self._held(term, rows)
-                values = term.data[term.indptr[rows.start]:term.indptr[rows.stop]][held]
+                upper = self._upper(term, rows)
+                values = term.data[term.indptr[rows.start]:term.indptr[rows.stop]][upper]
                 data[where[done:done + values.size]] += values  # a canonical term: each place once
                 done += values.size
-        self._numeric(before)
-        self._current = True
-
-    def _numeric(self, before: np.ndarray | None) -> None:
-        """Phase 22 on the values held; where ``before`` (the values the factors are of) differs from them in at most
-        LOW_RANK of the entries, PARDISO's low-rank update: iparm[38] = 1 and the changed entries' rows and columns in
-        ``perm``, [count, row, column, row, column, ...]; nothing where none changed (a face whose tangent bases
-        turned: the pair at 2·10⁴ DOFs refactorized every face, 2 of its 3 refactorizations)."""
-        pt, iparm, n, data, indptr, indices, _, mtype, number = self._handle  # perm: the changes, below
-        changed = None if before is None else np.flatnonzero(data != before)
-        if changed is None or changed.size > LOW_RANK * data.size:
-            self._run(22, np.zeros(1), np.zeros(1), 1)
-            return
-        if not changed.size:
-            return
-        entries = np.empty(2 * changed.size + 1, dtype=np.int32)
-        entries[0] = changed.size
-        entries[1::2] = np.searchsorted(indptr, changed, side="right") - 1
-        entries[2::2] = indices[changed]
-        iparm[38] = 1
-        try:
-            code = _call((pt, iparm, n, data, indptr, indices, entries, mtype, number), 22, np.zeros(1), np.zeros(1), 1)
-        finally:
-            iparm[38] = 0
-        if code:
-            raise PardisoError(code, 22)
+        self._run(22, np.zeros(1), np.zeros(1), 1)
 
     def _placed(self, position: int, term: sp.csr_matrix) -> np.ndarray:
-        """Where the held entries (:meth:`_held`) of the ``position``-th term sit in the data factorized (row by row,
-        int32: 4 bytes an entry kept), from the cache if the term's pattern is the last one placed there."""
+        """Where the upper-triangle entries of the ``position``-th term sit in the data factorized (row by row, int32:
+        4 bytes an entry kept), from the cache if the term's pattern is the last one placed there."""
         pattern = (REFACTOR_CHUNK, hashlib.blake2b(term.indptr).digest(), hashlib.blake2b(term.indices).digest())
         cached = self._cache.get(position)
         if cached is None or cached[0] != pattern:
             self._cache.pop(position, None)  # its memory free before the new places
             chunks = self._chunks(term)
-            where = np.empty(sum(int(self._held(term, rows).sum()) for rows in chunks),
+            where = np.empty(sum(int(self._upper(term, rows).sum()) for rows in chunks),
                              dtype=np.int32 if self._handle[3].size < 2**31 else np.int64)
             done = 0
             for rows in chunks:
@@ -307,24 +247,23 @@ class Pardiso:
         step = max(1, self.n * REFACTOR_CHUNK // max(K.nnz, 1))
         return [slice(start, min(start + step, self.n)) for start in range(0, self.n, step)]
 
-    def _held(self, K: sp.csr_matrix, rows: slice) -> np.ndarray:
-        """Which stored entries of K's ``rows`` the data factorized holds: those in its upper triangle (all of them
-        with :data:`UPDATED`)."""
-        if self._handle[7] == UPDATED:
-            return np.ones(K.indptr[rows.stop] - K.indptr[rows.start], dtype=bool)
-        return _upper(K, rows)
+    @staticmethod
+    def _upper(K: sp.csr_matrix, rows: slice) -> np.ndarray:
+        """Which stored entries of K's ``rows`` are in its upper triangle."""
+        row = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), np.diff(K.indptr[rows.start:rows.stop + 1]))
+        return K.indices[K.indptr[rows.start]:K.indptr[rows.stop]] >= row
 
     def _places(self, K: sp.csr_matrix, rows: slice) -> np.ndarray:
-        """Where the held entries of K's ``rows`` sit in the data factorized; ValueError for an entry outside
+        """Where the upper-triangle entries of K's ``rows`` sit in the data factorized; ValueError for an entry outside
         the pattern. Searched among the keys row · n + column of the entries factorized in those of the rows where K
         has any (increasing: rows sorted, then columns), not of all of them: a chunk's temporaries only, and a contact
         block's on its rows only (the pair's preconditioner at 1.4·10⁶ DOFs: its keys among all 6.7·10⁶ entries of H
-        took 0.18 s a refactorization)."""
+        took 0.18 s a refactorization, these 0.013 s; helper `lowrank`)."""
         start, stop = K.indptr[rows.start], K.indptr[rows.stop]
         counts = np.diff(K.indptr[rows.start:rows.stop + 1])
         row = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), counts)
-        held = self._held(K, rows)
-        wanted = row[held] * self.n + K.indices[start:stop][held]
+        upper = self._upper(K, rows)
+        wanted = row[upper] * self.n + K.indices[start:stop][upper]
         _, _, n, _, indptr, indices, _, _, _ = self._handle
         present = np.flatnonzero(counts) + rows.start
         lengths = (indptr[present + 1] - indptr[present]).astype(np.int64)
@@ -358,7 +297,7 @@ def _upper_triangle(K: sp.csr_matrix) -> sp.csr_matrix:
     """K's stored entries on and above the diagonal (zeros included), columns sorted, read off K's rows: scipy's
     ``triu`` goes through a COO copy of K, 0.45–1.26 s against 0.13 s on the pair's K at 1.4·10⁶ DOFs (1.9·10⁷
     entries; on the slab approximation's H, 4.1·10⁶, 0.03–0.07 s either way)."""
-    upper = _upper(K, slice(0, K.shape[0]))
+    upper = Pardiso._upper(K, slice(0, K.shape[0]))
     counts = np.zeros(K.shape[0], dtype=np.int64)
     stored = np.diff(K.indptr) > 0
     counts[stored] = np.add.reduceat(upper, K.indptr[:-1][stored])
@@ -366,9 +305,3 @@ def _upper_triangle(K: sp.csr_matrix) -> sp.csr_matrix:
     U = sp.csr_matrix((K.data[upper], K.indices[upper], indptr), shape=K.shape)
     U.sort_indices()
     return U
-
-
-def _upper(K: sp.csr_matrix, rows: slice) -> np.ndarray:
-    """Which stored entries of K's ``rows`` are in its upper triangle."""
-    row = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), np.diff(K.indptr[rows.start:rows.stop + 1]))
-    return K.indices[K.indptr[rows.start]:K.indptr[rows.stop]] >= row

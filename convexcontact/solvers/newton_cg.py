@@ -813,7 +813,7 @@ class _Preconditioner:
         self._factorize = approximation.factorize
         self._keeps = approximation.slab in (None, self.H.shape[0])  # H is K on DOFs, no coarse functions: see REUSE
         if not self.exact:
-            self.factors = self._factorize(self.H, self.G.T @ sp.diags(1.0 / self.shift) @ self.G, updated=True)
+            self.factors = self._factorize(self.H, self.G.T @ sp.diags(1.0 / self.shift) @ self.G)
             self._cost = _cost(self.factors, approximation.fill)  # see spent
             return
         # every R D⁻¹ Rᵀ is on E: the pattern they all fit, factorized at the first system with its values (one
@@ -846,8 +846,8 @@ class _Preconditioner:
             self._grows, self.updates = False, self.updates + 1  # the factors are not of this step's first face
             return lambda xi: _woodbury(updated, G, d, xi)
         contact = G.T @ sp.diags(1.0 / d) @ G
-        if self.factors is None:  # ``updated``: refactorized by low-rank updates of the few entries a face changes
-            self.factors = self._factorize(self.H, contact, self._pattern, updated=True)
+        if self.factors is None:
+            self.factors = self._factorize(self.H, contact, self._pattern)
             self._pattern = None
         else:
             self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
