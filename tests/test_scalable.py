@@ -342,7 +342,8 @@ def test_newton_cg_solves_the_dense_two_body_tresca_dual_by_the_projection_arc(m
     the projection arc newton-cg converges well within auto's DENSE_NEWTON_STEPS, to Clarabel's answer, certified;
     without it (ARC = 0) it does not — from 7·10⁴ DOFs (below, the plain segment converged: 25–32 steps at 1–4·10⁴),
     the size taken here (10⁵ took 50 s of the suite, 7·10⁴ a tenth). Newton's points on grown faces (GROW) converge
-    here in 9 steps, 8 without the arc; without them the arc is what converges (38 steps), as checked."""
+    here in 9 steps, 8 without the arc; without them the arc is what converges (38 steps), and without both the face
+    step (newton_cg.FACE), as checked."""
     from convexcontact.solvers import newton_cg
     from convexcontact.studies.benchmarks.bench import two_body_scene
 
@@ -355,4 +356,6 @@ def test_newton_cg_solves_the_dense_two_body_tresca_dual_by_the_projection_arc(m
     monkeypatch.setattr(newton_cg, "GROW", 0)
     assert model.solve("newton-cg", max_iter=rules.DENSE_NEWTON_STEPS).status == "solved"
     monkeypatch.setattr(newton_cg, "ARC", 0)
+    assert model.solve("newton-cg", max_iter=rules.DENSE_NEWTON_STEPS).status == "solved"  # the face step (FACE)
+    monkeypatch.setattr(newton_cg, "FACE", False)
     assert model.solve("newton-cg", max_iter=rules.DENSE_NEWTON_STEPS).status != "solved"

@@ -83,10 +83,12 @@ def test_every_shape_is_certified_as_the_issue_asks(dim, shape, law, formulation
 
 @pytest.mark.parametrize("formulation, dofs", [("auto", 5e3), (MATRIX_FREE, 2e3)])
 def test_the_check_catches_newton_cg_without_grown_faces(monkeypatch, formulation, dofs):
-    """The regression these tests guard: newton-cg without Newton's point on grown faces (GROW = 0) finds Tresca's
-    slip zone on the tall 2-D block a node every few steps — matrix-free at 2·10³ DOFs no answer after 100 steps; on
-    the dense W that auto picks at 5·10³ DOFs, Clarabel after newton-cg's 50 steps — and the check above says so."""
+    """The regression these tests guard: newton-cg without Newton's point on grown faces (GROW = 0) nor the face step
+    (FACE, which alone finds it too) finds Tresca's slip zone on the tall 2-D block a node every few steps —
+    matrix-free at 2·10³ DOFs no answer after 100 steps; on the dense W that auto picks at 5·10³ DOFs, Clarabel after
+    newton-cg's 50 steps — and the check above says so."""
     monkeypatch.setattr(newton_cg, "GROW", 0)
+    monkeypatch.setattr(newton_cg, "FACE", False)
     model = cc.prepare(scene_of("tall", 2, "tresca", dofs), formulation)
     with pytest.raises(AssertionError):
         check_answered_without_fallback(model, model.solve())
