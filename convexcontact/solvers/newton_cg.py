@@ -1024,11 +1024,13 @@ def _feasible_length(v: np.ndarray, d: np.ndarray, sets: _Bounds, held: np.ndarr
     """The largest α ≤ 1 with v + αd in every set that ``held`` (:func:`_working`) leaves free."""
     bounds = sets.bounds[(held[sets.bounds] >= 0) & (d[sets.bounds] < 0)]
     alpha = min(1.0, (v[bounds] / -d[bounds]).min(initial=np.inf))
-    free = np.linalg.norm(held[sets.balls], axis=1) <= sets.radii(v)
-    x, e, radius = v[sets.balls[free]], d[sets.balls[free]], sets.radii(v)[free]
+    radius = sets.radii(v)
+    free = np.linalg.norm(held[sets.balls], axis=1) <= radius
+    x, e, radius = v[sets.balls[free]], d[sets.balls[free]], radius[free]
     a, b = np.einsum("ij,ij->i", e, e), np.einsum("ij,ij->i", x, e)
     slack = np.maximum(radius**2 - np.einsum("ij,ij->i", x, x), 0.0)  # ‖x + αe‖ = ρ: aα² + 2bα − slack = 0
-    a, b, slack = a[a > 0], b[a > 0], slack[a > 0]
+    moving = a > 0
+    a, b, slack = a[moving], b[moving], slack[moving]
     root = np.sqrt(b**2 + a * slack)  # its positive root, without cancellation whatever b's sign
     return min(alpha, np.where(b > 0, slack / np.maximum(b + root, 1e-300), (root - b) / a).min(initial=np.inf))
 
