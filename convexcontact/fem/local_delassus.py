@@ -82,8 +82,8 @@ def _solved(K_region: sp.csr_matrix, load: sp.csr_matrix, slot: np.ndarray) -> n
     or a few: a mortar row's patch holds a slave and a master part): the blocks of one size stacked dense and solved
     together (numpy's batched LU), a right-hand side per slot, at most BATCH entries at a time. SuperLU's one sparse
     factorization of each colour's K_region took 0.45 s of the 0.8 s of the pair's diagonal at 1.4·10⁶ DOFs (9,816
-    patches, 60 colours; blocks of 24, 36 and 42 DOFs); the diagonal now 0.65–0.74 s against 0.8–1.2 (d the same to
-    5e-16); a 3-D whole face (1.5·10⁴ DOFs in the slab) 0.24 against 0.23 s."""
+    patches, 60 colours; blocks of 24, 36 and 42 DOFs); the diagonal now 0.65–0.94 s against 0.81–1.19 (d the same to
+    5e-16); a 3-D whole face (1.5·10⁴ DOFs in the slab) 0.23–0.26 s either way."""
     _, block = connected_components(K_region, directed=False)
     size, position = np.bincount(block), group_ranks(block)  # each block's DOFs, each DOF's place in its block
     rank = group_ranks(size)  # each block's place among the blocks of its size
