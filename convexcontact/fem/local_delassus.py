@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
 LAYERS = 2
@@ -23,6 +24,9 @@ Newton steps (6 steps with two layers) and its Coulomb row matrix-free stalled (
 
 BATCH = 2**20
 """Entries of the dense blocks :func:`_solved` stacks at once (8 MB)."""
+DENSE = 256
+"""The largest block of a patch :func:`_solved` solves dense: 3-D Q1 faces' patches (225 DOFs, rows of single DOFs)
+took 0.64 s dense against 0.70 s by SuperLU, Q2 hexahedra's (735–1215 DOFs) 2.15 s against 1.17 s."""
 
 QUANTUM = 2.0 ** -32
 """Patches whose entries agree to this fraction of their largest are solved once (see :func:`local_diagonal`)."""
@@ -79,13 +83,16 @@ def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.n
 
 def _solved(K_region: sp.csr_matrix, load: sp.csr_matrix, slot: np.ndarray) -> np.ndarray:
     """b_jᵀ K_region⁻¹ b_j for the rows b_j of ``load``, K_region block diagonal (a colour's patches, each one block
-    or a few: a mortar row's patch holds a slave and a master part): the blocks of one size stacked dense and solved
-    together (numpy's batched LU), a right-hand side per slot, at most BATCH entries at a time. SuperLU's one sparse
-    factorization of each colour's K_region took 0.45 s of the 0.8 s of the pair's diagonal at 1.4·10⁶ DOFs (9,816
-    patches, 60 colours; blocks of 24, 36 and 42 DOFs); the diagonal now 0.65–0.94 s against 0.81–1.19 (d the same to
-    5e-16); a 3-D whole face (1.5·10⁴ DOFs in the slab) 0.23–0.26 s either way."""
+    or a few: a mortar row's patch holds a slave and a master part): with blocks of at most DENSE DOFs, the blocks of
+    one size stacked dense and solved together (numpy's batched LU), a right-hand side per slot, at most BATCH entries
+    at a time; else one sparse factorization (:func:`_factorized`). SuperLU's factorization of each colour's K_region
+    took 0.45 s of the 0.8 s of the pair's diagonal at 1.4·10⁶ DOFs (9,816 patches, 60 colours; blocks of 24, 36 and
+    42 DOFs); the diagonal now 0.65–0.94 s against 0.81–1.19 (d the same to 5e-16); a 3-D whole face (1.5·10⁴ DOFs in
+    the slab) 0.23–0.26 s either way."""
     _, block = connected_components(K_region, directed=False)
     size, position = np.bincount(block), group_ranks(block)  # each block's DOFs, each DOF's place in its block
+    if size.max(initial=0) > DENSE:
+        return _factorized(K_region, load, slot)
     rank = group_ranks(size)  # each block's place among the blocks of its size
     order = np.argsort(size[block] * size.size + block, kind="stable")  # the DOFs by their block's size, block, place
     K = K_region[order]
@@ -109,6 +116,16 @@ def _solved(K_region: sp.csr_matrix, load: sp.csr_matrix, slot: np.ndarray) -> n
                                     minlength=diagonal.size)
         start += count * n
     return diagonal
+
+
+def _factorized(K_region: sp.csr_matrix, load: sp.csr_matrix, slot: np.ndarray) -> np.ndarray:
+    """:func:`_solved` by one SuperLU factorization of K_region and a right-hand side per slot."""
+    by_slot = sp.csr_matrix((np.ones(slot.size), (slot, np.arange(slot.size))))
+    response = spla.splu(sp.csc_matrix(K_region)).solve((by_slot @ load).T.toarray())
+    # b_j · (the response of row j's slot): other rows of a slot act on other blocks of K_region. Picked from the
+    # rows × slots products; the rows × region array of each row's slot's response this replaces was the contact
+    # solve's peak on thin bodies (strip 400 : 1 clamped, 3.4·10⁴ DOFs: 67 of 97 MB)
+    return (load @ response)[np.arange(slot.size), slot]
 
 
 def supports(B: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
