@@ -154,7 +154,9 @@ def graded_grids(points: np.ndarray, components: np.ndarray, sizes: np.ndarray, 
     box = points.min(axis=1, keepdims=True), points.max(axis=1, keepdims=True)
     order = np.argsort(level, kind="stable")  # each grid's points (its own and the finer grids') a leading run
     ends = np.searchsorted(level[order], np.arange(top + 1), side="right")
-    scaled = (points[:, order] - box[0]) / _per_axis(fitted, dim)  # in the finest grid's cells
+    scaled = np.ascontiguousarray((points[:, order] - box[0]) / _per_axis(fitted, dim))  # in the finest grid's
+    # cells, row-major (numpy's advanced index gives it column-major: the pair's four tries at 1.4·10⁶ DOFs
+    # 0.49–0.66 → 0.45–0.55 s)
     components = components[order]
     spacings, keeps = [fitted * 2**k for k in range(top + 1)], []
     for k, grid in enumerate(spacings):  # grid k's cells are 2^k of the finest's: the points there scaled exactly
