@@ -176,3 +176,42 @@ def test_pardiso_takes_the_upper_triangle_as_scipy_s_triu_gives_it():
     assert (U.data == 0).any() and U.nnz == expected.nnz
     for got, want in ((U.indptr, expected.indptr), (U.indices, expected.indices), (U.data, expected.data)):
         np.testing.assert_array_equal(got, want)
+
+
+def _layers(K: sp.csr_matrix, B: sp.csr_matrix, nonzero: bool) -> np.ndarray:
+    """The slab's DOFs by its definition: B's columns, grown a layer at a time by the product of K's pattern (its
+    nonzero entries, or every stored one) with the mask, up to LAYERS layers while they stay within SLAB of K's."""
+    from convexcontact.fem.factorization import LAYERS, SLAB
+
+    graph = sp.csr_matrix(((K.data != 0) | (not nonzero), K.indices, K.indptr), shape=K.shape).astype(np.int32)
+    inside = np.zeros(K.shape[0], dtype=bool)
+    inside[B.indices] = True
+    for _ in range(LAYERS):
+        grown = graph @ inside.astype(np.int32) > 0
+        if grown.sum() > SLAB * K.shape[0] or grown.sum() == inside.sum():
+            break
+        inside = grown
+    return np.flatnonzero(inside)
+
+
+def test_the_slab_grows_its_layers_through_k_s_nonzero_entries():
+    """The slab (its layers found among the last layer's neighbours) holds the DOFs its definition does, on a K with
+    stored zeros that cut links (the same pairs in both triangles): these link nothing, and the slab then differs
+    from the one grown through every stored entry."""
+    from convexcontact.fem.factorization import slab
+
+    K, top = elasticity(2, 16)
+    dense = K.toarray()
+    rng = np.random.default_rng(5)
+    cut = np.triu(rng.random(dense.shape) < 0.5, k=1) & (dense != 0)
+    dense[cut | cut.T] = 0.0
+    row, column = K.nonzero()
+    K = sp.csr_matrix((dense[row, column], (row, column)), shape=K.shape)
+    assert (K.data == 0).any()
+    B = sp.csr_matrix((np.ones(top.size), (np.arange(top.size), top)), shape=(top.size, K.shape[0]))
+    expected = _layers(K, B, nonzero=True)
+    assert not np.array_equal(expected, _layers(K, B, nonzero=False))
+    approximation = slab(K, B)
+    assert approximation.slab == expected.size
+    assert (approximation.H != K[expected][:, expected]).nnz == 0
+    assert (approximation.G != B[:, expected]).nnz == 0

@@ -220,16 +220,15 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None, whole: 
     approximation where it is the whole body (K's factors' :meth:`Factorization.twin`: numeric only, on K's own
     analysis), else :func:`factorize`."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
-    graph = sp.csr_matrix(((K.data != 0).astype(np.int32), K.indices, K.indptr), shape=K.shape)  # int8 sums of
-    # neighbours overflow; K's own indices, a stored zero a 0 (abs(K) > 0 copied K twice: a thin body's peak)
     contact = np.unique(B.indices)
     inside = np.zeros(K.shape[0], dtype=bool)
     inside[contact] = True
+    count, last = contact.size, contact  # the DOFs inside, the last layer's
     for layers in range(LAYERS):  # the layers grown, read after the loop
-        grown = (graph @ inside.astype(np.int32)) > 0
-        if grown.sum() > SLAB * K.shape[0] or grown.sum() == inside.sum():
+        last = _next_layer(K, inside, last)
+        if count + last.size > SLAB * K.shape[0] or last.size == 0:
             break
-        inside = grown
+        inside[last], count = True, count + last.size
     else:
         layers = LAYERS
     if layers < COARSE_LAYERS:  # too thin for coarse functions: the whole body
@@ -253,6 +252,18 @@ def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None, whole: 
             H = sp.bmat([[H, coupling], [coupling.T, block]])
             G = sp.hstack([G, sp.csr_matrix((B.shape[0], keep.size))])
     return Approximation(G.tocsr(), H.tocsr(), factorize_sum, index.size)
+
+
+def _next_layer(K: sp.csr_matrix, inside: np.ndarray, last: np.ndarray) -> np.ndarray:
+    """The DOFs outside ``inside`` with a nonzero entry of K (a stored zero is none) in a column inside, found among
+    the neighbours of the ``last`` layer grown (K's pattern is symmetric; an entry's row checked, as the product of K's
+    pattern with the mask it replaces read it): a product over all of K's rows a layer, and K's pattern held as
+    int32s for it, took 0.15–0.35 s of the pair's slab at 1.4·10⁶ DOFs (8 layers), these ~0.02 s."""
+    near = K[last].indices
+    near = np.unique(near[~inside[near]])
+    rows = K[near]
+    reached = (rows.data != 0) & inside[rows.indices]
+    return near[np.add.reduceat(reached, rows.indptr[:-1]) > 0] if near.size else near
 
 
 def _symmetrized(A: np.ndarray, scale: float = 1.0, block: int = 1024) -> np.ndarray:
