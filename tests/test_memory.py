@@ -60,7 +60,7 @@ def test_the_preconditioner_holds_a_few_times_k_while_it_is_built(shape, dim, do
     model = cc.prepare(scene_of(shape, dim, "tresca", dofs), "dual-matrix-free")
     approximation = model.program.P.approximation
     sets = newton_cg._bounds(model.program, bound_form(model.program))
-    shift = newton_cg.SHIFT * newton_cg._shifts(approximation, sets, 1.0)
+    shift = newton_cg.SHIFT * newton_cg._shifts(approximation, sets, lambda: 1.0)
     n, p = sets.scale.size, sets.balls.shape[1]
     every = newton_cg._expansion(n, np.arange(n), sets.balls[:0], np.zeros((0, p, p - 1)))  # every variable free
     # the factorization is at the first Newton system's (the pattern ordered for all of them, its values)

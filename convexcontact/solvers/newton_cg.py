@@ -448,11 +448,22 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         products[0] += 1
         return sets.scale * affine(sets.shift + sets.scale * v)
 
-    probe = np.random.default_rng(0).standard_normal(program.n_variables) * sets.scale
-    products[0] += 1
-    curvature = probe @ P.matvec(probe) / (probe @ probe)
-    c = 0.1 / curvature if curvature > 0 else 1.0  # 0.1: 219 products on a 2-D Tresca dual, 1: 263, 10: 2076
-    c = _step_lengths(program.P, sets, c, products)
+    @functools.cache
+    def curvature():
+        """P̃'s mean eigenvalue by one random product, taken only where it serves: the step lengths of variables whose
+        diagonal is not known (:func:`_step_lengths`), the preconditioner's δ without the approximation's estimate
+        (:func:`_shifts`). Where P is a matrix with a positive diagonal, or the contact dual's operator whose
+        approximation estimates it, it served neither: one product (a K solve) of each call, its coarse program's
+        too (the pair at 1.4·10⁶ DOFs, Signorini: 67 → 65 products; docs/performance.md, "The pair's products that
+        are not CG iterations")."""
+        probe = np.random.default_rng(0).standard_normal(program.n_variables) * sets.scale
+        products[0] += 1
+        return probe @ P.matvec(probe) / (probe @ probe)
+
+    def fallback():  # 0.1: 219 products on a 2-D Tresca dual, 1: 263, 10: 2076
+        return 0.1 / curvature() if curvature() > 0 else 1.0
+
+    c = _step_lengths(program.P, sets, fallback, products)
     v = np.zeros(program.n_variables) if start is None else (start - sets.shift) / sets.scale
     if start is not None and sets.coupling is None:  # the last answer may be outside this program's sets (a Picard
         v = _project(v, sets)  # step's smaller radii), and the convergence argument needs v₀ in them
@@ -937,15 +948,15 @@ def _ratio_spread(d: np.ndarray, kept: np.ndarray) -> float:
     return float(ratio.max(initial=1.0) / max(ratio.min(initial=1.0), 1e-300))
 
 
-def _shifts(approximation, sets: _Bounds, curvature: float) -> np.ndarray:
+def _shifts(approximation, sets: _Bounds, curvature) -> np.ndarray:
     """δ/SHIFT of the preconditioner per variable: the approximation's estimate of P̃_jj with the body clamped near
-    its row (``approximation.diagonal``), the short waves' scale; else P's mean eigenvalue (``curvature``). On a
+    its row (``approximation.diagonal``), the short waves' scale; else P's mean eigenvalue (``curvature()``). On a
     strip clamped at its ends W's long waves (beam bending) make the mean eigenvalue 10⁴ times the short waves', a δ
     beyond those leaves the short waves unpreconditioned: Signorini, aspect 400, 2.4·10⁴ DOFs with the whole strip
     as the approximation took 1346 CG iterations with δ = 10⁻³ × the mean eigenvalue, 29 with 10⁻⁷ ×."""
     estimate = getattr(approximation, "diagonal", None)
     if estimate is None:
-        return np.full(sets.scale.size, max(curvature, 1e-300))
+        return np.full(sets.scale.size, max(curvature(), 1e-300))
     return np.maximum(sets.scale**2 * estimate, 1e-300)
 
 
@@ -967,18 +978,19 @@ def _scaled(P, scale: np.ndarray):
     return scale[:, None] * (P.toarray() if sp.issparse(P) else np.asarray(P, dtype=float)) * scale
 
 
-def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
+def _step_lengths(P, sets: _Bounds, c, products: list | None = None):
     """c per variable, 0.1 / P̃_jj (one per ball: its least), where P is a matrix and its diagonal known; for an
     operator whose approximation estimates its diagonal up to a slowly varying factor (``approximation.diagonal``,
     d), 0.1 / (r d̃_j), r the mean of P̃_jj / d̃_j by one random product (Hutchinson's estimate of the trace of
-    D̃^-½ P̃ D̃^-½); else the scalar ``c``. One c for all misjudges the active set where rows differ in scale: the dense
-    W of a mortar pair on graded meshes took 29 Newton steps on Signorini with one c, 5 with these, and
+    D̃^-½ P̃ D̃^-½); else, and where that diagonal is 0, the scalar ``c()`` (called only there: a product where P is an
+    operator, see ``curvature`` in :func:`newton_cg`). One c for all misjudges the active set where rows differ in
+    scale: the dense W of a mortar pair on graded meshes took 29 Newton steps on Signorini with one c, 5 with these, and
     Tresca failed after 100 where it now converges (86: the slip zone still moves a node a step); the same pair's
     Tresca dual applied matrix-free: see ``approximation.diagonal``'s measurements in docs/performance.md."""
     if isinstance(P, spla.LinearOperator):
         estimate = getattr(getattr(P, "approximation", None), "diagonal", None)
         if estimate is None:
-            return c
+            return c()
         diagonal = sets.scale**2 * estimate
         probe = np.random.default_rng(1).standard_normal(diagonal.size) / np.sqrt(np.maximum(diagonal, 1e-300))
         if products is not None:
@@ -987,7 +999,7 @@ def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
         diagonal = diagonal * ratio
     else:
         diagonal = sets.scale**2 * np.asarray(P.diagonal()).ravel()
-    lengths = np.where(diagonal > 0, 0.1 / np.maximum(diagonal, 1e-300), c)
+    lengths = np.where(diagonal > 0, 0.1 / np.maximum(diagonal, 1e-300), c() if (diagonal <= 0).any() else 0.0)
     if sets.balls.size:
         lengths[sets.balls] = lengths[sets.balls].min(axis=1, keepdims=True)
     return lengths
