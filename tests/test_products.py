@@ -1,5 +1,5 @@
 """The products newton-cg takes that are no CG iterations (solvers/newton_cg.py; docs/performance.md, "The pair's
-products that are not CG iterations"): no curvature probe where P's diagonal is known."""
+products that are not CG iterations"): no curvature probe where P's diagonal is known, no product at x = 0 (∇f = q)."""
 
 import numpy as np
 import scipy.sparse.linalg as spla
@@ -43,3 +43,10 @@ def test_the_pair_s_dual_takes_no_curvature_probe_where_its_diagonal_is_known(mo
     products, _ = pair_products(monkeypatch)
     probe = np.random.default_rng(0).standard_normal(products[0].size)  # the fine program's probe (scale 1)
     assert not any(x.size == probe.size and np.array_equal(x, probe) for x in products)
+
+
+def test_the_pair_s_dual_takes_no_product_at_zero(monkeypatch):
+    """∇f at the start x = 0 is q: it took one product, by W's own formula and, in the coarse program (no such
+    formula), a product with 0."""
+    products, formulas = pair_products(monkeypatch)
+    assert not any(not x.any() for x in products + formulas)

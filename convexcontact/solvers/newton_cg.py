@@ -444,9 +444,14 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     def affine(x):
         return own(x) if exact else as_sum(x)
 
-    def gradient(v):  # ∇f in v: scale ⊙ (P x + q)
+    def gradient(v):
+        """∇f in v: scale ⊙ (P x + q); q itself at x = 0, without a product: a solve from no start began with one
+        there, its coarse program's too (the pair at 1.4·10⁶ DOFs, Signorini: 65 → 63 products)."""
+        x = sets.shift + sets.scale * v
+        if not x.any():
+            return sets.scale * program.q
         products[0] += 1
-        return sets.scale * affine(sets.shift + sets.scale * v)
+        return sets.scale * affine(x)
 
     @functools.cache
     def curvature():
