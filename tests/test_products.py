@@ -1,10 +1,14 @@
 """The products newton-cg takes that are no CG iterations (solvers/newton_cg.py; docs/performance.md, "The pair's
-products that are not CG iterations"): no curvature probe where P's diagonal is known, no product at x = 0 (∇f = q)."""
+products that are not CG iterations"): no curvature probe where P's diagonal is known, no product at x = 0 (∇f = q),
+no fresh sum against a loose tolerance (the coarse program's)."""
 
 import numpy as np
+import pytest
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import convexcontact as cc
+from convexcontact.conic import ConicProgram, nonnegative
 from convexcontact.solvers import newton_cg
 from convexcontact.studies.benchmarks.bench import scene_of
 
@@ -50,3 +54,23 @@ def test_the_pair_s_dual_takes_no_product_at_zero(monkeypatch):
     formula), a product with 0."""
     products, formulas = pair_products(monkeypatch)
     assert not any(not x.any() for x in products + formulas)
+
+
+def dense_program(n: int = 40, seed: int = 5) -> ConicProgram:
+    """min ½ xᵀPx + qᵀx over x ≥ 0, P a random SPD matrix applied as an operator (no diagonal known)."""
+    rng = np.random.default_rng(seed)
+    Q = np.linalg.qr(rng.standard_normal((n, n)))[0]
+    P = Q @ np.diag(np.geomspace(1.0, 1e-2, n)) @ Q.T
+    return ConicProgram(spla.aslinearoperator(0.5 * (P + P.T)), rng.standard_normal(n), -sp.eye(n, format="csc"),
+                        np.zeros(n), (nonnegative(n),))
+
+
+@pytest.mark.parametrize("tol, fresh", [(1e-3, False), (1e-12, True)])
+def test_a_fresh_sum_at_the_answer_only_against_a_tolerance_below_the_square_root_of_eps(monkeypatch, tol, fresh):
+    """A program without its own formula of ∇f (the coarse program's): at tol 1e-3 (COARSE_TOL) the stopping test
+    takes the sum CG's updates left (their rounding is ~ε a product), not a fresh product at the answer, which it
+    took before; at 1e-12 it does."""
+    products, _ = recorded(monkeypatch)
+    solution = newton_cg.solve(dense_program(), tol=tol)
+    assert solution.solved and solution.iterations >= 1
+    assert any(np.array_equal(x, solution.x) for x in products) == fresh
