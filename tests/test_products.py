@@ -1,6 +1,7 @@
 """The products newton-cg takes that are no CG iterations (solvers/newton_cg.py; docs/performance.md, "The pair's
 products that are not CG iterations"): no curvature probe where P's diagonal is known, no product at x = 0 (∇f = q),
-no fresh sum against a loose tolerance (the coarse program's)."""
+no fresh sum against a loose tolerance (the coarse program's), and a Newton step that starts where the last one ended
+starts from the gradient it ended with, while the step's target is above the sum's rounding."""
 
 import numpy as np
 import pytest
@@ -74,3 +75,45 @@ def test_a_fresh_sum_at_the_answer_only_against_a_tolerance_below_the_square_roo
     solution = newton_cg.solve(dense_program(), tol=tol)
     assert solution.solved and solution.iterations >= 1
     assert any(np.array_equal(x, solution.x) for x in products) == fresh
+
+
+def pair_solve(monkeypatch, law: str):
+    """The 2-D pair at 2·10⁴ DOFs forced matrix-free, no coarse start: the result and newton-cg's solve."""
+    monkeypatch.setattr(newton_cg, "COARSE_SETS", 10**9)  # no coarse start: the steps here are the fine program's
+    solves, solve = [], newton_cg.newton_cg
+    monkeypatch.setattr(newton_cg, "newton_cg", lambda *a, **k: solves.append(solve(*a, **k)) or solves[-1])
+    result = cc.prepare(scene_of("two-body", 2, law, 2e4), "dual-matrix-free").solve()
+    monkeypatch.setattr(newton_cg, "newton_cg", solve)
+    [solution] = solves
+    assert result.solved and result.certificate.worst <= 1e-10
+    return solution
+
+
+@pytest.mark.parametrize("law, steps, reused", [("signorini", 4, 3), ("tresca", 5, 5)])
+def test_a_newton_step_on_the_face_it_ended_on_starts_from_the_gradient_it_ended_with(monkeypatch, law, steps, reused):
+    """Each Newton step after a taken Newton point starts on that point's face, whose ∇f CG's products left
+    (newton_cg._start_gradient): ``reused`` products fewer than with a fresh ∇f at each step's start, the same Newton
+    steps, and that ∇f is a fresh one's to round-off."""
+    start_gradient, drift = newton_cg._start_gradient, []
+
+    def checked(point, known, affine, sets, products):
+        if known is not None and np.array_equal(point, known[0]):
+            fresh = sets.scale * affine(sets.shift + sets.scale * point)
+            drift.append(np.abs(known[1] - fresh).max() / np.abs(fresh).max())
+        return start_gradient(point, known, affine, sets, products)
+
+    monkeypatch.setattr(newton_cg, "_start_gradient", checked)
+    now = pair_solve(monkeypatch, law)
+    monkeypatch.setattr(newton_cg, "_start_gradient", lambda point, known, *rest: start_gradient(point, None, *rest))
+    before = pair_solve(monkeypatch, law)
+    assert now.iterations == before.iterations == steps
+    assert before.info["products"] - now.info["products"] == reused == len(drift) and max(drift) <= 1e-13
+
+
+def test_a_sum_of_updates_does_not_start_a_step_whose_target_is_below_its_rounding():
+    """The clamped strip 20 : 1 (10⁵ DOFs, Tresca, ‖c q‖ = 10³ ‖v‖): its second step's target is below the sum's
+    rounding (SUM_FLOOR × ε ‖c q‖), so that step starts from a fresh ∇f: 2 Newton steps, the second from 4e-10 to
+    below 1e-16; from the sum of the first step's updates it stopped at 2e-13 and took a third."""
+    model = cc.prepare(scene_of("strip-clamped-20", 2, "tresca", 1e5), "auto")
+    solution = newton_cg.solve(model.program)
+    assert solution.solved and solution.iterations == 2 and solution.info["residuals"][-1] <= 1e-16

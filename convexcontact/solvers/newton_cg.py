@@ -548,7 +548,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         change, where that lowers f by ARMIJO × |``cauchy``|; else None (FACE)."""
         nonlocal cg_total
         held = _working(v, sets, epsilon)
-        newton, iterations, known = _step(P, affine, sets, v, held, c, target, products, cache["precondition"], matrix)
+        newton, iterations, known = _step(P, affine, sets, v, held, c, target, products, cache["precondition"], matrix,
+                                          gradient_at=(v, g) if loose else None)
         cg_total += iterations
         alpha = _feasible_length(v, newton - v, sets, held)
         end = _project(v + alpha * (newton - v), sets)
@@ -561,13 +562,13 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         p = _project(v - c * g, sets)
         return least_on_segment(v, g, p, move(v, g, p)[2])
 
-    def newton_point(v, y, target, empty=False):
-        """Newton's point from v on the face y holds, the CG iterations it took and ∇f there where known; with fixed
-        radii on the face the natural map holds at that point (:func:`grown_point`), whose solves stop at
+    def newton_point(v, g, y, target, empty=False):
+        """Newton's point from v (∇f there g) on the face y holds, the CG iterations it took and ∇f there where known;
+        with fixed radii on the face the natural map holds at that point (:func:`grown_point`), whose solves stop at
         GROWN_FORCING alone where y is the ``empty`` face (see FIRST_FORCING)."""
         face = {}  # the dense Cholesky factor of this step's first system, for its grown faces (_direct)
         newton, iterations, known = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix,
-                                          face=face)
+                                          face=face, gradient_at=(v, g) if loose else None)
         if sets.coupling is None:
             newton, more, known = grown_point(v, y, newton, 0.0 if empty else target, face, known=known)
             iterations += more
@@ -582,8 +583,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         iterations, at, released, moved = 0, v, np.zeros(v.size, bool), False
         for _ in range(GROW if limit is None else limit):
             if sets.coupling is None or (RELEASE_MOVING and sets.balls.shape[1] == 1):
-                y, more = _released(y, newton, gradient(newton) if known is None else known, c, sets, released,
-                                    sets.radii(at), sets.radii(newton))
+                known = gradient(newton) if known is None else known
+                y, more = _released(y, newton, known, c, sets, released, sets.radii(at), sets.radii(newton))
                 moved = moved or more
             else:
                 y = _grown(y, newton, sets, sets.radii(at))
@@ -594,7 +595,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             # on the clamped plate's Coulomb problem (2·10⁴ DOFs) took over 4 min CPU with them, 13 s without; nor
             # once a set was released (that bound is for faces that hold more)
             newton, more, known = _step(P, affine, sets, at, y, c, target, products, cache["precondition"], matrix,
-                                        GROWN_FORCING, face, grown=sets.coupling is None and not moved)
+                                        GROWN_FORCING, face, grown=sets.coupling is None and not moved,
+                                        gradient_at=(newton, known) if loose and known is not None else None)
             iterations += more
             faces[0] += 1
         return newton, iterations, known if y is None else None
@@ -648,7 +650,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         empty = steps == 0 and start is None and coarse is None and sets.coupling is None and matrix is None
         target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
         target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
-        newton, iterations, known = newton_point(v, np.zeros_like(y) if empty else y, target, empty)
+        loose = not exact or target * np.max(c) >= floor  # ∇f's sums may serve (_start_gradient)
+        newton, iterations, known = newton_point(v, g, np.zeros_like(y) if empty else y, target, empty)
         cg_total += iterations
         best = min(best, residual)
         if sets.coupling is not None:
@@ -1135,14 +1138,31 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
     return v
 
 
+def _start_gradient(point, known, affine, sets: _Bounds, products) -> np.ndarray:
+    """∇f at a Newton step's start ``point`` (v with the face's held sets at their bounds): that of ``known`` = (a
+    point, ∇f there) without a product where the two points are the same (v already on the face: the step after one
+    that took Newton's point on a face that stayed, a grown face that only released sets), else one product. Where P
+    has its own formula of ∇f (:func:`_affine`), a sum of CG's updates serves for it only while the step's target is
+    above the sum's rounding, SUM_FLOOR × ε ‖c q‖∞ (``loose`` in :func:`newton_cg`): the updates' rounding,
+    ε‖P̃‖‖w − v‖ each, held the second step of the clamped strip 20 : 1 (10⁵ DOFs, Tresca) at 2e-13 where a fresh ∇f
+    took it from 4e-10 to 3e-17 (3 Newton steps and 18 products against 2 and 15). The pair at 1.4·10⁶ DOFs, Signorini:
+    62 → 59 products, the same 3 Newton steps and 30 CG iterations (docs/performance.md, "The pair's products that are
+    not CG iterations")."""
+    if known is not None and np.array_equal(point, known[0]):
+        return known[1].copy()  # CG's updates follow it in place (_step)
+    products[0] += 1
+    return sets.scale * affine(sets.shift + sets.scale * point)
+
+
 def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, relative=0.0, face=None,
-          grown=False):
+          grown=False, gradient_at=None):
     """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v, the CG
     (GMRES, where radii move) iterations it took and ∇f at the new v where CG's products give it (else None), CG
     stopping at ``target`` or ``relative`` × its first residual (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃)
     and the system has at most DIRECT_LIMIT unknowns, a dense Cholesky (LU where that fails or radii move) instead, or
     the factor kept in ``face`` (:func:`_direct`). ``grown``: the face is a grown one of the step's (:func:`_grown`),
-    whose preconditioner may be the step's factors (REUSE, KEPT_FORCING)."""
+    whose preconditioner may be the step's factors (REUSE, KEPT_FORCING). ``gradient_at``: (a point, ∇f there), ∇f at
+    the step's start where that is the point (:func:`_start_gradient`)."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
@@ -1189,8 +1209,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
     # the system for the step from ξ at v, whose right-hand side is the residual there: one product with P where
     # the right-hand side and the Krylov method's first residual took two
     start = R.T @ (v - new)
-    products[0] += 1
-    gradient = sets.scale * affine(sets.shift + sets.scale * (new + Z @ start))  # ∇f at the step's start
+    gradient = _start_gradient(new + Z @ start, gradient_at, affine, sets, products)
     rhs = -(R.T @ gradient)
     rhs[free.size:] -= curvature * start[free.size:]
     count, at_point = [0], None if size else gradient  # ∇f at the point, where known without a product
