@@ -1,7 +1,8 @@
 """The products newton-cg takes that are no CG iterations (solvers/newton_cg.py; docs/performance.md, "The pair's
 products that are not CG iterations"): no curvature probe where P's diagonal is known, no product at x = 0 (∇f = q),
-no fresh sum against a loose tolerance (the coarse program's), and a Newton step that starts where the last one ended
-starts from the gradient it ended with, while the step's target is above the sum's rounding."""
+∇f at the coarse answer from the coarse solve's products, no fresh sum against a loose tolerance (the coarse
+program's), and a Newton step that starts where the last one ended starts from the gradient it ended with, while
+the step's target is above the sum's rounding."""
 
 import numpy as np
 import pytest
@@ -55,6 +56,25 @@ def test_the_pair_s_dual_takes_no_product_at_zero(monkeypatch):
     formula), a product with 0."""
     products, formulas = pair_products(monkeypatch)
     assert not any(not x.any() for x in products + formulas)
+
+
+def test_the_gradient_at_the_coarse_answer_comes_from_the_coarse_solve_s_products(monkeypatch):
+    """From the coarse answer x (newton_cg.COARSE_SETS) ∇f there is q + W Q̃ x_c from the coarse solve's products
+    (newton_cg.LIFT), a fresh one's by W's own formula to round-off, and the fine program takes no product at x (it
+    took one)."""
+    answers, coarse_start = [], newton_cg._coarse_start
+
+    def kept(program, *args):
+        answer = coarse_start(program, *args)
+        if answer is not None:  # fresh, by W's own formula (the dual's scale is 1)
+            answers.append((answer, program.gradient(answer[0])))
+        return answer
+
+    monkeypatch.setattr(newton_cg, "_coarse_start", kept)
+    products, formulas = pair_products(monkeypatch)
+    [((x, _, lifted), fresh)] = answers
+    assert lifted is not None and np.abs(lifted - fresh).max() <= 1e-14 * np.abs(fresh).max()
+    assert not any(point.size == x.size and np.array_equal(point, x) for point in products + formulas)
 
 
 def dense_program(n: int = 40, seed: int = 5) -> ConicProgram:

@@ -283,6 +283,13 @@ the zone left after each face a fixed fraction of the last (the 2-D pair at 3.2�
 561, …, 1124, 1135 of 1153 bounds held in 10 faces), each face a product, a gradient and mostly a refactorization; the
 coarse program finds the zones to within an aggregate in a few faces on 64 unknowns, and the fine one's faces then
 move the fronts within it (docs/performance.md, "The first step on aggregated rows")."""
+LIFT = 1e-12
+"""∇f at the coarse answer x = shift + Q̃ x_c (COARSE_SETS) is q + P Q̃ x_c from the coarse solve's own products, P Q̃
+kept before Q̃ᵀ restricts it (:class:`_Coarse`), where x_c is their inputs' combination to LIFT × ‖x_c‖∞ (least
+squares: that solve's points are such combinations, as its gradients are of the products, but where a projection
+moved one): a fresh ∇f there cost the fine program a product. Against a fresh ∇f by W's own formula at the 2-D pair's coarse
+answers (2·10⁴–2.8·10⁵ DOFs; Signorini, Tresca, Coulomb's stick start): 2e-16–4e-15 of its largest entry
+(tests/test_products.py)."""
 COARSE_TOL = 1e-3
 """The coarse program's tolerance (COARSE_SETS): its answer is a start, constant on each aggregate (1e-2 on the pair
 at 10⁵ DOFs forced matrix-free, Tresca: 82 → 108 products)."""
@@ -478,11 +485,15 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         v = _project(v - c * g, sets)  # factors, whose peak is the fine program's), whose first face is then its own
         if sets.coupling is None and matrix is None:  # (FORCING, not the empty face's FIRST_FORCING)
             coarse = _coarse_start(program, sets, v, max_iter, verbose)
+        lifted = None
         if coarse is not None:
-            v = _project((coarse[0] - sets.shift) / sets.scale, sets)
+            point, _, lifted = coarse
+            point = (point - sets.shift) / sets.scale
+            v = _project(point, sets)
             products[0] += coarse[1]["products"]
             max_iter -= coarse_step
-        g = gradient(v)
+            lifted = lifted if np.array_equal(v, point) else None  # ∇f at the coarse answer, not at its projection
+        g = gradient(v) if lifted is None else lifted
     cache = {} if cache is None else cache
     if "precondition" not in cache:
         approximation = getattr(program.P, "approximation", None)
@@ -712,9 +723,10 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
 
 
 def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter: int,
-                  verbose: bool) -> tuple[np.ndarray, dict] | None:
-    """x of the answer of ``program`` restricted to x = shift + scale ⊙ Q v_c, solved to COARSE_TOL (COARSE_SETS), and
-    that solve's products (K solves, as this program's), Newton steps, faces grown, refactorizations and updates: Q
+                  verbose: bool) -> tuple[np.ndarray, dict, np.ndarray | None] | None:
+    """x of the answer of ``program`` restricted to x = shift + scale ⊙ Q v_c, solved to COARSE_TOL (COARSE_SETS),
+    that solve's products (K solves, as this program's), Newton steps, faces grown, refactorizations and updates, and
+    ∇f at x (in v) from that solve's own products where they give it (LIFT; else None): Q
     copies each coarse set to the sets of its aggregate (:func:`_aggregates`, bounds and balls apart), so a feasible
     v_c is a feasible x (a coarse ball's radius is its aggregate's least), and P_c = Q̃ᵀ P Q̃ (Q̃ = diag(scale) Q)
     carries P's approximation with G's rows summed alike (Q̃ᵀ G). None where P has no approximation or one without
@@ -760,7 +772,8 @@ def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter:
     solution = newton_cg(coarse, bound_form_of(coarse), None, COARSE_TOL, max_iter, verbose)
     info = {key: solution.info[key] for key in ("products", "grown", "factorizations", "updates")}
     info.update(products=info["products"] + int(sets.shift.any()), steps=solution.iterations)
-    return sets.shift + Q @ solution.x, info
+    lifted = P.lifted(solution.x)
+    return sets.shift + Q @ solution.x, info, None if lifted is None else sets.scale * (q + lifted)
 
 
 def _coarse_approximation(approximation, G: sp.csr_matrix):
@@ -796,9 +809,23 @@ class _Coarse(spla.LinearOperator):
         super().__init__(float, (Q.shape[1], Q.shape[1]))
         self._P, self._Q, self._Qt = P, Q, sp.csr_matrix(Q.T)
         self.approximation = approximation
+        self._kept = []  # each product's x_c and P Q̃ x_c, before Q̃ᵀ restricts it (see lifted)
 
     def _matvec(self, x):
-        return self._Qt @ self._P.matvec(self._Q @ x)
+        x = np.asarray(x, dtype=float).ravel()
+        full = self._P.matvec(self._Q @ x)
+        self._kept.append((x.copy(), full))
+        return self._Qt @ full
+
+    def lifted(self, x: np.ndarray) -> np.ndarray | None:
+        """P Q̃ x from the products taken, where x is their x_c's combination to LIFT (least squares); else None."""
+        if not self._kept:
+            return None
+        X = np.stack([taken for taken, _ in self._kept], axis=1)
+        weights = np.linalg.lstsq(X, x, rcond=None)[0]
+        if np.abs(X @ weights - x).max(initial=0.0) > LIFT * np.abs(x).max(initial=0.0):
+            return None
+        return np.stack([full for _, full in self._kept], axis=1) @ weights
 
     _rmatvec = _matvec
 
