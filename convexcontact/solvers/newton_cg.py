@@ -293,8 +293,8 @@ LIFT = 1e-12
 """∇f at the coarse answer x = shift + Q̃ x_c (COARSE_SETS) is q + P Q̃ x_c from the coarse solve's own products, P Q̃
 kept before Q̃ᵀ restricts it (:class:`_Coarse`), where x_c is their inputs' combination to LIFT × ‖x_c‖∞ (least
 squares: that solve's points are such combinations, as its gradients are of the products, but where a projection
-moved one): a fresh ∇f there cost the fine program a product. Against a fresh ∇f by W's own formula at the 2-D pair's coarse
-answers (2·10⁴–2.8·10⁵ DOFs; Signorini, Tresca, Coulomb's stick start): 2e-16–4e-15 of its largest entry
+moved one): a fresh ∇f there cost the fine program a product. Against a fresh ∇f by W's own formula at the 2-D pair's
+coarse answers (2·10⁴–2.8·10⁵ DOFs; Signorini, Tresca, Coulomb's stick start): 2e-16–4e-15 of its largest entry
 (tests/test_products.py)."""
 COARSE_TOL = 1e-3
 """The coarse program's tolerance (COARSE_SETS): its answer is a start, constant on each aggregate (1e-2 on the pair
@@ -369,7 +369,7 @@ class Session:
         self.program, self._form = program, bound_form_of(program)
         self._tol, self._max_iter, self._verbose, self._progress = tol or TOL, max_iter, verbose, progress
         self._start: np.ndarray | None = None
-        self._cache: dict = {}  # the preconditioner, built at the first solve
+        self._cache: dict = {}  # the preconditioner and the step lengths, made at the first solve
 
     def update(self, q: np.ndarray | None = None, b: np.ndarray | None = None):
         self.program = self.program.updated(q, b)
@@ -442,9 +442,10 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
               progress=None, cache: dict | None = None, coupling: sp.spmatrix | None = None,
               coarse_step: bool = False) -> ConicSolution:
     """Newton's method on the natural map from ``start`` (x; None: the projected gradient step from 0);
-    ``cache`` keeps the preconditioner for the next solve of a session; ``coupling``: see :func:`coupled`;
-    ``coarse_step``: the coarse program's answer, where one begins the solve (COARSE_SETS), counts as one of
-    ``max_iter``'s Newton steps (a trial's, :meth:`Session.trial`)."""
+    ``cache`` keeps the preconditioner and the step lengths (c: one product, see :func:`_step_lengths`) for the next
+    solve of a session (the pair's Coulomb problem at 1.4·10⁶ DOFs: three solves, 2 products fewer); ``coupling``:
+    see :func:`coupled`; ``coarse_step``: the coarse program's answer, where one begins the solve (COARSE_SETS),
+    counts as one of ``max_iter``'s Newton steps (a trial's, :meth:`Session.trial`)."""
     began = time.perf_counter()
     P = _operator(program.P)
     sets = _bounds(program, form, coupling)
@@ -481,7 +482,10 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     def fallback():  # 0.1: 219 products on a 2-D Tresca dual, 1: 263, 10: 2076
         return 0.1 / curvature() if curvature() > 0 else 1.0
 
-    c = _step_lengths(program.P, sets, fallback, products)
+    cache = {} if cache is None else cache
+    if "lengths" not in cache:  # a session's P and scale do not change (its update takes q and b)
+        cache["lengths"] = _step_lengths(program.P, sets, fallback, products)
+    c = cache["lengths"]
     v = np.zeros(program.n_variables) if start is None else (start - sets.shift) / sets.scale
     if start is not None and sets.coupling is None:  # the last answer may be outside this program's sets (a Picard
         v = _project(v, sets)  # step's smaller radii), and the convergence argument needs v₀ in them
@@ -500,7 +504,6 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             max_iter -= coarse_step
             lifted = lifted if np.array_equal(v, point) else None  # ∇f at the coarse answer, not at its projection
         g = gradient(v) if lifted is None else lifted
-    cache = {} if cache is None else cache
     if "precondition" not in cache:
         approximation = getattr(program.P, "approximation", None)
         cache["precondition"] = approximation and _Preconditioner(approximation, sets.scale, sets.balls,
