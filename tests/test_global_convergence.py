@@ -125,7 +125,7 @@ def decrease_fraction(problem: ConicProgram) -> float:
     form = newton_cg.bound_form_of(problem)
     sets = newton_cg._bounds(problem, form)
     P = problem.P.toarray()
-    c = newton_cg._step_lengths(problem.P, sets, 1.0)
+    c = newton_cg._step_lengths(problem.P, sets, lambda: 1.0)
     scaled = np.sqrt(c)[:, None] * sets.scale[:, None] * P * sets.scale * np.sqrt(c)
     return min(newton_cg.ARMIJO, 0.5, 1 / (2 * np.linalg.eigvalsh(scaled).max()))
 

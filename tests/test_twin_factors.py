@@ -101,7 +101,7 @@ def test_the_clamped_plate_s_preconditioner_is_placed_on_k_s_twin_without_a_k_si
     model = cc.prepare(scene_of("plate-clamped-20", 3, law, 3e4), "dual-matrix-free")
     approximation = model.program.P.approximation
     sets = newton_cg._bounds(model.program, bound_form(model.program))
-    shift = newton_cg.SHIFT * newton_cg._shifts(approximation, sets, 1.0)
+    shift = newton_cg.SHIFT * newton_cg._shifts(approximation, sets, lambda: 1.0)
     n, p = sets.scale.size, sets.balls.shape[1]
     built = []
 

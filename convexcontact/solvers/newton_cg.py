@@ -262,6 +262,12 @@ FIXED_FORCING = 1e-3
 """The fixed-point step's solve stops at FIXED_FORCING × the natural residual it starts from (or tol)."""
 GMRES_RESTART = 50
 """Krylov vectors GMRES keeps where radii move (the Newton system is then not symmetric)."""
+GMRES_LIFT = True
+"""Where radii move, ∇f at Newton's point is ∇f at the step's start + P̃ Z ξ from GMRES's own products, ξ their inputs'
+combination (:func:`_combined`), as CG's updates give it where radii are fixed: ∇f there cost the step's test a
+product where the point is feasible, and a refused point's face another (``grown_point``). The solve where radii move,
+products: the 2-D pair at 2·10⁴ DOFs forced matrix-free 132 → 119, at 1.4·10⁶ DOFs 78 → 74, the same 6 Newton steps
+and GMRES iterations (docs/performance.md, "The pair's products that are not CG iterations")."""
 GMRES_CYCLES = 10
 """Restarts of GMRES per Newton system: a direction for the step rules, which judge it, not a solve to the end. Two P2
 spheres with Coulomb (12,168 DOFs, matrix-free): near the axis node's answer GMRES(50) stagnated at 1e-7–1e-9 of the
@@ -283,6 +289,13 @@ the zone left after each face a fixed fraction of the last (the 2-D pair at 3.2�
 561, …, 1124, 1135 of 1153 bounds held in 10 faces), each face a product, a gradient and mostly a refactorization; the
 coarse program finds the zones to within an aggregate in a few faces on 64 unknowns, and the fine one's faces then
 move the fronts within it (docs/performance.md, "The first step on aggregated rows")."""
+LIFT = 1e-12
+"""∇f at the coarse answer x = shift + Q̃ x_c (COARSE_SETS) is q + P Q̃ x_c from the coarse solve's own products, P Q̃
+kept before Q̃ᵀ restricts it (:class:`_Coarse`), where x_c is their inputs' combination to LIFT × ‖x_c‖∞ (least
+squares: that solve's points are such combinations, as its gradients are of the products, but where a projection
+moved one): a fresh ∇f there cost the fine program a product. Against a fresh ∇f by W's own formula at the 2-D pair's
+coarse answers (2·10⁴–2.8·10⁵ DOFs; Signorini, Tresca, Coulomb's stick start): 2e-16–4e-15 of its largest entry
+(tests/test_products.py)."""
 COARSE_TOL = 1e-3
 """The coarse program's tolerance (COARSE_SETS): its answer is a start, constant on each aggregate (1e-2 on the pair
 at 10⁵ DOFs forced matrix-free, Tresca: 82 → 108 products)."""
@@ -356,7 +369,7 @@ class Session:
         self.program, self._form = program, bound_form_of(program)
         self._tol, self._max_iter, self._verbose, self._progress = tol or TOL, max_iter, verbose, progress
         self._start: np.ndarray | None = None
-        self._cache: dict = {}  # the preconditioner, built at the first solve
+        self._cache: dict = {}  # the preconditioner and the step lengths, made at the first solve
 
     def update(self, q: np.ndarray | None = None, b: np.ndarray | None = None):
         self.program = self.program.updated(q, b)
@@ -429,9 +442,10 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
               progress=None, cache: dict | None = None, coupling: sp.spmatrix | None = None,
               coarse_step: bool = False) -> ConicSolution:
     """Newton's method on the natural map from ``start`` (x; None: the projected gradient step from 0);
-    ``cache`` keeps the preconditioner for the next solve of a session; ``coupling``: see :func:`coupled`;
-    ``coarse_step``: the coarse program's answer, where one begins the solve (COARSE_SETS), counts as one of
-    ``max_iter``'s Newton steps (a trial's, :meth:`Session.trial`)."""
+    ``cache`` keeps the preconditioner and the step lengths (c: one product, see :func:`_step_lengths`) for the next
+    solve of a session (the pair's Coulomb problem at 1.4·10⁶ DOFs: three solves, 2 products fewer); ``coupling``:
+    see :func:`coupled`; ``coarse_step``: the coarse program's answer, where one begins the solve (COARSE_SETS),
+    counts as one of ``max_iter``'s Newton steps (a trial's, :meth:`Session.trial`)."""
     began = time.perf_counter()
     P = _operator(program.P)
     sets = _bounds(program, form, coupling)
@@ -444,15 +458,34 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     def affine(x):
         return own(x) if exact else as_sum(x)
 
-    def gradient(v):  # ∇f in v: scale ⊙ (P x + q)
+    def gradient(v):
+        """∇f in v: scale ⊙ (P x + q); q itself at x = 0, without a product: a solve from no start began with one
+        there, its coarse program's too (the pair at 1.4·10⁶ DOFs, Signorini: 65 → 63 products)."""
+        x = sets.shift + sets.scale * v
+        if not x.any():
+            return sets.scale * program.q
         products[0] += 1
-        return sets.scale * affine(sets.shift + sets.scale * v)
+        return sets.scale * affine(x)
 
-    probe = np.random.default_rng(0).standard_normal(program.n_variables) * sets.scale
-    products[0] += 1
-    curvature = probe @ P.matvec(probe) / (probe @ probe)
-    c = 0.1 / curvature if curvature > 0 else 1.0  # 0.1: 219 products on a 2-D Tresca dual, 1: 263, 10: 2076
-    c = _step_lengths(program.P, sets, c, products)
+    @functools.cache
+    def curvature():
+        """P̃'s mean eigenvalue by one random product, taken only where it serves: the step lengths of variables whose
+        diagonal is not known (:func:`_step_lengths`), the preconditioner's δ without the approximation's estimate
+        (:func:`_shifts`). Where P is a matrix with a positive diagonal, or the contact dual's operator whose
+        approximation estimates it, it served neither: one product (a K solve) of each call, its coarse program's
+        too (the pair at 1.4·10⁶ DOFs, Signorini: 67 → 65 products; docs/performance.md, "The pair's products that
+        are not CG iterations")."""
+        probe = np.random.default_rng(0).standard_normal(program.n_variables) * sets.scale
+        products[0] += 1
+        return probe @ P.matvec(probe) / (probe @ probe)
+
+    def fallback():  # 0.1: 219 products on a 2-D Tresca dual, 1: 263, 10: 2076
+        return 0.1 / curvature() if curvature() > 0 else 1.0
+
+    cache = {} if cache is None else cache
+    if "lengths" not in cache:  # a session's P and scale do not change (its update takes q and b)
+        cache["lengths"] = _step_lengths(program.P, sets, fallback, products)
+    c = cache["lengths"]
     v = np.zeros(program.n_variables) if start is None else (start - sets.shift) / sets.scale
     if start is not None and sets.coupling is None:  # the last answer may be outside this program's sets (a Picard
         v = _project(v, sets)  # step's smaller radii), and the convergence argument needs v₀ in them
@@ -462,12 +495,15 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         v = _project(v - c * g, sets)  # factors, whose peak is the fine program's), whose first face is then its own
         if sets.coupling is None and matrix is None:  # (FORCING, not the empty face's FIRST_FORCING)
             coarse = _coarse_start(program, sets, v, max_iter, verbose)
+        lifted = None
         if coarse is not None:
-            v = _project((coarse[0] - sets.shift) / sets.scale, sets)
+            point, _, lifted = coarse
+            point = (point - sets.shift) / sets.scale
+            v = _project(point, sets)
             products[0] += coarse[1]["products"]
             max_iter -= coarse_step
-        g = gradient(v)
-    cache = {} if cache is None else cache
+            lifted = lifted if np.array_equal(v, point) else None  # ∇f at the coarse answer, not at its projection
+        g = gradient(v) if lifted is None else lifted
     if "precondition" not in cache:
         approximation = getattr(program.P, "approximation", None)
         cache["precondition"] = approximation and _Preconditioner(approximation, sets.scale, sets.balls,
@@ -532,7 +568,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         change, where that lowers f by ARMIJO × |``cauchy``|; else None (FACE)."""
         nonlocal cg_total
         held = _working(v, sets, epsilon)
-        newton, iterations, known = _step(P, affine, sets, v, held, c, target, products, cache["precondition"], matrix)
+        newton, iterations, known = _step(P, affine, sets, v, held, c, target, products, cache["precondition"], matrix,
+                                          gradient_at=(v, g) if loose else None)
         cg_total += iterations
         alpha = _feasible_length(v, newton - v, sets, held)
         end = _project(v + alpha * (newton - v), sets)
@@ -545,13 +582,13 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         p = _project(v - c * g, sets)
         return least_on_segment(v, g, p, move(v, g, p)[2])
 
-    def newton_point(v, y, target, empty=False):
-        """Newton's point from v on the face y holds, the CG iterations it took and ∇f there where known; with fixed
-        radii on the face the natural map holds at that point (:func:`grown_point`), whose solves stop at
+    def newton_point(v, g, y, target, empty=False):
+        """Newton's point from v (∇f there g) on the face y holds, the CG iterations it took and ∇f there where known;
+        with fixed radii on the face the natural map holds at that point (:func:`grown_point`), whose solves stop at
         GROWN_FORCING alone where y is the ``empty`` face (see FIRST_FORCING)."""
         face = {}  # the dense Cholesky factor of this step's first system, for its grown faces (_direct)
         newton, iterations, known = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix,
-                                          face=face)
+                                          face=face, gradient_at=(v, g) if loose else None)
         if sets.coupling is None:
             newton, more, known = grown_point(v, y, newton, 0.0 if empty else target, face, known=known)
             iterations += more
@@ -566,8 +603,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         iterations, at, released, moved = 0, v, np.zeros(v.size, bool), False
         for _ in range(GROW if limit is None else limit):
             if sets.coupling is None or (RELEASE_MOVING and sets.balls.shape[1] == 1):
-                y, more = _released(y, newton, gradient(newton) if known is None else known, c, sets, released,
-                                    sets.radii(at), sets.radii(newton))
+                known = gradient(newton) if known is None else known
+                y, more = _released(y, newton, known, c, sets, released, sets.radii(at), sets.radii(newton))
                 moved = moved or more
             else:
                 y = _grown(y, newton, sets, sets.radii(at))
@@ -578,17 +615,19 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             # on the clamped plate's Coulomb problem (2·10⁴ DOFs) took over 4 min CPU with them, 13 s without; nor
             # once a set was released (that bound is for faces that hold more)
             newton, more, known = _step(P, affine, sets, at, y, c, target, products, cache["precondition"], matrix,
-                                        GROWN_FORCING, face, grown=sets.coupling is None and not moved)
+                                        GROWN_FORCING, face, grown=sets.coupling is None and not moved,
+                                        gradient_at=(newton, known) if loose and known is not None else None)
             iterations += more
             faces[0] += 1
         return newton, iterations, known if y is None else None
 
-    def backtrack(v, g, towards, residual, lengths=(1.0, 0.5, 0.25, 0.125, 0.0625)):
+    def backtrack(v, g, towards, residual, lengths=(1.0, 0.5, 0.25, 0.125, 0.0625), known=None):
         """Without an f (moving balls), the first of ``lengths`` (1, ½, …, 1/16) of the way to ``towards``
-        (projected) whose natural residual is below ``residual``; ``v`` itself where none is."""
+        (projected; ∇f there ``known``, where it is) whose natural residual is below ``residual``; ``v`` itself where
+        none is."""
         for alpha in lengths:
-            w = _project(v + alpha * (towards - v), sets)
-            gw = gradient(w)
+            w = _project(towards if alpha == 1.0 else v + alpha * (towards - v), sets)
+            gw = known if alpha == 1.0 and known is not None and np.array_equal(w, towards) else gradient(w)
             if natural(w, gw)[0] < residual:
                 return w, gw, True
         return v, g, False
@@ -609,8 +648,12 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         residual, y, size = natural(v, g)
         if residual * size <= max(tol * answer(v, size), 0.0 if exact or own is None else floor):
             exact = own is not None  # the sum's rounding is near: P's own formula from here on, where it has one
-            g = gradient(v)  # ∇f was updated along the segments: check with a fresh one
-            residual, y, size = natural(v, g)
+            if exact or tol < LOAD_SCALE:  # ∇f was updated along the segments: check with a fresh one; not a sum
+                # again against a tolerance above √ε (the coarse program's, COARSE_TOL), beyond the rounding of the
+                # updates, ε‖P̃‖‖w − v‖ each: a product of each coarse solve (the pair at 1.4·10⁶ DOFs, Signorini:
+                # 63 → 62 products)
+                g = gradient(v)
+                residual, y, size = natural(v, g)
         first = first or residual
         history.append(residual)
         if verbose:
@@ -628,16 +671,17 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         empty = steps == 0 and start is None and coarse is None and sets.coupling is None and matrix is None
         target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
         target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
-        newton, iterations, known = newton_point(v, np.zeros_like(y) if empty else y, target, empty)
+        loose = not exact or target * np.max(c) >= floor  # ∇f's sums may serve (_start_gradient)
+        newton, iterations, known = newton_point(v, g, np.zeros_like(y) if empty else y, target, empty)
         cg_total += iterations
         best = min(best, residual)
         if sets.coupling is not None:
-            v, g, moved = backtrack(v, g, newton, residual, (1.0,))
+            v, g, moved = backtrack(v, g, newton, residual, (1.0,), known)
             if not moved:  # Newton's point refused: first on the face grown by the sets it leaves (see GROW)
-                grown, more, _ = grown_point(v, y, newton, target, limit=min(GROW, GROW_MOVING))
+                grown, more, at_grown = grown_point(v, y, newton, target, limit=min(GROW, GROW_MOVING), known=known)
                 cg_total += more
                 if grown is not newton:
-                    v, g, moved = backtrack(v, g, grown, residual)
+                    v, g, moved = backtrack(v, g, grown, residual, known=at_grown)
             if not moved:
                 v, g, moved = backtrack(v, g, newton, residual, (0.5, 0.25, 0.125, 0.0625))
             if not moved:  # a projected-gradient segment, as for a fixed f: Newton stalled on a punch with F = 2
@@ -689,9 +733,10 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
 
 
 def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter: int,
-                  verbose: bool) -> tuple[np.ndarray, dict] | None:
-    """x of the answer of ``program`` restricted to x = shift + scale ⊙ Q v_c, solved to COARSE_TOL (COARSE_SETS), and
-    that solve's products (K solves, as this program's), Newton steps, faces grown, refactorizations and updates: Q
+                  verbose: bool) -> tuple[np.ndarray, dict, np.ndarray | None] | None:
+    """x of the answer of ``program`` restricted to x = shift + scale ⊙ Q v_c, solved to COARSE_TOL (COARSE_SETS),
+    that solve's products (K solves, as this program's), Newton steps, faces grown, refactorizations and updates, and
+    ∇f at x (in v) from that solve's own products where they give it (LIFT; else None): Q
     copies each coarse set to the sets of its aggregate (:func:`_aggregates`, bounds and balls apart), so a feasible
     v_c is a feasible x (a coarse ball's radius is its aggregate's least), and P_c = Q̃ᵀ P Q̃ (Q̃ = diag(scale) Q)
     carries P's approximation with G's rows summed alike (Q̃ᵀ G). None where P has no approximation or one without
@@ -737,7 +782,8 @@ def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter:
     solution = newton_cg(coarse, bound_form_of(coarse), None, COARSE_TOL, max_iter, verbose)
     info = {key: solution.info[key] for key in ("products", "grown", "factorizations", "updates")}
     info.update(products=info["products"] + int(sets.shift.any()), steps=solution.iterations)
-    return sets.shift + Q @ solution.x, info
+    lifted = P.lifted(solution.x)
+    return sets.shift + Q @ solution.x, info, None if lifted is None else sets.scale * (q + lifted)
 
 
 def _coarse_approximation(approximation, G: sp.csr_matrix):
@@ -773,11 +819,31 @@ class _Coarse(spla.LinearOperator):
         super().__init__(float, (Q.shape[1], Q.shape[1]))
         self._P, self._Q, self._Qt = P, Q, sp.csr_matrix(Q.T)
         self.approximation = approximation
+        self._kept = []  # each product's x_c and P Q̃ x_c, before Q̃ᵀ restricts it (see lifted)
 
     def _matvec(self, x):
-        return self._Qt @ self._P.matvec(self._Q @ x)
+        x = np.asarray(x, dtype=float).ravel()
+        full = self._P.matvec(self._Q @ x)
+        self._kept.append((x.copy(), full))
+        return self._Qt @ full
+
+    def lifted(self, x: np.ndarray) -> np.ndarray | None:
+        """P Q̃ x from the products taken, where x is their x_c's combination (:func:`_combined`); else None."""
+        return _combined(self._kept, x)
 
     _rmatvec = _matvec
+
+
+def _combined(taken: list, x: np.ndarray) -> np.ndarray | None:
+    """A linear map's value at x from its values at the points ``taken`` ((point, value) pairs): Σ wᵢ valueᵢ for
+    the weights with Σ wᵢ pointᵢ = x to LIFT × ‖x‖∞ (least squares); None where x is no such combination."""
+    if not taken:
+        return None
+    X = np.stack([point for point, _ in taken], axis=1)
+    weights = np.linalg.lstsq(X, x, rcond=None)[0]
+    if np.abs(X @ weights - x).max(initial=0.0) > LIFT * np.abs(x).max(initial=0.0):
+        return None
+    return np.stack([value for _, value in taken], axis=1) @ weights
 
 
 class _Preconditioner:
@@ -937,15 +1003,15 @@ def _ratio_spread(d: np.ndarray, kept: np.ndarray) -> float:
     return float(ratio.max(initial=1.0) / max(ratio.min(initial=1.0), 1e-300))
 
 
-def _shifts(approximation, sets: _Bounds, curvature: float) -> np.ndarray:
+def _shifts(approximation, sets: _Bounds, curvature) -> np.ndarray:
     """δ/SHIFT of the preconditioner per variable: the approximation's estimate of P̃_jj with the body clamped near
-    its row (``approximation.diagonal``), the short waves' scale; else P's mean eigenvalue (``curvature``). On a
+    its row (``approximation.diagonal``), the short waves' scale; else P's mean eigenvalue (``curvature()``). On a
     strip clamped at its ends W's long waves (beam bending) make the mean eigenvalue 10⁴ times the short waves', a δ
     beyond those leaves the short waves unpreconditioned: Signorini, aspect 400, 2.4·10⁴ DOFs with the whole strip
     as the approximation took 1346 CG iterations with δ = 10⁻³ × the mean eigenvalue, 29 with 10⁻⁷ ×."""
     estimate = getattr(approximation, "diagonal", None)
     if estimate is None:
-        return np.full(sets.scale.size, max(curvature, 1e-300))
+        return np.full(sets.scale.size, max(curvature(), 1e-300))
     return np.maximum(sets.scale**2 * estimate, 1e-300)
 
 
@@ -967,18 +1033,19 @@ def _scaled(P, scale: np.ndarray):
     return scale[:, None] * (P.toarray() if sp.issparse(P) else np.asarray(P, dtype=float)) * scale
 
 
-def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
+def _step_lengths(P, sets: _Bounds, c, products: list | None = None):
     """c per variable, 0.1 / P̃_jj (one per ball: its least), where P is a matrix and its diagonal known; for an
     operator whose approximation estimates its diagonal up to a slowly varying factor (``approximation.diagonal``,
     d), 0.1 / (r d̃_j), r the mean of P̃_jj / d̃_j by one random product (Hutchinson's estimate of the trace of
-    D̃^-½ P̃ D̃^-½); else the scalar ``c``. One c for all misjudges the active set where rows differ in scale: the dense
-    W of a mortar pair on graded meshes took 29 Newton steps on Signorini with one c, 5 with these, and
+    D̃^-½ P̃ D̃^-½); else, and where that diagonal is 0, the scalar ``c()`` (called only there: a product where P is an
+    operator, see ``curvature`` in :func:`newton_cg`). One c for all misjudges the active set where rows differ in
+    scale: the dense W of a mortar pair on graded meshes took 29 Newton steps on Signorini with one c, 5 with these, and
     Tresca failed after 100 where it now converges (86: the slip zone still moves a node a step); the same pair's
     Tresca dual applied matrix-free: see ``approximation.diagonal``'s measurements in docs/performance.md."""
     if isinstance(P, spla.LinearOperator):
         estimate = getattr(getattr(P, "approximation", None), "diagonal", None)
         if estimate is None:
-            return c
+            return c()
         diagonal = sets.scale**2 * estimate
         probe = np.random.default_rng(1).standard_normal(diagonal.size) / np.sqrt(np.maximum(diagonal, 1e-300))
         if products is not None:
@@ -987,7 +1054,7 @@ def _step_lengths(P, sets: _Bounds, c: float, products: list | None = None):
         diagonal = diagonal * ratio
     else:
         diagonal = sets.scale**2 * np.asarray(P.diagonal()).ravel()
-    lengths = np.where(diagonal > 0, 0.1 / np.maximum(diagonal, 1e-300), c)
+    lengths = np.where(diagonal > 0, 0.1 / np.maximum(diagonal, 1e-300), c() if (diagonal <= 0).any() else 0.0)
     if sets.balls.size:
         lengths[sets.balls] = lengths[sets.balls].min(axis=1, keepdims=True)
     return lengths
@@ -1114,14 +1181,31 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
     return v
 
 
+def _start_gradient(point, known, affine, sets: _Bounds, products) -> np.ndarray:
+    """∇f at a Newton step's start ``point`` (v with the face's held sets at their bounds): that of ``known`` = (a
+    point, ∇f there) without a product where the two points are the same (v already on the face: the step after one
+    that took Newton's point on a face that stayed, a grown face that only released sets), else one product. Where P
+    has its own formula of ∇f (:func:`_affine`), a sum of CG's updates serves for it only while the step's target is
+    above the sum's rounding, SUM_FLOOR × ε ‖c q‖∞ (``loose`` in :func:`newton_cg`): the updates' rounding,
+    ε‖P̃‖‖w − v‖ each, held the second step of the clamped strip 20 : 1 (10⁵ DOFs, Tresca) at 2e-13 where a fresh ∇f
+    took it from 4e-10 to 3e-17 (3 Newton steps and 18 products against 2 and 15). The pair at 1.4·10⁶ DOFs, Signorini:
+    62 → 59 products, the same 3 Newton steps and 30 CG iterations (docs/performance.md, "The pair's products that are
+    not CG iterations")."""
+    if known is not None and np.array_equal(point, known[0]):
+        return known[1].copy()  # CG's updates follow it in place (_step)
+    products[0] += 1
+    return sets.scale * affine(sets.shift + sets.scale * point)
+
+
 def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, relative=0.0, face=None,
-          grown=False):
+          grown=False, gradient_at=None):
     """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v, the CG
     (GMRES, where radii move) iterations it took and ∇f at the new v where CG's products give it (else None), CG
     stopping at ``target`` or ``relative`` × its first residual (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃)
     and the system has at most DIRECT_LIMIT unknowns, a dense Cholesky (LU where that fails or radii move) instead, or
     the factor kept in ``face`` (:func:`_direct`). ``grown``: the face is a grown one of the step's (:func:`_grown`),
-    whose preconditioner may be the step's factors (REUSE, KEPT_FORCING)."""
+    whose preconditioner may be the step's factors (REUSE, KEPT_FORCING). ``gradient_at``: (a point, ∇f there), ∇f at
+    the step's start where that is the point (:func:`_start_gradient`)."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
@@ -1159,17 +1243,20 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
 
     last = [None, None, np.zeros(free.size + k * t)]  # CG's last direction, P̃ Z times it, its last iterate
 
+    taken = []  # GMRES's products: each ξ and P̃ Z ξ (GMRES_LIFT)
+
     def hessian(xi):  # Rᵀ P̃ Z ξ + curvature on the tangent coordinates
         products[0] += 1
         last[0], last[1] = xi.copy(), sets.scale * P.matvec(sets.scale * (Z @ xi))  # CG scales xi in place after
+        if moving is not None and GMRES_LIFT:
+            taken.append((last[0], last[1]))
         return R.T @ last[1] + np.concatenate([np.zeros(free.size), curvature * xi[free.size:]])
 
     size = free.size + k * t
     # the system for the step from ξ at v, whose right-hand side is the residual there: one product with P where
     # the right-hand side and the Krylov method's first residual took two
     start = R.T @ (v - new)
-    products[0] += 1
-    gradient = sets.scale * affine(sets.shift + sets.scale * (new + Z @ start))  # ∇f at the step's start
+    gradient = _start_gradient(new + Z @ start, gradient_at, affine, sets, products)
     rhs = -(R.T @ gradient)
     rhs[free.size:] -= curvature * start[free.size:]
     count, at_point = [0], None if size else gradient  # ∇f at the point, where known without a product
@@ -1203,6 +1290,8 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
         else:
             xi, _ = spla.gmres(H, rhs, rtol=0.0, atol=target, restart=GMRES_RESTART,
                                maxiter=GMRES_CYCLES, M=M, callback=callback, callback_type="pr_norm")
+            moved = _combined(taken, xi)  # P̃ Z ξ (GMRES_LIFT)
+            at_point = None if moved is None else gradient + moved
         new = new + Z @ (start + xi)
     return new, count[0], at_point
 
