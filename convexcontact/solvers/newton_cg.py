@@ -1243,13 +1243,16 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
 
     last = [None, None, np.zeros(free.size + k * t)]  # CG's last direction, P̃ Z times it, its last iterate
 
-    taken = []  # GMRES's products: each ξ and P̃ Z ξ (GMRES_LIFT)
+    # GMRES's products: each ξ and P̃ Z ξ (GMRES_LIFT), at most a restart's: beyond, their memory (two vectors each)
+    # and the least squares (n k² flops) outgrow the one product they save
+    taken = [] if moving is not None and GMRES_LIFT else None
 
     def hessian(xi):  # Rᵀ P̃ Z ξ + curvature on the tangent coordinates
+        nonlocal taken
         products[0] += 1
         last[0], last[1] = xi.copy(), sets.scale * P.matvec(sets.scale * (Z @ xi))  # CG scales xi in place after
-        if moving is not None and GMRES_LIFT:
-            taken.append((last[0], last[1]))
+        if taken is not None:
+            taken = taken + [(last[0], last[1])] if len(taken) < GMRES_RESTART else None
         return R.T @ last[1] + np.concatenate([np.zeros(free.size), curvature * xi[free.size:]])
 
     size = free.size + k * t
@@ -1290,7 +1293,7 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
         else:
             xi, _ = spla.gmres(H, rhs, rtol=0.0, atol=target, restart=GMRES_RESTART,
                                maxiter=GMRES_CYCLES, M=M, callback=callback, callback_type="pr_norm")
-            moved = _combined(taken, xi)  # P̃ Z ξ (GMRES_LIFT)
+            moved = None if taken is None else _combined(taken, xi)  # P̃ Z ξ (GMRES_LIFT)
             at_point = None if moved is None else gradient + moved
         new = new + Z @ (start + xi)
     return new, count[0], at_point
