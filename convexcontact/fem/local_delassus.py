@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from scipy.sparse.csgraph import connected_components
+
+from .coarse import bodies
 
 LAYERS = 2
 """Layers of cells around a row's support (patches of ~24 DOFs on a 2-D P1 face, ~220 on a 3-D Q1 face). One layer
@@ -89,7 +90,7 @@ def _solved(K_region: sp.csr_matrix, load: sp.csr_matrix, slot: np.ndarray) -> n
     took 0.45 s of the 0.8 s of the pair's diagonal at 1.4·10⁶ DOFs (9,816 patches, 60 colours; blocks of 24, 36 and
     42 DOFs); the diagonal now 0.65–0.94 s against 0.81–1.19 (d the same to 5e-16); a 3-D whole face (1.5·10⁴ DOFs in
     the slab) 0.23–0.26 s either way."""
-    _, block = connected_components(K_region, directed=False)
+    block = bodies(K_region)  # its blocks: K_region's pattern is symmetric
     size, position = np.bincount(block), group_ranks(block)  # each block's DOFs, each DOF's place in its block
     if size.max(initial=0) > DENSE:
         return _factorized(K_region, load, slot)

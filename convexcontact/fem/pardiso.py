@@ -262,8 +262,9 @@ class Pardiso:
         start, stop = K.indptr[rows.start], K.indptr[rows.stop]
         counts = np.diff(K.indptr[rows.start:rows.stop + 1])
         row = np.repeat(np.arange(rows.start, rows.stop, dtype=np.int64), counts)
-        upper = self._upper(K, rows)
-        wanted = row[upper] * self.n + K.indices[start:stop][upper]
+        columns = K.indices[start:stop]
+        upper = columns >= row  # as :meth:`_upper`, on the rows already at hand
+        wanted = row[upper] * self.n + columns[upper]
         _, _, n, _, indptr, indices, _, _, _ = self._handle
         present = np.flatnonzero(counts) + rows.start
         lengths = (indptr[present + 1] - indptr[present]).astype(np.int64)
