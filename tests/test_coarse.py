@@ -63,6 +63,42 @@ def test_graded_functions_are_the_kept_hats_through_one_grid_a_point(dim):
     np.testing.assert_allclose((functions.nodes @ functions.combination).toarray(), direct.toarray(), atol=1e-14)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_localized_functions_are_the_nodal_basis_of_the_kept_span(dim):
+    """The graded functions localized (all of them, and 9 in 10 kept) are their span's nodal basis ψ = F A⁻¹, A the
+    functions' values at their own nodes: each hat evaluated here from its node's position and its grid's spacing,
+    not through any grid's numbering. ψ_j is 1 at its node and 0 at the other functions', no wider than F_j, and
+    the basis is local: under half of F's nonzeros (the hierarchical F: a coarse hat over every finer one)."""
+    rng = np.random.default_rng(dim)
+    points = rng.uniform(0.0, 1.0, (dim, 4000))
+    components = rng.integers(0, dim, 4000)
+    sizes = 0.01 * 100.0 ** points[0]
+    (low, high), spacings, keeps = graded_grids(points, components, sizes, 0.03)
+    nodes, spacing, component = [], [], []
+    for grid, keep in zip(spacings, keeps):
+        grid = np.broadcast_to(np.reshape(grid, (-1, 1)), (dim, 1))
+        shape = np.floor((high - low) / grid).astype(int).ravel() + 2
+        kept = np.flatnonzero(keep)
+        nodes.append(low + np.stack(np.unravel_index(kept // dim, tuple(shape))) * grid)
+        spacing.append(np.broadcast_to(grid, (dim, kept.size)))
+        component.append(kept % dim)
+    nodes, spacing, component = np.hstack(nodes), np.hstack(spacing), np.concatenate(component)
+
+    def hats(at, at_components):
+        reach = np.clip(1.0 - np.abs(at[:, :, None] - nodes[:, None, :]) / spacing[:, None, :], 0.0, None)
+        return reach.prod(axis=0) * (at_components[:, None] == component[None, :])
+
+    functions = graded_functions(points, components, sizes, 0.03)
+    F, A = hats(points, components), hats(nodes, component)
+    np.testing.assert_allclose((functions.nodes @ functions.combination).toarray(), F, atol=1e-14)
+    for columns in (np.arange(F.shape[1]), np.sort(rng.permutation(F.shape[1])[:F.shape[1] * 9 // 10])):
+        local = functions.kept(columns).localized()
+        psi = (local.nodes @ local.combination).toarray()
+        np.testing.assert_allclose(psi, F[:, columns] @ np.linalg.inv(A[np.ix_(columns, columns)]), atol=1e-12)
+        assert not (psi[F[:, columns] == 0]).any()
+        assert np.count_nonzero(psi) < np.count_nonzero(F[:, columns]) / 2
+
+
 def test_bodies_are_the_connected_components_numbered_by_their_first_dofs():
     """Three bodies' DOFs interleaved: the bodies are K's connected components, numbered in the order of their first
     DOFs (as scipy's undirected search numbers them)."""

@@ -9,7 +9,7 @@ from scipy.sparse.csgraph import connected_components
 
 import convexcontact as cc
 from convexcontact.fem import factorization
-from convexcontact.fem.coarse import body_far_functions, dof_cell_sizes, far_functions
+from convexcontact.fem.coarse import Functions, body_far_functions, dof_cell_sizes, far_functions
 from convexcontact.scene.bodies_library import punch_on_foundation
 from convexcontact.scene.description import Tresca
 
@@ -39,6 +39,27 @@ def test_the_approximation_s_h_is_structurally_symmetric(pair):
     H = pair[0].program.P.approximation.H.tocsr()
     stored = sp.csr_matrix((np.ones(H.nnz), H.indices, H.indptr), shape=H.shape)
     assert (stored != stored.T).nnz == 0
+
+
+def test_h_holds_the_coarse_span_in_its_nodal_basis(pair):
+    """H's block of coarse functions is their span's nodal basis (:meth:`~convexcontact.fem.coarse.Functions.localized`),
+    not the hierarchical one (each grid's hats at the nodes the next coarser grid lacks, a coarse hat over every
+    finer one, as before): G H⁻¹ Gᵀ the same to round-off, and each function coupled to at most 64 others, where
+    a hierarchical one reaches 176 (on the pair at 1.4·10⁶ DOFs: 76 against 3,550, H's fill 1.54·10⁷ → 1.13·10⁷)."""
+    model, B, _ = pair
+    far = body_far_functions(model.fem)
+
+    def hierarchical(inside, contact):
+        functions = far(inside, contact)
+        return Functions(functions.nodes, functions.combination)
+
+    approximations = [factorization.slab(model.fem.K, B, coarse) for coarse in (far, hierarchical)]
+    local, before = [approximation.H[approximation.slab:, approximation.slab:].getnnz(axis=0).max()
+                     for approximation in approximations]
+    assert approximations[0].H.shape == approximations[1].H.shape
+    assert local <= 64 and before > 150
+    local, before = [a.G @ factorization.factorize(a.H).solve(a.G.T.toarray()) for a in approximations]
+    assert np.abs(local - before).max() <= 1e-11 * np.abs(before).max()
 
 
 def test_coarse_functions_stay_on_one_body(pair):

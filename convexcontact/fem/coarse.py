@@ -179,10 +179,14 @@ class Functions:
     (nested grids: a coarser hat is, on a finer grid's cells, the sum of the finer hats weighted by its values at
     their nodes). A point of a graded body carries its own grid's functions and every coarser one's (the pair at
     1.4·10⁶ DOFs: F 1.77·10⁷ nonzeros, ~19 a row); ``nodes`` 2^dim a row and ``combination`` few, so that K's energy
-    on F is ``combinationᵀ (nodesᵀ K nodes) combination``: 0.48 against 2.7 s for Fᵀ K F there."""
+    on F is ``combinationᵀ (nodesᵀ K nodes) combination``: 0.48 against 2.7 s for Fᵀ K F there. ``values`` and
+    ``grids`` give :meth:`localized`, the same span in its nodal basis, for
+    :func:`~convexcontact.fem.factorization.slab`'s H."""
 
     nodes: sp.csr_matrix
     combination: sp.csr_matrix
+    values: sp.csr_matrix | None = None  # c × c: each function's values at the functions' own nodes
+    grids: np.ndarray | None = None  # c: each function's grid, 0 the finest
 
     @property
     def shape(self) -> tuple:
@@ -190,7 +194,26 @@ class Functions:
 
     def kept(self, columns: np.ndarray) -> Functions:
         """These ``columns`` of F only."""
-        return Functions(self.nodes, self.combination[:, columns])
+        if self.values is None:
+            return Functions(self.nodes, self.combination[:, columns])
+        return Functions(self.nodes, self.combination[:, columns], sp.csr_matrix(self.values[columns][:, columns]),
+                         self.grids[columns])
+
+    def localized(self) -> Functions:
+        """The nodal basis of F's span: ψ_j, 1 at function j's node and 0 at every other function's, from the finest
+        grid up as ψ_j = F_j − Σ_i F_j(node i) ψ_i over the functions i of finer grids (a function is 0 at the other
+        nodes of its grid and of the coarser ones). Where the finer grids' functions around a node are all kept, ψ_j
+        is the finest grid's hat there; it never reaches beyond F_j's support."""
+        if self.values is None:
+            return self
+        finer = sp.csc_matrix(self.values - sp.eye(self.values.shape[0]))  # F_j(node i), i of a finer grid
+        combination, nodal = sp.csc_matrix(self.combination), sp.csc_matrix(self.combination.shape)
+        for grid in np.unique(self.grids):
+            mine = np.flatnonzero(self.grids == grid)
+            placed = sp.csr_matrix((np.ones(mine.size), (np.arange(mine.size), mine)), shape=(mine.size, nodal.shape[1]))
+            nodal = nodal + (combination[:, mine] - nodal @ finer[:, mine]) @ placed
+        nodal.eliminate_zeros()  # dyadic values: the cancelled ones are exact zeros
+        return Functions(self.nodes, sp.csr_matrix(nodal))
 
 
 def _factored(points: np.ndarray, components: np.ndarray, grids: tuple) -> Functions:
@@ -219,7 +242,9 @@ def _factored(points: np.ndarray, components: np.ndarray, grids: tuple) -> Funct
     used = np.concatenate(used)
     nodes = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))),
                           shape=(n, used.size))
-    return Functions(nodes, _combination(used, starts, shapes, keeps))
+    own = np.concatenate([np.flatnonzero(keep) + start for keep, start in zip(keeps, starts)])  # the functions' nodes
+    grids = np.repeat(np.arange(len(keeps)), [int(keep.sum()) for keep in keeps])
+    return Functions(nodes, _combination(used, starts, shapes, keeps), _combination(own, starts, shapes, keeps), grids)
 
 
 def _combination(used: np.ndarray, starts: np.ndarray, shapes: list, keeps: list) -> sp.csr_matrix:
@@ -254,7 +279,7 @@ def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray,
     DENSE_COLUMNS functions (the slab keeps those independent in K's energy: :func:`independent`)."""
 
     def coarse(inside: np.ndarray, contact: np.ndarray) -> Functions:
-        nodes, combinations = [], []
+        nodes, combinations, values, levels = [], [], [], []
         for body in np.unique(bodies[contact]):
             mine = bodies == body
             rest = np.flatnonzero(~inside & mine)
@@ -280,9 +305,13 @@ def far_functions(points: np.ndarray, components: np.ndarray, sizes: np.ndarray,
             indptr[rest + 1] = np.diff(own.indptr)  # the body's rows among all DOFs
             nodes.append(sp.csr_matrix((own.data, own.indices, np.cumsum(indptr)), shape=(inside.size, own.shape[1])))
             combinations.append(functions.combination)
+            values.append(functions.values)
+            levels.append(functions.grids)
         if not nodes:
-            return Functions(sp.csr_matrix((inside.size, 0)), sp.csr_matrix((0, 0)))
-        return Functions(sp.hstack(nodes, format="csr"), sp.block_diag(combinations, format="csr"))
+            return Functions(sp.csr_matrix((inside.size, 0)), sp.csr_matrix((0, 0)), sp.csr_matrix((0, 0)),
+                             np.zeros(0, dtype=np.int64))
+        return Functions(sp.hstack(nodes, format="csr"), sp.block_diag(combinations, format="csr"),
+                         sp.block_diag(values, format="csr"), np.concatenate(levels))
 
     return coarse
 
