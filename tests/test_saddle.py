@@ -125,9 +125,10 @@ def test_the_saddle_serves_where_w_is_smaller_than_s(monkeypatch):
     assert isinstance(dual_factors(K, C, fewer), Condensation)
 
 
-def test_auto_limits_the_saddles_rows_not_its_columns(monkeypatch):
-    """Where W comes from the saddle, MATRIX_FREE_COLUMNS bounds the dual's rows, not the DOFs they touch: a pair over
-    that many columns keeps its dense W while its rows fit, and goes matrix-free, saying why, once they do not."""
+def test_auto_bounds_the_saddles_memory_not_its_columns(monkeypatch):
+    """Where W comes from the saddle, its predicted memory decides (SADDLE_MEMORY), not the DOFs the rows touch: a
+    pair over MATRIX_FREE_COLUMNS columns keeps its dense W while the prediction fits, and goes matrix-free, saying
+    why, once it does not."""
     scene = cc.bodies_library.punch_on_foundation(0.05)
     columns = rules.contact_columns(cc.prepare(scene, "primal").fem).size
     monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 0)
@@ -136,9 +137,9 @@ def test_auto_limits_the_saddles_rows_not_its_columns(monkeypatch):
     rows = model.program.P.shape[0]
     assert rows < columns - 1 and isinstance(model.condensation.factorization, Saddle)
     assert not solvers.matrix_free(model.program)
-    monkeypatch.setattr(rules, "MATRIX_FREE_COLUMNS", rows - 1)
+    monkeypatch.setattr(rules, "SADDLE_MEMORY", rules.saddle_memory(model.fem, rows) - 1e-3)
     model = cc.prepare(scene)
-    assert solvers.matrix_free(model.program) and f"{rows} contact unknowns exceed {rows - 1}" in model.reason
+    assert solvers.matrix_free(model.program) and f"a dense W of {rows} contact unknowns would need" in model.reason
 
 
 def test_a_large_3d_pair_keeps_its_dense_w_from_the_saddle(monkeypatch):

@@ -67,18 +67,34 @@ bench at 1.4·10⁶ DOFs has 9816 unknowns, under DENSE_LIMIT, but 34,762 column
 18 GB and was stopped. Beyond it, the matrix-free dual (or the primal where that has no bound form)."""
 
 MATRIX_FREE_COLUMNS = 4000
-"""Most columns for a dense W where the matrix-free dual applies (newton-cg's bound form): forming W takes a solve
-per column and its Newton steps dense factorizations of the unknowns in contact, the matrix-free dual one
-factorization of K and its products. Measured on the 2-D pair (`bench --scenario two-body`, quiet; contact ratio and
-peak memory, dense / matrix-free; Signorini, Tresca, Coulomb): 1.0·10⁵ DOFs, 2,566 columns: 4.21 / 4.87, 9.12 / 11.4,
-6.33 / 15.1 (memory 2.6–3.1× / 1.7–1.8×); 2.8·10⁵ DOFs, 7,084 columns: 9.49 / 7.53, 27.5 / 14.6, 18.5 / 14.5 (memory
-5.0–6.3× / 1.8–1.9×); 6.0·10⁵ DOFs, 14,916 columns, Tresca: 83.6 (memory 12×) / 24.2 (1.9×). The 2-D punch at 10⁶
-DOFs condenses onto 2,002 columns and keeps its dense W. Where W comes from K's factors with B's rows appended
-(factorization.saddle_applies) its cost grows with the rows m, not the columns: there the limit is on m. The pair
-at 2.8·10⁵ DOFs (7,084 columns), quiet, dense / matrix-free (contact ratio, end to end, memory): Signorini, 2,269
-rows, 2.01, 1.37, 1.57× / 9.7, 4.77, 1.83× (dense since); Tresca, 4,538 rows, 4.08, 2.32, 2.54× / 16.7, 7.9, 1.69×
-(matrix-free: the dense memory over 2×); at 6·10⁵ Tresca, 10,880 rows, dense memory 4.3× (docs/performance.md, "W
-from K's factors with B's rows appended")."""
+"""Most columns K is condensed onto for a dense W where the matrix-free dual applies (newton-cg's bound form): forming W
+takes a solve per column and its Newton steps dense factorizations of the unknowns in contact, the matrix-free dual one
+factorization of K and its products. Measured on the 2-D pair condensed (`bench --scenario two-body`, quiet; contact
+ratio and peak memory, dense / matrix-free; Signorini, Tresca, Coulomb): 1.0·10⁵ DOFs, 2,566 columns: 4.21 / 4.87,
+9.12 / 11.4, 6.33 / 15.1 (memory 2.6–3.1× / 1.7–1.8×); 2.8·10⁵ DOFs, 7,084 columns: 9.49 / 7.53, 27.5 / 14.6, 18.5 /
+14.5 (memory 5.0–6.3× / 1.8–1.9×); 6.0·10⁵ DOFs, 14,916 columns, Tresca: 83.6 (memory 12×) / 24.2 (1.9×). The 2-D
+punch at 10⁶ DOFs condenses onto 2,002 columns and keeps its dense W. Where W comes from K's factors with B's rows
+appended (factorization.saddle_applies) there is no condensation onto the columns: :data:`SADDLE_MEMORY` decides."""
+
+SADDLE_MEMORY = 2.0
+"""Most peak memory of a dense W from the saddle (factorization.saddle_applies), predicted by :func:`saddle_memory`,
+in multiples of the linear solve's (issue 25's target), where the matrix-free dual applies. Its cost grows with the
+rows m (W is m² doubles), not with the columns; before, MATRIX_FREE_COLUMNS = 4,000 bounded m, which let the 2-D
+pair's friction rows through at 3,628 rows (2.3·10⁵ DOFs; peak 2.19–2.22× Tresca, 2.44–2.45× Coulomb) and kept
+Signorini's 5,440 rows at 7.7·10⁵ matrix-free, where its dense peak read 1.99× (docs/performance.md, "The dense W's
+memory on the pair")."""
+
+LINEAR_BYTES = 75
+"""Bytes of the linear solve's peak memory per stored entry of K (PARDISO's factors and work), known before
+factorizing: the 2-D pair read 1.02–1.04 kB per DOF, 13.8 entries, from 5·10⁴ to 1.4·10⁶ DOFs. A 3-D K fills more
+per entry (nested dissection's separators grow as n^⅔), so there this underestimates, and the prediction errs
+towards the matrix-free dual."""
+
+SADDLE_BASE, W_COPIES = 1.3, 2.6
+"""The dense dual's peak from the saddle in multiples of the linear solve's: SADDLE_BASE (K's factors with B's rows,
+the dual program) plus W_COPIES arrays of W's 8 m² bytes (W, PARDISO's Schur block, the Newton steps' dense
+factorizations; Coulomb's Picard copies). Fitted on the 2-D pair at 1.0–2.3·10⁵ DOFs, all laws: predicted / measured
+1.70 / 1.68–1.71 (10⁵, friction), 1.98 / 1.98 (1.7·10⁵, friction), 2.32 / 2.19–2.44 (2.6·10⁵, friction)."""
 
 MATRIX_FREE = "dual-matrix-free"
 """The dual with W as an operator (one solve with K's factors per product) and newton-cg."""
@@ -102,16 +118,18 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
     closed = round(unknowns * np.count_nonzero(fem.contact.gap <= TOUCHING) / fem.contact.m)
     saddle = saddle_applies(columns, unknowns)  # W from K's factors with its rows: no dense S onto the columns
     pair = columns > fem.dim * fem.contact.m  # the rows touch DOFs beyond their nodes': a pair's other body
-    # what a dense W's cost grows with (MATRIX_FREE_COLUMNS): its rows by the saddle, else the columns condensed onto
-    size, what = (unknowns, f"{unknowns} contact unknowns") if saddle else (columns, f"the {columns} DOFs to condense onto")
+    free = matrix_free_applies(fem, law)
+    memory = saddle_memory(fem, unknowns)
     too_large = (f"{unknowns} contact unknowns exceed {DENSE_LIMIT}" if unknowns > DENSE_LIMIT else
                  f"{closed} contact unknowns at closed nodes exceed {CLOSED_LIMIT}" if closed > CLOSED_LIMIT else
                  f"the {columns} DOFs to condense onto exceed {COLUMN_LIMIT}" if columns > COLUMN_LIMIT and not saddle
-                 else f"{what} exceed {MATRIX_FREE_COLUMNS}" if size > MATRIX_FREE_COLUMNS and matrix_free_applies(fem, law)
-                 else
+                 else f"the {columns} DOFs to condense onto exceed {MATRIX_FREE_COLUMNS}"
+                 if columns > MATRIX_FREE_COLUMNS and free and not saddle else
+                 f"a dense W of {unknowns} contact unknowns would need about {memory:.1f}× the memory of a linear solve "
+                 f"(more than {SADDLE_MEMORY:g}×)" if memory > SADDLE_MEMORY and free and saddle else
                  f"a 3-D body of {fem.n_free} DOFs (over {DENSE_DOFS_3D}) costs more to condense than to factorize"
                  if fem.dim == 3 and fem.n_free > DENSE_DOFS_3D and not (saddle and pair) else None)
-    if too_large and matrix_free_applies(fem, law):
+    if too_large and free:
         return MATRIX_FREE, (f"{too_large}: W = B K⁻¹ Bᵀ is applied through one factorization of K{reuse}, never "
                              "formed (a dense W would cost more), and newton-cg solves the dual")
     if too_large and (unknowns > DENSE_LIMIT or (columns > COLUMN_LIMIT and not saddle)):
@@ -120,7 +138,7 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
     # Not for 3-D friction with a bound form: the primal's second-order cones are not in the polish's bound form and
     # Clarabel leaves their law at 1e-8–3e-7, where newton-cg's dense dual certifies it to round-off, in less time on
     # the sizes this rule reaches (docs/performance.md, "The family in 3-D and with Coulomb"; 2-D intervals are polished)
-    unpolished = fem.dim == 3 and has_friction(law) and matrix_free_applies(fem, law)
+    unpolished = fem.dim == 3 and has_friction(law) and free
     if 4 * columns > fem.n_free and not unpolished:
         return "primal", f"the contact nodes carry {columns} of the {fem.n_free} DOFs: too many to gain by condensing"
     return "dual", (f"{unknowns} contact unknowns beside {fem.n_free} DOFs: K is condensed onto Γ_C once "
@@ -151,6 +169,12 @@ def dense_newton(formulation: str, program: ConicProgram, law):
         return solvers.session(program, "newton-cg", max_iter=DENSE_NEWTON_STEPS)
     except ValueError:
         return None
+
+
+def saddle_memory(fem: FEModel, rows: int) -> float:
+    """The peak memory of a dense W of ``rows`` contact unknowns from the saddle, predicted before factorizing, in
+    multiples of the linear solve's (:data:`SADDLE_BASE`, :data:`W_COPIES`, :data:`LINEAR_BYTES`)."""
+    return SADDLE_BASE + W_COPIES * 8.0 * rows**2 / (LINEAR_BYTES * fem.K.nnz)
 
 
 def matrix_free_applies(fem: FEModel, law) -> bool:
