@@ -78,23 +78,27 @@ appended (factorization.saddle_applies) there is no condensation onto the column
 
 SADDLE_MEMORY = 2.0
 """Most peak memory of a dense W from the saddle (factorization.saddle_applies), predicted by :func:`saddle_memory`,
-in multiples of the linear solve's (issue 25's target), where the matrix-free dual applies. Its cost grows with the
-rows m (W is m² doubles), not with the columns; before, MATRIX_FREE_COLUMNS = 4,000 bounded m, which let the 2-D
-pair's friction rows through at 3,628 rows (2.3·10⁵ DOFs; peak 2.19–2.22× Tresca, 2.44–2.45× Coulomb) and kept
-Signorini's 5,440 rows at 7.7·10⁵ matrix-free, where its dense peak read 1.99× (docs/performance.md, "The dense W's
-memory on the pair")."""
+in multiples of the linear solve's (issue 25's target), where the matrix-free dual applies. That W's cost grows with
+its rows m (m² doubles), the linear solve's with K's entries. Before, MATRIX_FREE_COLUMNS = 4,000 bounded m there: it
+let the 2-D pair's friction rows through at 2,410–3,628 rows (1.7–2.6·10⁵ DOFs, peak 1.98–2.44×; matrix-free
+1.53–1.63×) and kept Signorini dense to 3,412 rows (4.8·10⁵ DOFs, 1.93×; at 4,409 rows, 6.3·10⁵, 2.01×). Now the
+pair's friction is dense to ~1.4·10⁵ DOFs (1.3·10⁵: 1,912 rows, 1.77–1.81×), Signorini where it was (docs/performance.md,
+"The dense W's memory on the pair")."""
 
 LINEAR_BYTES = 75
 """Bytes of the linear solve's peak memory per stored entry of K (PARDISO's factors and work), known before
-factorizing: the 2-D pair read 1.02–1.04 kB per DOF, 13.8 entries, from 5·10⁴ to 1.4·10⁶ DOFs. A 3-D K fills more
-per entry (nested dissection's separators grow as n^⅔), so there this underestimates, and the prediction errs
+factorizing: the 2-D pair read 1.00–1.04 kB per DOF (13.8 entries) from 5·10⁴ to 1.4·10⁶ DOFs. A 3-D K fills more per
+entry (the pair of spheres at 10⁵ DOFs: 154 B), so there this underestimates the linear solve and the prediction errs
 towards the matrix-free dual."""
 
-SADDLE_BASE, W_COPIES = 1.3, 2.6
+SADDLE_BASE, W_COPIES = 1.47, 2.45
 """The dense dual's peak from the saddle in multiples of the linear solve's: SADDLE_BASE (K's factors with B's rows,
 the dual program) plus W_COPIES arrays of W's 8 m² bytes (W, PARDISO's Schur block, the Newton steps' dense
-factorizations; Coulomb's Picard copies). Fitted on the 2-D pair at 1.0–2.3·10⁵ DOFs, all laws: predicted / measured
-1.70 / 1.68–1.71 (10⁵, friction), 1.98 / 1.98 (1.7·10⁵, friction), 2.32 / 2.19–2.44 (2.6·10⁵, friction)."""
+factorizations, Coulomb's Picard copies). The least upper bound of the 2-D pair's dense peaks at 1.0, 2.6, 3.5 and
+4.8·10⁵ DOFs (all laws, 8 rows; measured 0–0.24 below it, Signorini at 4.8·10⁵ on it: 1.93); it bounds those at 1.4,
+1.7, 2.1 and 6.3·10⁵ DOFs too (8 rows, not fitted: 0.04–0.23 below; Signorini at 6.3·10⁵ predicted 2.06, measured
+2.01). In 3-D it errs high (:data:`LINEAR_BYTES`): the pair of spheres at 10⁵ DOFs, 1,533 Tresca rows, predicted
+1.61, measured 1.26–1.28."""
 
 MATRIX_FREE = "dual-matrix-free"
 """The dual with W as an operator (one solve with K's factors per product) and newton-cg."""
