@@ -81,9 +81,9 @@ SADDLE_MEMORY = 2.0
 in multiples of the linear solve's (issue 25's target), where the matrix-free dual applies. That W's cost grows with
 its rows m (m² doubles), the linear solve's with K's entries. Before, MATRIX_FREE_COLUMNS = 4,000 bounded m there: it
 let the 2-D pair's friction rows through at 2,410–3,628 rows (1.7–2.6·10⁵ DOFs, peak 1.98–2.44×; matrix-free
-1.53–1.63×) and kept Signorini dense to 3,412 rows (4.8·10⁵ DOFs, 1.93×; at 4,409 rows, 6.3·10⁵, 2.01×). Now the
-pair's friction is dense to ~1.4·10⁵ DOFs (1.3·10⁵: 1,912 rows, 1.77–1.81×), Signorini where it was (docs/performance.md,
-"The dense W's memory on the pair")."""
+1.53–1.63×; quiet, at 3.2·10⁵ DOFs 4,538 rows read 2.54×) and kept Signorini dense to 3,412 rows (4.8·10⁵ DOFs,
+1.93×; at 4,409 rows, 6.3·10⁵, 2.01×). Now the pair's friction is dense to ~1.4·10⁵ DOFs (1.3·10⁵: 1,912 rows,
+1.77–1.81×), Signorini where it was (docs/performance.md, "The dense W's memory on the pair")."""
 
 LINEAR_BYTES = 75
 """Bytes of the linear solve's peak memory per stored entry of K (PARDISO's factors and work), known before
