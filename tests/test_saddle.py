@@ -162,13 +162,21 @@ def test_a_large_3d_pair_keeps_its_dense_w_from_the_saddle(monkeypatch):
     assert solvers.matrix_free(model.program) and "costs more to condense than to factorize" in model.reason
 
 
-def test_the_saddle_keeps_ks_own_factors_not_its_schur_block():
-    """Once W is formed the saddle's factors (K with B's rows appended, PARDISO's m × m Schur block among them: a
-    second W) are freed and K's own serve the solves: the factors held are those of a plain factorization of K. The
-    pair at 2.6·10⁵ DOFs: the dense dual's peak 2.21× → 1.98× the linear solve's (Tresca), 2.47× → 2.05× (Coulomb)."""
+
+def test_a_large_w_frees_the_saddles_factors_for_ks_own(monkeypatch):
+    """Where W is large beside K (SADDLE_FREED) the saddle's factors (A = [K Bᵀ; B 0], PARDISO's m × m Schur block
+    among them: a second W) are freed once W is formed and K's own serve the solves: the factors held are a plain
+    factorization's, W the same array, the solves K's to round-off (the pair at 2.6·10⁵ DOFs: the peak 2.23× → 1.92×
+    the linear solve's with Tresca, 2.43× → 2.07× with Coulomb). The pair at 10⁴ DOFs (W 0.01 of its linear solve's
+    memory) keeps A's factors, which hold more than K's."""
     model = cc.prepare(two_body_scene("tresca", 1e4), "primal")
     K, B = model.fem.K, rows_of(model)
-    s, plain = saddle(K, B), factorize(K)
-    assert s.fill == plain.fill
-    b = np.random.default_rng(1).standard_normal(K.shape[0])
-    assert_close(s.solve(b), plain.solve(b), 1e-13)
+    plain, kept = factorize(K), saddle(K, B)
+    assert kept.fill > plain.fill + B.shape[0] ** 2 // 2
+    monkeypatch.setattr(factorization, "SADDLE_FREED", 0.0)
+    freed = saddle(K, B)
+    assert freed.fill == plain.fill
+    assert np.array_equal(freed.schur(B), kept.schur(B))
+    b = np.random.default_rng(1).standard_normal((K.shape[0], 2))
+    assert_close(freed.solve(b), plain.solve(b), 1e-13)
+    assert_close(freed.solve(b), kept.solve(b), 1e-10)

@@ -198,7 +198,7 @@ class Approximation:
         G = sp.csr_matrix(G)
         if _pardiso() is None:
             return self.factorize(self.H).schur(G)
-        return _appended(self.H, G)
+        return _appended(self.H, G)[1]
 
 
 def slab(K: sp.spmatrix, B: sp.spmatrix, coarse: Callable | None = None, whole: Callable | None = None) -> Approximation:
@@ -592,13 +592,29 @@ and 2.4× the linear solve's memory (docs/performance.md, "W from K's factors wi
 cost little, and a condensation serves the answer's derivatives as well (drivers/linearized.py)."""
 
 
+SADDLE_FREED = 0.25
+"""W's bytes (8 m²) as a fraction of a linear solve's memory (:data:`LINEAR_BYTES` per stored entry of K) from which
+:class:`Saddle` frees the saddle's factors once W is formed and factors K alone for the solves: PARDISO keeps A's
+m × m Schur block among them, a second W that no solve needs. The 2-D pair at 2.6·10⁵ DOFs (m = 3628, 0.39): A's
+factors took 312 MB, K's 213, W 105; the dense dual's peak fell from 2.23× to 1.92× the linear solve's with Tresca,
+2.43× to 2.07× with Coulomb. It costs K's own factorization (analysis and numeric phase, ~0.9 s CPU there against the
+saddle's 2.4 s) and one Newton step more (all six rows of the pair at 10⁵ and 2.6·10⁵ DOFs): W and K's solves from
+two factorizations each err by ~3·10⁻¹¹, and Px + q differs from the gradient's solves by 3·10⁻¹³ of q, where one
+factorization gave 2·10⁻¹⁶; the stopping test, which checks with the gradient's solves, asks for one step more. Kept
+where the peak stayed under 2× (the pair's friction rows at 1.4·10⁵ DOFs, 0.21: 1.77–1.81×; its Signorini rows at
+2.6·10⁵, 0.10: 1.49–1.54×); at 1.7·10⁵, 0.26, 1.96–1.98×, at 2.1·10⁵, 0.32, 2.06–2.13× (docs/performance.md, "The
+saddle's W without PARDISO's Schur block")."""
+
+LINEAR_BYTES = 75
+"""A linear solve's peak memory per stored entry of K: 1.00–1.04 kB per DOF on the 2-D pair from 5·10⁴ to 1.4·10⁶ DOFs,
+13.8 entries of K per DOF (docs/performance.md, "The dense W's memory on the pair")."""
+
+
 class Saddle(Factorization):
     """K factored with the contact rows B appended, A = [K Bᵀ; B 0], by PARDISO (symmetric indefinite, B's rows
     ordered last, K's block pivoted as K alone): A's Schur complement onto B's rows is −W, formed by the sparse
-    factorization itself. Those factors are then freed and K's own solve with K: PARDISO keeps the m × m Schur block
-    among them, a second W that no solve needs (the 2-D pair at 2.6·10⁵ DOFs, m = 3628: A's factors took 312 MB, K's
-    213, W 105; the dense dual's peak 2.21× → 1.98× the linear solve's with Tresca, 2.47× → 2.05× with Coulomb), for one
-    more factorization of K (its analysis and numeric phase, 1.1 s there against the saddle's 2.6 s).
+    factorization itself. Its forward, diagonal and backward phases with B's part set to zero solve with K; where W is
+    large beside K (:data:`SADDLE_FREED`) those factors are freed once W is formed and K's own solve.
 
     Attributes
     ----------
@@ -615,16 +631,25 @@ class Saddle(Factorization):
     def _factor(self, B: sp.spmatrix) -> None:
         start = time.perf_counter()
         self.B, self._factors, self._W = sp.csr_matrix(B), None, None  # the former factors and W freed first
-        self._W = _appended(self._K, self.B)
-        self._factors = _pardiso_factors(self._K)
+        self._factors, self._W = _appended(self._K, self.B)
+        self._own = 8.0 * self.B.shape[0] ** 2 >= SADDLE_FREED * LINEAR_BYTES * self._K.nnz
+        if self._own:
+            self._factors = None  # A's factors, their Schur block with them, freed before K's are made
+            self._factors = _pardiso_factors(self._K)
         self.timings["factorization"] = time.perf_counter() - start
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        return self._factors.solve(b)
+        if self._own:
+            return self._factors.solve(b)
+        b = np.asarray(b, dtype=float)
+        n = self._K.shape[0]
+        y = self._factors.diagonal(self._factors.forward(np.concatenate([b, np.zeros((self.B.shape[0],) + b.shape[1:])])))
+        y[n:] = 0.0
+        return self._factors.backward(y)[:n]
 
     @property
     def fill(self) -> int:
-        """Nonzeros of the factors held: K's own."""
+        """Nonzeros of the factors held: A's (its Schur block's among them), or K's own."""
         return self._factors.fill
 
     def schur(self, B: sp.spmatrix) -> np.ndarray:
@@ -634,16 +659,16 @@ class Saddle(Factorization):
         return self._W
 
 
-def _appended(K: sp.csr_matrix, B: sp.csr_matrix) -> np.ndarray:
-    """B K⁻¹ Bᵀ, −(A's Schur complement onto B's rows) symmetrized, formed by PARDISO's factorization of A = [K Bᵀ;
-    B 0] (symmetric indefinite, B's rows ordered last, K's block pivoted as K alone; :class:`Saddle`'s W,
-    :meth:`Approximation.reduced`). The factors are freed before W is symmetrized: they hold the m × m Schur block
-    beside W, and no solve uses them."""
+def _appended(K: sp.csr_matrix, B: sp.csr_matrix) -> tuple:
+    """PARDISO's factors of A = [K Bᵀ; B 0] (symmetric indefinite, B's rows ordered last, K's block pivoted as K
+    alone) and B K⁻¹ Bᵀ, −(A's Schur complement onto B's rows) symmetrized, formed by the sparse factorization itself
+    (:class:`Saddle`'s W, :meth:`Approximation.reduced`)."""
     n, m = K.shape[0], B.shape[0]
     zeros = sp.csr_matrix((np.zeros(m), np.arange(m), np.arange(m + 1)), shape=(m, m))  # stored: PARDISO's rule
     A = sp.bmat([[sp.triu(K), B.T], [None, zeros]], format="csr")
-    S = _pardiso_factors(A, schur=np.arange(n, n + m), mtype=_pardiso().SADDLE).S
-    return _symmetrized(S, -1.0)
+    factors = _pardiso_factors(A, schur=np.arange(n, n + m), mtype=_pardiso().SADDLE)
+    W, factors.S = _symmetrized(factors.S, -1.0), None
+    return factors, W
 
 
 def saddle(K: sp.spmatrix, B: sp.spmatrix) -> Saddle:

@@ -123,9 +123,7 @@ class Pardiso:
         :data:`SADDLE` every diagonal entry must be stored, zeros included.
     schur : indices C. If given, PARDISO orders C last, returns the dense Schur
         complement of K onto C as :attr:`S` and keeps the interior factors
-        (iparm[35] = 2) for the forward and backward phases 331 and 333. iparm[35] = 1 (no factorization of
-        the Schur block) held as much (PARDISO's reports and the resident set: the pair's saddle at 10⁵ DOFs, 167 MB
-        either way), and its phases 331–333 no longer solved with K's block (residual 9·10⁴).
+        (iparm[35] = 2) for the forward, diagonal and backward phases 331, 332 and 333.
 
     Raises
     ------
@@ -284,6 +282,11 @@ class Pardiso:
     def forward(self, b: np.ndarray) -> np.ndarray:
         """With ``schur``, phase 331: y_I = L_II⁻¹ b_I and y_C = b_C − K_CI K_II⁻¹ b_I (the condensed load)."""
         return self._phase(331, b)
+
+    def diagonal(self, y: np.ndarray) -> np.ndarray:
+        """With ``schur`` and :data:`SADDLE`, phase 332: the diagonal of the LDLᵀ factors applied between
+        :meth:`forward` and :meth:`backward`."""
+        return self._phase(332, y)
 
     def backward(self, y: np.ndarray) -> np.ndarray:
         """With ``schur``, phase 333: x_C = y_C and x_I = L_IIᵀ⁻¹(y_I − L_CIᵀ y_C); from y = forward(f)
