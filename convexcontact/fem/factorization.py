@@ -271,10 +271,11 @@ def _next_layer(K: sp.csr_matrix, inside: np.ndarray, last: np.ndarray) -> np.nd
     return near[np.add.reduceat(reached, rows.indptr[:-1]) > 0] if near.size else near
 
 
-def _symmetrized(A: np.ndarray, scale: float = 1.0, block: int = 1024) -> np.ndarray:
+def _symmetrized(A: np.ndarray, scale: float = 1.0, block: int = 256) -> np.ndarray:
     """scale · (A + Aᵀ) / 2 in A's own memory, a pair of blocks at a time: ``A += A.T`` makes a copy of A (numpy's
     rule for overlapping operands), an m² array at the dense dual's peak (the 2-D pair at 3.2·10⁵ DOFs with Tresca:
-    165 MB of its 847)."""
+    165 MB of its 847). Blocks of 256² (1 MB a temporary): of 1024² they added 16 MB to the pair's peak at 2.6·10⁵
+    DOFs, right after the saddle's factorization (W 3628², 105 MB), and took 0.11 s against 0.035 s."""
     for i in range(0, A.shape[0], block):
         rows = slice(i, i + block)
         for j in range(i, A.shape[0], block):
@@ -591,10 +592,29 @@ and 2.4× the linear solve's memory (docs/performance.md, "W from K's factors wi
 cost little, and a condensation serves the answer's derivatives as well (drivers/linearized.py)."""
 
 
+SADDLE_FREED = 0.25
+"""W's bytes (8 m²) as a fraction of a linear solve's memory (:data:`LINEAR_BYTES` per stored entry of K) from which
+:class:`Saddle` frees the saddle's factors once W is formed and factors K alone for the solves: PARDISO keeps A's
+m × m Schur block among them, a second W that no solve needs. The 2-D pair at 2.6·10⁵ DOFs (m = 3628, 0.39): A's
+factors took 312 MB, K's 213, W 105; the dense dual's peak fell from 2.23× to 1.92× the linear solve's with Tresca,
+2.43× to 2.07× with Coulomb. It costs K's own factorization (analysis and numeric phase, ~0.9 s CPU there against the
+saddle's 2.4 s) and one Newton step more (all six rows of the pair at 10⁵ and 2.6·10⁵ DOFs): W and K's solves from
+two factorizations each err by ~3·10⁻¹¹, and Px + q differs from the gradient's solves by 3·10⁻¹³ of q, where one
+factorization gave 2·10⁻¹⁶; the stopping test, which checks with the gradient's solves, asks for one step more. Kept
+where the peak stayed under 2× (the pair's friction rows at 1.4·10⁵ DOFs, 0.21: 1.77–1.81×; its Signorini rows at
+2.6·10⁵, 0.10: 1.49–1.54×); at 1.7·10⁵, 0.26, 1.96–1.98×, at 2.1·10⁵, 0.32, 2.06–2.13× (docs/performance.md, "The
+saddle's W without PARDISO's Schur block")."""
+
+LINEAR_BYTES = 75
+"""A linear solve's peak memory per stored entry of K: 1.00–1.04 kB per DOF on the 2-D pair from 5·10⁴ to 1.4·10⁶ DOFs,
+13.8 entries of K per DOF (docs/performance.md, "The dense W's memory on the pair")."""
+
+
 class Saddle(Factorization):
     """K factored with the contact rows B appended, A = [K Bᵀ; B 0], by PARDISO (symmetric indefinite, B's rows
     ordered last, K's block pivoted as K alone): A's Schur complement onto B's rows is −W, formed by the sparse
-    factorization itself. Its forward, diagonal and backward phases with B's part set to zero solve with K.
+    factorization itself. Its forward, diagonal and backward phases with B's part set to zero solve with K; where W is
+    large beside K (:data:`SADDLE_FREED`) those factors are freed once W is formed and K's own solve.
 
     Attributes
     ----------
@@ -610,16 +630,27 @@ class Saddle(Factorization):
 
     def _factor(self, B: sp.spmatrix) -> None:
         start = time.perf_counter()
-        self.B, self._factors = sp.csr_matrix(B), None  # the former factors freed first
+        self.B, self._factors, self._W = sp.csr_matrix(B), None, None  # the former factors and W freed first
         self._factors, self._W = _appended(self._K, self.B)
+        self._own = 8.0 * self.B.shape[0] ** 2 >= SADDLE_FREED * LINEAR_BYTES * self._K.nnz
+        if self._own:
+            self._factors = None  # A's factors, their Schur block with them, freed before K's are made
+            self._factors = _pardiso_factors(self._K)
         self.timings["factorization"] = time.perf_counter() - start
 
     def solve(self, b: np.ndarray) -> np.ndarray:
+        if self._own:
+            return self._factors.solve(b)
         b = np.asarray(b, dtype=float)
         n = self._K.shape[0]
         y = self._factors.diagonal(self._factors.forward(np.concatenate([b, np.zeros((self.B.shape[0],) + b.shape[1:])])))
         y[n:] = 0.0
         return self._factors.backward(y)[:n]
+
+    @property
+    def fill(self) -> int:
+        """Nonzeros of the factors held: A's (its Schur block's among them), or K's own."""
+        return self._factors.fill
 
     def schur(self, B: sp.spmatrix) -> np.ndarray:
         B = sp.csr_matrix(B)
