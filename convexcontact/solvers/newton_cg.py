@@ -877,6 +877,7 @@ class _Preconditioner:
         self._grows = False  # whether the factors are of this Newton step's first face (see system)
         self.kept = False  # whether the last system's are those of the face it grew from (see KEPT_FORCING)
         self._factorize = approximation.factorize
+        self._holds = False  # whether the factors hold H as their refactorizations' base (see system)
         self._keeps = approximation.slab in (None, self.H.shape[0])  # H is K on DOFs, no coarse functions: see REUSE
         if not self.exact:
             self.factors = self._factorize(self.H, self.G.T @ sp.diags(1.0 / self.shift) @ self.G)
@@ -916,7 +917,10 @@ class _Preconditioner:
             self.factors = self._factorize(self.H, contact, self._pattern)
             self._pattern = None
         else:
-            self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
+            if not self._holds:  # H placed once, the base of every later refactorization
+                self.factors.hold(self.H)
+                self._holds = True
+            self.factors.refactorize(contact)  # added in place: no K-sized sum
         self.factorizations += 1
         self._factored, self._grows, self._solved = (R, G, d), True, {}
         self._terms = _terms(R, d) if terms is None else terms
