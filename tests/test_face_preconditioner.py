@@ -32,6 +32,21 @@ def test_the_update_solves_the_updated_matrix():
     assert np.abs(updated.solve(b) - exact).max() <= 1e-11 * np.abs(exact).max()
 
 
+def test_a_face_s_terms_are_keyed_by_each_column_s_rows_values_and_d():
+    """Each column of R (0 to 3 entries, unsorted rows) keyed by its sorted rows', values' and d's bytes, to its
+    index, in the columns' order: the same terms between two faces are the same keys."""
+    rng = np.random.default_rng(1)
+    counts = rng.integers(0, 4, 40)
+    rows = np.concatenate([rng.choice(30, count, replace=False) for count in counts])
+    R = sp.csc_matrix((rng.standard_normal(rows.size), rows, np.concatenate([[0], np.cumsum(counts)])), shape=(30, 40))
+    d = rng.uniform(1.0, 2.0, 40)
+    S = R.sorted_indices()
+    column = [S.indices[a:b].tobytes() + S.data[a:b].tobytes() + d[j].tobytes()
+              for j, (a, b) in enumerate(zip(S.indptr[:-1], S.indptr[1:]))]
+    assert not R.has_sorted_indices and list(newton_cg._terms(R.tocsr(), d).items()) == [
+        (key, j) for j, key in enumerate(column)]
+
+
 @pytest.fixture(scope="module")
 def pair():
     return cc.prepare(scene_of("two-body", 2, "tresca", 2e4), "dual-matrix-free")

@@ -168,8 +168,9 @@ products with W against 73), and the approximation is then the whole body (see :
 class Approximation:
     """W ≈ G H⁻¹ Gᵀ with H sparse SPD (K on a slab of DOFs next to the contact, its first ``slab`` rows, and on
     coarse functions beyond it) and G = B on them; ``factorize(H, *terms)`` returns the factors of H + the terms, on
-    a pattern that holds every entry a term stores, zeros included (:func:`stored_sum`), an object with ``solve``
-    and ``refactorize(H, *terms)`` (new values on that pattern, the sum of the terms)."""
+    a pattern that holds every entry a term stores, zeros included (:func:`stored_sum`), an object with ``solve``,
+    ``refactorize(*terms)`` (new values on that pattern, the sum of the terms) and ``hold(*terms)`` (a sum every later
+    refactorization adds its terms to: H, placed once)."""
 
     G: sp.csr_matrix
     H: sp.csr_matrix
@@ -402,17 +403,27 @@ class _Direct(Factorization):
         twin._solve, twin.timings = factors.solve, {}
         return twin
 
-    def refactorize(self, K: sp.spmatrix, *more: sp.spmatrix) -> None:
-        """Factorize new values, K (+ ``more``, summed), on the sparsity pattern of the first K (entries outside it:
-        ValueError), without the singularity check: PARDISO keeps its ordering and redoes only the numeric
-        factorization, placing each term's entries (their sum is not formed: a K-sized temporary)."""
+    _held: tuple = ()  # SuperLU's base of later refactorizations (see hold)
+
+    def refactorize(self, *terms: sp.spmatrix) -> None:
+        """Factorize new values, the sum of ``terms`` and of the base :meth:`hold` set, on the sparsity pattern of the
+        first K (entries outside it: ValueError), without the singularity check: PARDISO keeps its ordering and redoes
+        only the numeric factorization, placing each term's entries (their sum is not formed: a K-sized temporary)."""
         if self._factors is not None:
-            self._factors.refactorize(K, *more)
+            self._factors.refactorize(*terms)
             return
-        K = sum(more, K)
+        K = sum(self._held + terms[1:], terms[0])
         if (_structure(K) > self._pattern).nnz:
             raise ValueError("refactorize: the matrix has entries outside the pattern factorized")
         self._solve = _superlu(K, self._dim)  # SuperLU has no numeric-only factorization: a new one
+
+    def hold(self, *terms: sp.spmatrix) -> None:
+        """Make the sum of ``terms`` the base of the next refactorizations (until the next call): each factorizes it +
+        its own terms. PARDISO places the base once (:meth:`~convexcontact.fem.pardiso.Pardiso.hold`)."""
+        if self._factors is not None:
+            self._factors.hold(*terms)
+        else:
+            self._held = terms
 
 
 def _structure(K: sp.spmatrix) -> sp.csr_matrix:

@@ -151,7 +151,7 @@ class Pardiso:
                         U.indices.astype(np.int32), perm, mtype, 1)
         weakref.finalize(self, _release, self._handle)
         self._free = list(range(2, MAXFCT + 1)) if schur is None and mtype == 2 else []  # the twins' numbers
-        self._cache: dict = {}  # a term's position -> (its pattern's fingerprint, its places): see refactorize
+        self._values()
         S = np.zeros((len(schur), len(schur))) if schur is not None else np.zeros(1)
         self._run(12, np.zeros(1), S, 1)
         self.S = S if schur is not None else None  # row-major, symmetric up to rounding
@@ -165,7 +165,8 @@ class Pardiso:
             return None
         pt, iparm, n, data, ia, ja, perm, mtype, _ = self._handle
         twin = object.__new__(Pardiso)
-        twin.n, twin.S, twin._cache, twin._free = n, None, {}, []
+        twin.n, twin.S, twin._free = n, None, []
+        twin._values()
         twin._handle = (pt, iparm.copy(), n, np.zeros_like(data), ia, ja, perm, mtype, self._free.pop())
         try:
             twin.refactorize(*terms)
@@ -174,6 +175,12 @@ class Pardiso:
             raise
         weakref.finalize(twin, _release_twin, twin._handle, self._free, self)
         return twin
+
+    def _values(self) -> None:
+        """The state of the values factorized between refactorizations (see :meth:`refactorize` and :meth:`hold`)."""
+        self._cache: dict = {}  # a term's position -> (its pattern's fingerprint, its places)
+        self._held = None  # terms to hold, placed at the next refactorization
+        self._above = None  # with a base held: each term's places and the base's values there, as it was added
 
     def _run(self, phase: int, b: np.ndarray, x: np.ndarray, nrhs: int) -> None:
         code = _call(self._handle, phase, b, x, nrhs)
@@ -207,22 +214,54 @@ class Pardiso:
 
     def refactorize(self, *terms: sp.spmatrix) -> None:
         """New values, the sum of ``terms`` (one matrix, or a few whose sum is not formed: a preconditioner's K and its
-        contact block), on the sparsity pattern of the matrix factorized (or part of it): the numeric factorization
-        only (phase 22), keeping the ordering — 0.14 s against 0.65 s on a 2-D slab of 1.4·10⁵ DOFs. Where each
-        term's entries go is kept while its pattern stays (each Newton step of newton-cg passes H and a contact block
-        of the same patterns): finding it took a third of a refactorization of a 3-D plate's K."""
+        contact block) and of the base :meth:`hold` set, if any, on the sparsity pattern of the matrix factorized (or
+        part of it): the numeric factorization only (phase 22), keeping the ordering — 0.14 s against 0.65 s on a 2-D
+        slab of 1.4·10⁵ DOFs. Where each term's entries go is kept while its pattern stays (each Newton step of
+        newton-cg passes a contact block of the same pattern): finding it took a third of a refactorization of a 3-D
+        plate's K."""
         terms = [_canonical(term) for term in terms]
         places = [self._placed(position, term) for position, term in enumerate(terms)]  # all checked first
-        data = self._handle[3]
-        data[:] = 0.0  # in place: PARDISO holds a pointer to it
+        data = self._handle[3]  # changed in place: PARDISO holds a pointer to it
+        if self._held is not None:  # a new base
+            self._place(self._held)
+            self._held, self._above = None, []
+        elif self._above is None:  # no base
+            data[:] = 0.0
+        else:
+            for where, values in reversed(self._above):  # the base's values back where the last terms went
+                data[where] = values
+            self._above = []
         for term, where in zip(terms, places):
+            if self._above is not None:
+                self._above.append((where, data[where]))
             done = 0
-            for rows in self._chunks(term):
-                upper = self._upper(term, rows)
-                values = term.data[term.indptr[rows.start]:term.indptr[rows.stop]][upper]
+            for _, values in self._upper_values(term):
                 data[where[done:done + values.size]] += values  # a canonical term: each place once
                 done += values.size
         self._run(22, np.zeros(1), np.zeros(1), 1)
+
+    def hold(self, *terms: sp.spmatrix) -> None:
+        """Make the sum of ``terms`` the base of the next refactorizations, until the next call: each then factorizes
+        the base + its own terms, and places only its terms' entries, the base's staying in the values factorized
+        (the places of the last terms' entries restored to it first). The pair's preconditioner at 1.4·10⁶ DOFs
+        re-placed its unchanging H (6.5·10⁶ upper entries) and hashed H's pattern at each refactorization: our own
+        work 0.069 s beside PARDISO's 0.24 s, 0.023 s with H held (docs/performance.md, helper `refactcost`). Placed at the next refactorization (ValueError there for an entry outside the pattern), by chunks
+        whose places are not kept: a term held needs neither its places nor its pattern's fingerprint."""
+        self._cache.clear()  # the places of terms given before: memory free
+        self._held, self._above = [_canonical(term) for term in terms], None
+
+    def _place(self, terms: list) -> None:
+        """The values factorized set to the sum of ``terms`` (canonical), a chunk of rows at a time."""
+        data = self._handle[3]
+        data[:] = 0.0
+        for term in terms:
+            for rows, values in self._upper_values(term):
+                data[self._places(term, rows)] += values
+
+    def _upper_values(self, term: sp.csr_matrix):
+        """Each chunk of rows of a canonical ``term`` (:meth:`_chunks`) and the values of its upper-triangle entries."""
+        for rows in self._chunks(term):
+            yield rows, term.data[term.indptr[rows.start]:term.indptr[rows.stop]][self._upper(term, rows)]
 
     def _placed(self, position: int, term: sp.csr_matrix) -> np.ndarray:
         """Where the upper-triangle entries of the ``position``-th term sit in the data factorized (row by row, int32:

@@ -877,6 +877,7 @@ class _Preconditioner:
         self._grows = False  # whether the factors are of this Newton step's first face (see system)
         self.kept = False  # whether the last system's are those of the face it grew from (see KEPT_FORCING)
         self._factorize = approximation.factorize
+        self._holds = False  # whether the factors hold H as their refactorizations' base (see system)
         self._keeps = approximation.slab in (None, self.H.shape[0])  # H is K on DOFs, no coarse functions: see REUSE
         if not self.exact:
             self.factors = self._factorize(self.H, self.G.T @ sp.diags(1.0 / self.shift) @ self.G)
@@ -916,7 +917,10 @@ class _Preconditioner:
             self.factors = self._factorize(self.H, contact, self._pattern)
             self._pattern = None
         else:
-            self.factors.refactorize(self.H, contact)  # summed in place: no K-sized sum
+            if not self._holds:  # H placed once, the base of every later refactorization
+                self.factors.hold(self.H)
+                self._holds = True
+            self.factors.refactorize(contact)  # added in place: no K-sized sum
         self.factorizations += 1
         self._factored, self._grows, self._solved = (R, G, d), True, {}
         self._terms = _terms(R, d) if terms is None else terms
@@ -978,11 +982,19 @@ class _Updated:
 def _terms(R: sp.csr_matrix, d: np.ndarray) -> dict:
     """R's columns with their d, each as a key (its rows', entries' and d's bytes, one bytes object: its length
     fixes the column's count of entries) to its index: the rank-one terms g gᵀ/d of the face's Gᵀ D⁻¹ G, compared
-    between faces by key (:meth:`_Preconditioner._updated`)."""
+    between faces by key (:meth:`_Preconditioner._updated`). The keys of the columns with one count of entries are
+    the rows of one byte array: the pair's Coulomb at 1.4·10⁶ DOFs spent 0.6 s of its contact solve on them column by
+    column (~2,500 columns a face, three ``tobytes`` each)."""
     R = sp.csc_matrix(R)
     R.sort_indices()
-    return {R.indices[a:b].tobytes() + R.data[a:b].tobytes() + d[j].tobytes(): j
-            for j, (a, b) in enumerate(zip(R.indptr[:-1], R.indptr[1:]))}
+    counts = np.diff(R.indptr)
+    keys = np.empty(R.shape[1], dtype=object)
+    for count in np.unique(counts):
+        columns = np.flatnonzero(counts == count)
+        at = R.indptr[columns, None] + np.arange(count)
+        record = np.hstack([R.indices[at].view(np.uint8), R.data[at].view(np.uint8), d[columns, None].view(np.uint8)])
+        keys[columns] = record.view(f"V{record.shape[1]}").ravel().tolist()
+    return dict(zip(keys.tolist(), range(R.shape[1])))
 
 
 def _face_signs(R: sp.csr_matrix, other: sp.csr_matrix) -> np.ndarray | None:
