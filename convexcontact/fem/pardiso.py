@@ -245,8 +245,9 @@ class Pardiso:
         the base + its own terms, and places only its terms' entries, the base's staying in the values factorized
         (the places of the last terms' entries restored to it first). The pair's preconditioner at 1.4·10⁶ DOFs
         re-placed its unchanging H (6.5·10⁶ upper entries) and hashed H's pattern at each refactorization: our own
-        work 0.069 s beside PARDISO's 0.24 s, 0.023 s with H held (docs/performance.md, helper `refactcost`). Placed at the next refactorization (ValueError there for an entry outside the pattern), by chunks
-        whose places are not kept: a term held needs neither its places nor its pattern's fingerprint."""
+        work 0.069 s beside PARDISO's 0.24 s, 0.023 s with H held (docs/performance.md, helper `refactcost`). Placed
+        at the next refactorization (ValueError there for an entry outside the pattern), by chunks whose places are not
+        kept: a term held needs neither its places nor its pattern's fingerprint."""
         self._cache.clear()  # the places of terms given before: memory free
         self._held, self._above = [_canonical(term) for term in terms], None
 
