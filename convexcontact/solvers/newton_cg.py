@@ -1366,7 +1366,10 @@ def _reduced(tilde, Z: sp.csr_matrix, R: sp.csr_matrix) -> np.ndarray:
     if R is Z and Z.nnz == Z.shape[1] == rows.size and (Z.data == 1).all() and (Z.indices == np.arange(rows.size)).all():
         return block  # Z picks the variables ``rows``, in order
     Z, R = Z[rows], R[rows]
-    return np.ascontiguousarray(R.T @ np.ascontiguousarray((Z.T @ block).T))
+    left = Z.T @ block
+    del block  # each m² temporary freed once used: two at a time, not three (Coulomb's dense Newton systems)
+    left = np.ascontiguousarray(left.T)
+    return np.ascontiguousarray(R.T @ left)
 
 
 REFACTOR = 1 / 3
