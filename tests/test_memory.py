@@ -226,3 +226,18 @@ def test_a_dense_newton_system_with_tangent_bases_holds_two_arrays_of_its_size_a
         tracemalloc.stop()
     assert peak < 2.5 * 8 * m * m
     np.testing.assert_allclose(reduced, R.T.toarray() @ P @ Z.toarray(), atol=1e-12 * np.abs(P).max() * m)
+
+
+@pytest.mark.skipif(factorization._pardiso() is None, reason="PARDISO does not load here")
+@pytest.mark.parametrize("size", [53, 47])
+def test_pardiso_refuses_a_held_or_refactorized_term_of_another_shape(size):
+    """A term larger than the matrix factorized had its rows beyond it never read (its entries there dropped
+    silently); a smaller one failed on an index. Both are now a ValueError that names the shapes, from hold and from
+    refactorize alike."""
+    n = 50
+    K = sp.diags([-np.ones(n - 1), 4.0 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csr")
+    factors = pardiso.Pardiso(K)
+    wrong = sp.eye(size, format="csr")
+    for call in (factors.hold, factors.refactorize):
+        with pytest.raises(ValueError, match=rf"a term of shape \({size}, {size}\).*\(50, 50\)"):
+            call(wrong)

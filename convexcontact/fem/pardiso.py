@@ -151,7 +151,7 @@ class Pardiso:
                         U.indices.astype(np.int32), perm, mtype, 1)
         weakref.finalize(self, _release, self._handle)
         self._free = list(range(2, MAXFCT + 1)) if schur is None and mtype == 2 else []  # the twins' numbers
-        self._values()
+        self._reset_placements()
         S = np.zeros((len(schur), len(schur))) if schur is not None else np.zeros(1)
         self._run(12, np.zeros(1), S, 1)
         self.S = S if schur is not None else None  # row-major, symmetric up to rounding
@@ -166,7 +166,7 @@ class Pardiso:
         pt, iparm, n, data, ia, ja, perm, mtype, _ = self._handle
         twin = object.__new__(Pardiso)
         twin.n, twin.S, twin._free = n, None, []
-        twin._values()
+        twin._reset_placements()
         twin._handle = (pt, iparm.copy(), n, np.zeros_like(data), ia, ja, perm, mtype, self._free.pop())
         try:
             twin.refactorize(*terms)
@@ -176,8 +176,9 @@ class Pardiso:
         weakref.finalize(twin, _release_twin, twin._handle, self._free, self)
         return twin
 
-    def _values(self) -> None:
-        """The state of the values factorized between refactorizations (see :meth:`refactorize` and :meth:`hold`)."""
+    def _reset_placements(self) -> None:
+        """No term placed yet: the state of the values factorized between refactorizations (see :meth:`refactorize`
+        and :meth:`hold`)."""
         self._cache: dict = {}  # a term's position -> (its pattern's fingerprint, its places)
         self._held = None  # terms to hold, placed at the next refactorization
         self._above = None  # with a base held: each term's places and the base's values there, as it was added
@@ -219,7 +220,7 @@ class Pardiso:
         slab of 1.4·10⁵ DOFs. Where each term's entries go is kept while its pattern stays (each Newton step of
         newton-cg passes a contact block of the same pattern): finding it took a third of a refactorization of a 3-D
         plate's K."""
-        terms = [_canonical(term) for term in terms]
+        terms = self._checked(terms, "refactorize")
         places = [self._placed(position, term) for position, term in enumerate(terms)]  # all checked first
         data = self._handle[3]  # changed in place: PARDISO holds a pointer to it
         if self._held is not None:  # a new base
@@ -249,7 +250,16 @@ class Pardiso:
         at the next refactorization (ValueError there for an entry outside the pattern), by chunks whose places are not
         kept: a term held needs neither its places nor its pattern's fingerprint."""
         self._cache.clear()  # the places of terms given before: memory free
-        self._held, self._above = [_canonical(term) for term in terms], None
+        self._held, self._above = self._checked(terms, "hold"), None
+
+    def _checked(self, terms, caller: str) -> list:
+        """``terms`` canonical (:func:`_canonical`); ValueError naming a shape other than the matrix factorized's (a
+        larger term's rows beyond it were never read: its entries there dropped silently)."""
+        for term in terms:
+            if term.shape != (self.n, self.n):
+                raise ValueError(f"{caller}: a term of shape {term.shape}; give each the shape of the matrix "
+                                 f"factorized, {(self.n, self.n)}")
+        return [_canonical(term) for term in terms]
 
     def _place(self, terms: list) -> None:
         """The values factorized set to the sum of ``terms`` (canonical), a chunk of rows at a time."""
