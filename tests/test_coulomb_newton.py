@@ -98,15 +98,16 @@ def test_friction_at_gauss_points_runs_the_map():
 
 
 def test_a_stalled_newton_leaves_the_map_to_converge(monkeypatch):
-    """Newton's method is local: where it fails, the map goes on from where it was, and converges."""
+    """Newton's method is local: where it fails, the map goes on from where it was, and converges. Cut to no step:
+    one step (before) no longer fails here, its point on the natural map's faces is the answer (RELEASE_MOVING)."""
     original = newton_cg.Session.coupled
-    monkeypatch.setattr(newton_cg.Session, "coupled", lambda self, coupling: original(self, coupling, max_iter=1))
+    monkeypatch.setattr(newton_cg.Session, "coupled", lambda self, coupling: original(self, coupling, max_iter=0))
     scene = whole_face(2, 61, 2e3, Coulomb(friction=0.3))
     result = cc.prepare(scene, "dual").solve()
     assert result.status == "solved" and result.certificate.worst <= 1e-6
     assert not any(step["coulomb_newton"] for step in result.extra["history"])
     assert len(result.extra["history"]) > 2
-    assert result.extra["picard"]["attempts"][0]["newton"] == "max_iter after 1 Newton steps"
+    assert result.extra["picard"]["attempts"][0]["newton"] == "max_iter after 0 Newton steps"
 
 
 def test_newton_option_is_checked():
@@ -293,7 +294,9 @@ def test_where_most_points_slip_at_the_stick_start_newton_starts_from_the_tresca
     """On the 2-D pair (W an operator) most points of the stick start lie outside their Coulomb discs (TRESCA_SLIP):
     one Tresca solve follows, its slip bounds F·λ_N of the stick start's pressure (recomputed here from the start's
     recovered pressure by the Picard map's own bound), and Newton's Coulomb solve from its answer takes fewer steps
-    than from the stick start (measured 4 → 2; docs/performance.md, "Coulomb's start on the pair")."""
+    than from the stick start (measured 4 → 2; docs/performance.md, "Coulomb's start on the pair"), or no more where
+    Newton's points are on the natural map's faces at every step (RELEASE_MOVING: 2 and 2 here, and 16 Newton products
+    from the stick start against 6 + 24 with the Tresca solve; at 3.5·10⁵ DOFs 124 against 35 + 33)."""
     bounds = []
     tresca_start = picard.tresca_start
     monkeypatch.setattr(picard, "tresca_start", lambda model, newton, radii: bounds.append(radii) or
@@ -314,7 +317,7 @@ def test_where_most_points_slip_at_the_stick_start_newton_starts_from_the_tresca
     bound, _, _ = picard.pressure_map(model)
     np.testing.assert_allclose(bounds[0], bound(model.recover(stuck).pressure), rtol=1e-10, atol=1e-14)
     monkeypatch.setattr(picard, "TRESCA_SLIP", 1.0)  # the stick start alone
-    assert tresca < newton_steps(cc.prepare(scene, "dual-matrix-free")) and len(bounds) == 1
+    assert tresca <= newton_steps(cc.prepare(scene, "dual-matrix-free")) and len(bounds) == 1
 
 
 def test_where_a_coarse_program_begins_the_stick_start_its_answer_is_the_start(monkeypatch):
@@ -362,14 +365,15 @@ def test_the_tresca_start_is_solved_only_to_a_start_s_tolerance(monkeypatch):
 
 @pytest.mark.parametrize("release", [True, False])
 def test_newton_s_coulomb_faces_on_intervals_are_the_natural_map_s(monkeypatch, release):
-    """The 2-D block at 10⁵ DOFs (W a matrix): where Newton's point on the Coulomb problem is refused, its faces are the
-    natural map's at that point (RELEASE_MOVING: released and flipped intervals, as with fixed radii), and Newton's
-    Coulomb solve takes 6 steps; with faces only grown by the sets the point leaves (before) it crawled for 11."""
+    """The 2-D block at 10⁵ DOFs (W a matrix): Newton's points on the Coulomb problem are on the natural map's faces at
+    them (RELEASE_MOVING: released and flipped intervals, as with fixed radii), and Newton's Coulomb solve takes 2
+    steps (6 with those faces only at refused points); with faces only grown by the sets a refused point leaves
+    (before that) it crawled for 11."""
     monkeypatch.setattr(newton_cg, "RELEASE_MOVING", release)
     result = cc.prepare(scene_of("block", 2, "coulomb", 1e5), "auto").solve()
     assert result.status == "solved" and result.certificate.worst <= 1e-10
     [step] = result.extra["history"]
-    assert step["coulomb_newton"] and len(step["newton_residuals"]) - 1 == (6 if release else 11)
+    assert step["coulomb_newton"] and len(step["newton_residuals"]) - 1 == (2 if release else 11)
 
 
 def test_a_stall_is_left_by_the_fixed_point_map_s_step(monkeypatch):

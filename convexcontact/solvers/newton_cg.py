@@ -157,20 +157,32 @@ matrix-free 8 / 148 → 6 / 141 → 5 / 109; 10⁵ dense 8 / 49 → 3 / 60 → 3
 9 / 193 → 7 / 180 → 5 / 152; 6·10⁵ 11 / 284 → 4 / 146 → 4 / 145 (docs/performance.md, "Tresca's plateau on the
 pair"). The convergence argument does not change: Newton's point is a trial."""
 GROW_MOVING = 3
-"""Times the face may grow where radii move (:func:`coupled`), and only after Newton's point was refused (its natural
-residual not below the step's): a node that leaves its interval at Newton's point made its projection raise the
-residual, and each step went half way to that same point (clamped strip 400 : 1, 4·10⁴ DOFs: 7 Newton steps, the
-residual halved 5 times, an answer the certificate refused, 7.6e-6). Grown at every step, as with fixed radii, the
-faces cost more than the steps they saved where P is a matrix (each is an LU of its own: strip 20 : 1 free, 2·10⁴
-DOFs, 5 → 13 systems) and on the clamped plate (3-D, 2·10⁴ DOFs: 33 → 75 products, 5 steps both). Refused points
-only (steps / products / faces grown, 2·10⁴ DOFs unless said; docs/performance.md, "The clamped strip 400 : 1's
-Coulomb row"): GROW_MOVING = 1: tall block stalled after 16 steps, strip 400 : 1 at 5·10⁴ 6 / 208 / 5; 2: tall 12 /
-134 / 22; 3: block 13 → 9 / 38 / 12, tall (stalled after 18 before) 2 / 13 / 4, clamped plate 5 / 51 / 3, strip
-400 : 1 at 5·10⁴ 3 / 67 / 2; 10 (GROW): block 6 / 23 / 7, tall 1 / 10 / 4, clamped plate 5 / 75 / 10."""
+"""Times the face may grow where radii move on balls of more variables (discs; intervals take the natural map's faces,
+RELEASE_MOVING), and only after Newton's point was refused (its natural residual not below the step's): a node that
+leaves its interval at Newton's point made its projection raise the residual, and each step went half way to that same
+point (clamped strip 400 : 1, 4·10⁴ DOFs: 7 Newton steps, the residual halved 5 times, an answer the certificate
+refused, 7.6e-6). Grown at every step, as with fixed radii, the faces cost more than the steps they saved where P is a
+matrix (each is an LU of its own: strip 20 : 1 free, 2·10⁴ DOFs, 5 → 13 systems) and on the clamped plate (3-D, 2·10⁴
+DOFs: 33 → 75 products, 5 steps both). Refused points only (steps / products / faces grown, 2·10⁴ DOFs unless said;
+docs/performance.md, "The clamped strip 400 : 1's Coulomb row"): GROW_MOVING = 1: tall block stalled after 16 steps,
+strip 400 : 1 at 5·10⁴ 6 / 208 / 5; 2: tall 12 / 134 / 22; 3: block 13 → 9 / 38 / 12, tall (stalled after 18 before) 2 /
+13 / 4, clamped plate 5 / 51 / 3, strip 400 : 1 at 5·10⁴ 3 / 67 / 2; 10 (GROW): block 6 / 23 / 7, tall 1 / 10 / 4,
+clamped plate 5 / 75 / 10."""
 RELEASE_MOVING = True
-"""Where radii move and the balls are intervals (2-D), the refused Newton point's faces (GROW_MOVING) are the natural
-map's at that point, as with fixed radii (:func:`_released`: sets whose multiplier points inward released, an interval
-moved to the end its multiplier pushes it to), not only grown by the sets it leaves (:func:`_grown`): a grown face held
+"""Where radii move and the balls are intervals (2-D), Newton's point is on the face the natural map holds at it, as
+with fixed radii (GROW, :func:`_released`: sets whose multiplier points inward released, an interval moved to the end
+its multiplier pushes it to), at every step, not only grown by the sets it leaves (:func:`_grown`) once refused.
+Those faces at refused points only (GROW_MOVING = 3 of them, before) left the pair on a plateau, the residual 1.5–4×
+lower a step for 4–5 steps: the third face still moved 1–4 intervals, and its point gained little; at every Newton
+point, up to GROW, the faces stay after 3–9 and the point is the answer's but for GMRES's tolerance. Newton's Coulomb
+solve, steps / products, before → faces at refused points up to GROW → at every point (docs/performance.md, "Newton's
+Coulomb plateau on the pair"): the pair `auto` at 3.5·10⁵ DOFs 7 / 176 → 3 / 90 → 2 / 33, at 1.4·10⁶ 6 / 73 → 2 / 56
+(at every point); forced matrix-free at 2·10⁴ 6 / 118 → 4 / 58 → 3 / 69, 1.6·10⁵ 5 / 51 → 5 / 51 → 2 / 37, but 10⁵
+3 / 25 → 3 / 25 → 2 / 36 (its first Newton point was 13× lower already, then taken as it was); the clamped strip
+400 : 1 at 10⁵ forced matrix-free 3 / 29 → 2 / 25; W a matrix, dense LUs (steps + faces): the pair at 10⁵ 6 + 9 →
+1 + 5, the block 6 + 9 → 2 + 9, the tall block at 2·10⁴ 2 + 6 → 1 + 4. Discs unchanged.
+
+Before that, the refused Newton point's faces were only grown by the sets it leaves (:func:`_grown`): a grown face held
 a node at the wrong end of its interval, Newton's point was refused again, and the steps crawled on a plateau (2-D pair
 at 3.2·10⁵ DOFs: a refused step cost 25–37 products against 9–14 for a taken one). Newton's Coulomb solve, steps /
 products, grown → released (docs/performance.md, "Coulomb's starts on the pair from the coarse answer"): the 2-D
@@ -415,14 +427,15 @@ class Session:
 
 def coupled(program: ConicProgram, coupling: sp.spmatrix, start: np.ndarray, tol: float | None = None,
             max_iter: int = 30, verbose: bool = False, cache: dict | None = None) -> ConicSolution:
-    """Newton's method from ``start`` on the program whose ball radii move with x: ‖v_k‖ ≤ (coupling x)_k,
-    a quasi-variational inequality (no f is minimized: the Newton system is not symmetric, GMRES solves it,
-    and a step is taken where it lowers the natural residual: Newton's point, else the point on the face grown by the
-    sets it leaves (GROW_MOVING), else a point towards Newton's or the projected gradient's, else the fixed-point
-    map's step, FIXED_STEPS). ``coupling`` (balls × variables) may not involve the balls' own variables. The answer is that
-    of the program whose radius rows hold the radii it reached (also ``info["radii"]``); "failed" (solver
-    status "stalled") where no step lowers the residual: without a convexity argument Newton's method is local,
-    so start near the answer (a fixed point of x ↦ the program's answer with radii coupling x)."""
+    """Newton's method from ``start`` on the program whose ball radii move with x: ‖v_k‖ ≤ (coupling x)_k, a
+    quasi-variational inequality (no f is minimized: the Newton system is not symmetric, GMRES solves it, and a step is
+    taken where it lowers the natural residual: Newton's point, else the point on the face grown by the sets it leaves
+    (GROW_MOVING; on intervals Newton's point is on the natural map's faces, RELEASE_MOVING), else a point towards
+    Newton's or the projected gradient's, else the fixed-point map's step, FIXED_STEPS). ``coupling`` (balls ×
+    variables) may not involve the balls' own variables. The answer is that of the program whose radius rows hold the
+    radii it reached (also ``info["radii"]``); "failed" (solver status "stalled") where no step lowers the residual:
+    without a convexity argument Newton's method is local, so start near the answer (a fixed point of x ↦ the program's
+    answer with radii coupling x)."""
     form = bound_form_of(program)
     coupling = sp.csr_matrix(coupling)
     if coupling.shape != (form.ball_vars.shape[0], program.n_variables):
@@ -584,12 +597,13 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
 
     def newton_point(v, g, y, target, empty=False):
         """Newton's point from v (∇f there g) on the face y holds, the CG iterations it took and ∇f there where known;
-        with fixed radii on the face the natural map holds at that point (:func:`grown_point`), whose solves stop at
-        GROWN_FORCING alone where y is the ``empty`` face (see FIRST_FORCING)."""
+        with fixed radii, or moving radii on intervals (RELEASE_MOVING), on the face the natural map holds at that point
+        (:func:`grown_point`), whose solves stop at GROWN_FORCING alone where y is the ``empty`` face
+        (FIRST_FORCING)."""
         face = {}  # the dense Cholesky factor of this step's first system, for its grown faces (_direct)
         newton, iterations, known = _step(P, affine, sets, v, y, c, target, products, cache["precondition"], matrix,
                                           face=face, gradient_at=(v, g) if loose else None)
-        if sets.coupling is None:
+        if natural_faces:
             newton, more, known = grown_point(v, y, newton, 0.0 if empty else target, face, known=known)
             iterations += more
         return newton, iterations, known
@@ -602,7 +616,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         point, the CG iterations it took and ∇f there where known."""
         iterations, at, released, moved = 0, v, np.zeros(v.size, bool), False
         for _ in range(GROW if limit is None else limit):
-            if sets.coupling is None or (RELEASE_MOVING and sets.balls.shape[1] == 1):
+            if natural_faces:
                 known = gradient(newton) if known is None else known
                 y, more = _released(y, newton, known, c, sets, released, sets.radii(at), sets.radii(newton))
                 moved = moved or more
@@ -644,6 +658,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     fixed_steps = 0  # the fixed-point map's steps taken where radii move (see FIXED_STEPS)
     status, word = "failed", "max_iter"
     floor = SUM_FLOOR * EPS * (c * np.abs(sets.scale * program.q)).max(initial=0.0)
+    natural_faces = sets.coupling is None or (RELEASE_MOVING and sets.balls.shape[1] == 1)  # at every Newton point
     for steps in range(max_iter + 1):
         residual, y, size = natural(v, g)
         if residual * size <= max(tol * answer(v, size), 0.0 if exact or own is None else floor):
@@ -677,7 +692,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         best = min(best, residual)
         if sets.coupling is not None:
             v, g, moved = backtrack(v, g, newton, residual, (1.0,), known)
-            if not moved:  # Newton's point refused: first on the face grown by the sets it leaves (see GROW)
+            if not moved and not natural_faces:  # Newton's point refused: first on the face grown by the sets it
+                # leaves (GROW_MOVING)
                 grown, more, at_grown = grown_point(v, y, newton, target, limit=min(GROW, GROW_MOVING), known=known)
                 cg_total += more
                 if grown is not newton:
