@@ -98,7 +98,21 @@ after it, the pressure's change from the stick start's (the 2-D pair, forced mat
 Newton's Coulomb path was the same in each of these rows from an answer to START_TOL, and the Tresca start took one
 step fewer in four of them (products 26 → 25, 30 → 25, 32 → 25, 44 → 35, 82 → 75; docs/performance.md, "Coulomb's
 starts on the pair from the coarse answer"). It was START_TOL (1e-8) before; 1e-6, measured then on one row (6 products
-fewer at 1.4·10⁶), was not taken."""
+fewer at 1.4·10⁶), was not taken. The test is newton-cg's own, relative to ‖v‖∞ (LOAD_SCALE), not to the residual it
+prints: at 1.4·10⁶ DOFs from the stick start it took a third step from a printed 3.5e-5 to 4.4e-9 (20 products), and
+stopped at 3.5e-5 Newton's Coulomb solve took 10 steps and 247 products instead of 6 and 73 (docs/performance.md,
+"The Tresca start from the coarse program on its own bounds")."""
+TRESCA_COARSE = 10_000
+"""Where the Tresca start's program (TRESCA_SLIP) has at least this many unknowns it is solved from no start, so from
+the coarse program on its own bounds (newton-cg's COARSE_SETS), not from the stick start it follows: from there its
+first steps' faces moved the slip and opening fronts a face at a time, each face a product and a refactorization
+(faces 60–1,070 terms apart, past the low-rank update's reach, UPDATE_RANK / UPDATE_SOLVES). The Tresca start's Newton
+steps / products with W / refactorizations, from the stick start → from the coarse answer (docs/performance.md, "The
+Tresca start from the coarse program on its own bounds"): the 2-D pair at 1.4·10⁶ DOFs (19,632 unknowns) 3 / 72 / 18
+→ 1 / 49 / 4, Newton's Coulomb solve after it 6 Newton steps and 73 products from either; not below, where the coarse
+program's products outweighed the faces it saved: at 3.5·10⁵ (4,910 unknowns) 2 / 35 / 4 → 1 / 40 / 2, forced
+matrix-free at 10⁵ (1,434) 1 / 22 / 3 → 1 / 32 / 1 and at 2·10⁴ (296) 2 / 22 / 1 → 1 / 47 / 1, Newton's Coulomb solve
+unchanged. The threshold lies between the rows measured, not at a measured crossing."""
 STICK_RADIUS = np.sqrt(np.finfo(float).max)
 """The slip bound of the stick start: one no multiplier reaches (its square still finite)."""
 
@@ -387,11 +401,11 @@ def stick_start(model: Model, newton, linear: sp.spmatrix) -> bool:
 
 
 def tresca_start(model: Model, newton, radii: np.ndarray):
-    """Solve, from the session's start, its program with the slip bounds ``radii`` (F G S λ_N of the start's
-    pressure; TRESCA_SLIP): its answer, if solved, becomes the start of Newton's Coulomb solve, whose coupling
-    replaces these bounds."""
+    """Solve, from the session's start (from no start where the program is large, TRESCA_COARSE), its program with the
+    slip bounds ``radii`` (F G S λ_N of the start's pressure; TRESCA_SLIP): its answer, if solved, becomes the start
+    of Newton's Coulomb solve, whose coupling replaces these bounds."""
     newton.update(b=model.bound_update(radii)["b"])
-    newton.solve(TRESCA_TOL)
+    newton.solve(TRESCA_TOL, fresh=model.program.n_variables >= TRESCA_COARSE)
 
 
 def radius_coupling(model: Model, linear: sp.spmatrix) -> sp.csr_matrix:

@@ -416,10 +416,11 @@ class Session:
             self._start = solution.x
         return solution
 
-    def solve(self, tol: float | None = None) -> ConicSolution:
-        """From the last answer (or the seed) to this session's tolerance, or to a looser ``tol`` (a start's)."""
-        solution = newton_cg(self.program, self._form, self._start, max(self._tol, tol or 0.0), self._max_iter,
-                             self._verbose, self._progress, self._cache)
+    def solve(self, tol: float | None = None, fresh: bool = False) -> ConicSolution:
+        """From the last answer (or the seed) to this session's tolerance, or to a looser ``tol`` (a start's);
+        ``fresh``: from no start instead (the coarse program's answer, where one begins the solve: COARSE_SETS)."""
+        solution = newton_cg(self.program, self._form, None if fresh else self._start, max(self._tol, tol or 0.0),
+                             self._max_iter, self._verbose, self._progress, self._cache)
         if solution.solved:
             self._start = solution.x
         return solution
