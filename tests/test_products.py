@@ -153,8 +153,9 @@ def coupled_solve(monkeypatch):
 def test_where_radii_move_the_gradient_at_newton_s_point_comes_from_gmres_s_products(monkeypatch):
     """∇f at Newton's point is ∇f at the step's start + P̃ Z ξ from GMRES's products (newton_cg.GMRES_LIFT), a fresh
     one's to round-off; the solve where radii move took 133 products with a fresh ∇f there (131 with the session's
-    step lengths and the refused point's ∇f handed on where its face stays), 117–118 now (GMRES's iterations follow
-    PARDISO's rounding), the same 6 Newton steps."""
+    step lengths and the refused point's ∇f handed on where its face stays), 117–118 with the lift (GMRES's iterations
+    follow PARDISO's rounding), the same 6 Newton steps; since Newton's points take the natural map's faces at every
+    step (RELEASE_MOVING) 3 steps, 80 → 69 products: each lifted ∇f (11) is one product fewer, to GMRES's rounding."""
     step, drift = newton_cg._step, []
 
     def checked(P, affine, sets, *args, **kwargs):
@@ -168,8 +169,9 @@ def test_where_radii_move_the_gradient_at_newton_s_point_comes_from_gmres_s_prod
     now = coupled_solve(monkeypatch)
     monkeypatch.setattr(newton_cg, "GMRES_LIFT", False)
     before = coupled_solve(monkeypatch)
-    assert now.iterations == before.iterations == 6 and before.info["products"] - now.info["products"] >= 12
-    assert drift and max(drift) <= 1e-12
+    assert now.iterations == before.iterations == 3 and len(drift) >= 8
+    assert before.info["products"] - now.info["products"] >= len(drift) - 1
+    assert max(drift) <= 1e-12
 
 
 def test_a_session_s_solves_take_their_step_lengths_once(monkeypatch):
