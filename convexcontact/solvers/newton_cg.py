@@ -308,9 +308,14 @@ squares: that solve's points are such combinations, as its gradients are of the 
 moved one): a fresh ∇f there cost the fine program a product. Against a fresh ∇f by W's own formula at the 2-D pair's
 coarse answers (2·10⁴–2.8·10⁵ DOFs; Signorini, Tresca, Coulomb's stick start): 2e-16–4e-15 of its largest entry
 (tests/test_products.py)."""
-COARSE_TOL = 1e-3
-"""The coarse program's tolerance (COARSE_SETS): its answer is a start, constant on each aggregate (1e-2 on the pair
-at 10⁵ DOFs forced matrix-free, Tresca: 82 → 108 products)."""
+COARSE_TOL = 1e-5
+"""The coarse program's tolerance (COARSE_SETS): its answer is a start, constant on each aggregate. The coarse program
+starts from its approximation's answer (:func:`_approximated`), near its own, so a tighter tolerance costs it few
+products, and the fine path needs it: the pair at 1.4·10⁶ DOFs, Tresca, from there to 1e-3 took 6 coarse products, then
+4 Newton steps and 105 products with 12 refactorizations and 17 updates; to 1e-5, 8 coarse products, then 3 steps and
+78 products with 13 and 9, as from no start to 1e-3 after 35 coarse products (docs/performance.md, "The coarse program
+from its approximation's answer"). From no start, 1e-2 on the pair at 10⁵ DOFs forced matrix-free, Tresca: 82 → 108
+products."""
 LINE = 8
 """The coarse start (COARSE_SETS) only where the sets' rows form a line: the breadth-first levels of their graph from
 the reverse Cuthill–McKee order's start number at least 1 / LINE of the rows (the 2-D pair at 2·10⁴ / 5·10⁴ DOFs: 44
@@ -796,11 +801,24 @@ def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter:
                                      for k in range(radius.size)]  # each ball: its radius row, −I on its variables
     b = np.concatenate([np.zeros(bounds)] + [np.concatenate([[r], np.zeros(p)]) for r in radius])
     coarse = ConicProgram(P, Q.T @ q, sp.vstack(A).tocsc(), b, tuple(cones))
-    solution = newton_cg(coarse, bound_form_of(coarse), None, COARSE_TOL, max_iter, verbose)
+    solution = newton_cg(coarse, bound_form_of(coarse), _approximated(coarse, max_iter, verbose), COARSE_TOL,
+                         max_iter, verbose)
     info = {key: solution.info[key] for key in ("products", "grown", "factorizations", "updates")}
     info.update(products=info["products"] + int(sets.shift.any()), steps=solution.iterations)
     lifted = P.lifted(solution.x)
     return sets.shift + Q @ solution.x, info, None if lifted is None else sets.scale * (q + lifted)
+
+
+def _approximated(program: ConicProgram, max_iter: int, verbose: bool) -> np.ndarray | None:
+    """x of the answer of the coarse ``program`` (:func:`_coarse_start`) with P its approximation G Gᵀ, dense: no
+    product with P, where it is solved (else None), the coarse solve's start. From no start the coarse program found its
+    faces as the fine one did, each a product with W at least (a K solve): the pair at 1.4·10⁶ DOFs, Signorini 21 → 12
+    coarse products, Tresca 35 → 8 (COARSE_TOL 1e-5), the fine program's Newton steps, products, refactorizations and
+    updates the same; Coulomb's stick start at 2·10⁴ DOFs forced matrix-free 46 → 6."""
+    G = program.P.approximation.G
+    approximated = replace(program, P=sp.csc_matrix((G @ G.T).toarray()))
+    solution = newton_cg(approximated, bound_form_of(approximated), None, COARSE_TOL, max_iter, verbose)
+    return solution.x if solution.solved else None
 
 
 def _coarse_approximation(approximation, G: sp.csr_matrix):
