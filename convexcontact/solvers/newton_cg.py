@@ -938,7 +938,8 @@ class _Preconditioner:
         if self.kept:  # H + Gᵀ D⁻¹ G of the face it grew from bounds this one's: see REUSE
             return lambda xi: _woodbury(self.factors, G, d, xi)
         kept = self._factored
-        signs = None if grown or kept is None or not self._keeps else _face_signs(R, kept[0])
+        reusable = not grown and kept is not None and self._keeps  # H = K: the factors kept may serve (REUSE)
+        signs = _face_signs(R, kept[0]) if reusable else None
         if signs is not None and _ratio_spread(d, kept[2]) <= REUSE:
             self._grows = False
             return lambda xi: signs * _woodbury(self.factors, kept[1], kept[2], signs * xi)
@@ -947,7 +948,7 @@ class _Preconditioner:
         if updated is not None:
             self._grows, self.updates = False, self.updates + 1  # the factors are not of this step's first face
             return lambda xi: _woodbury(updated, G, d, xi)
-        near = None if grown or kept is None or not self._keeps else self._near(R, d)
+        near = self._near(R, d) if reusable else None
         if near is not None:
             self._grows, self.updates = False, self.updates + 1
             return near
@@ -1002,12 +1003,11 @@ class _Preconditioner:
         (REUSE's first case on them), the others joining or leaving as a low-rank update (:meth:`_updated`); else None.
         The free plate 20 : 20 : 1 at 2.6·10⁵ DOFs, Tresca: its fifth face held 8 columns the factored one did not and
         4 fewer, d within 1.63 on the 40,731 both hold; refactorized, 5.4 s, ~43 solves with its factors."""
-        R_kept, _, d_kept = self._factored
+        R, R_kept, d_kept = sp.csc_matrix(R), sp.csc_matrix(self._factored[0]), self._factored[2]
         here, there = _matched(R, R_kept)
         others = np.setdiff1d(np.arange(R.shape[1]), here)
         if R.shape[1] + R_kept.shape[1] - 2 * here.size > UPDATE_RANK:
             return None
-        R, R_kept = sp.csc_matrix(R), sp.csc_matrix(R_kept)
         signs = _face_signs(sp.csr_matrix(R[:, here]), sp.csr_matrix(R_kept[:, there]))
         if signs is None or _ratio_spread(d[here], d_kept[there]) > REUSE:
             return None
@@ -1022,10 +1022,10 @@ class _Preconditioner:
         return lambda xi: signs * _woodbury(updated, G, d_near, signs * xi)
 
 
-def _matched(R: sp.csr_matrix, other: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
+def _matched(R: sp.csc_matrix, other: sp.csc_matrix) -> tuple[np.ndarray, np.ndarray]:
     """The columns of R and of ``other`` (two faces) that are one variable's or one sphere's tangent coordinate in both:
     those with the same first and last row, paired in their order among such columns."""
-    keys = [_rows(sp.csc_matrix(face)) for face in (R, other)]
+    keys = [_rows(face) for face in (R, other)]
     ranks = [_ranks(key) for key in keys]
     count = 1 + max(rank.max(initial=0) for rank in ranks)
     return np.intersect1d(*(key * count + rank for key, rank in zip(keys, ranks)), assume_unique=True,
