@@ -35,12 +35,27 @@ def row_by_row(K: sp.csr_matrix, B: sp.csr_matrix, layers: int) -> np.ndarray:
     return diagonal
 
 
-@pytest.mark.parametrize("dim, nodes, dofs, layers", [(2, 9, 200, 2), (3, 25, 700, 1), (3, 25, 700, 2)])
+@pytest.mark.parametrize("dim, nodes, dofs, layers", [(2, 9, 200, 2), (3, 25, 700, 0), (3, 25, 700, 1),
+                                                      (3, 25, 700, 2)])
 def test_a_node_s_rows_share_a_patch_and_keep_their_own_diagonal(dim, nodes, dofs, layers):
     """The rows of a node (normal and tangential: a component each) are solved on one patch, a third of the
     factorizations in 3-D; each row's d_j is still b_jᵀ K_Ω⁻¹ b_j on its own support's patch."""
     K, B = contact_rows(dim, nodes, dofs)
     np.testing.assert_allclose(local_diagonal(K, B, layers), row_by_row(K, B, layers), rtol=1e-10)
+
+
+@pytest.mark.parametrize("dim, dofs", [(2, 300), (3, 700)])
+def test_the_patches_grow_on_k_s_nodes(dim, dofs):
+    """_twins groups K's rows into its nodes (a vector field's ``dim`` DOFs, numbered together, one pattern): every
+    group's rows store the same columns, and each group is a node, so a patch grown on nodes is the one grown on
+    DOFs (the diagonal, checked above against one solve per row)."""
+    K, _ = contact_rows(dim, 9 if dim == 2 else 25, dofs)
+    twins = local_delassus._twins(K)
+    node = twins.indices
+    assert twins.shape[1] == K.shape[0] // dim and np.all(np.bincount(node) == dim)
+    patterns = [tuple(K[i].indices) for i in range(K.shape[0])]
+    assert all(patterns[i] == patterns[i - 1] for i in range(1, K.shape[0]) if node[i] == node[i - 1])
+    assert all(patterns[i] != patterns[i - 1] for i in range(1, K.shape[0]) if node[i] != node[i - 1])
 
 
 def test_grown_faces_solved_loosely_give_the_same_answer_for_fewer_products(monkeypatch):

@@ -43,18 +43,23 @@ def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.n
     64-bit hash (a collision's odds: patches² / 2⁶⁵); a wrong d_j would only set a step length and a shift of the
     preconditioner, never the answer, which the certificate judges."""
     K, B = sp.csr_matrix(K), sp.csr_matrix(B)
-    graph = sp.csr_matrix((np.ones(K.nnz, dtype=np.int32), K.indices, K.indptr), shape=K.shape)
-    reach = _pattern(graph @ B.T).T.tocsr() if layers else B  # each row's support grown once
+    twins = _twins(K)  # the patches grown on K's nodes, not its DOFs (see _twins)
+    heads = np.flatnonzero(np.diff(twins.indices, prepend=-1))  # each node's first DOF, whose row is its node's
+    node_graph = _pattern(_ones(K[heads]) @ twins)
+    rows = _ones(B) @ twins  # each row's nodes
+    reach = sp.csr_matrix(_pattern(rows @ node_graph)) if layers else B  # its support grown once (on nodes)
     support, slot = supports(reach)
     first = np.flatnonzero(slot == 0)  # a row of each patch, in the order of the patches
-    patch = _pattern(reach[first].T)  # n × patches
+    nodes = _pattern(reach[first].T if layers else rows[first].T)  # nodes × patches
     for _ in range(layers - 1):
-        patch = _pattern(graph @ patch)
-    conflict = _pattern(patch.T @ _pattern(graph @ patch))  # patches that overlap or touch
+        nodes = _pattern(node_graph @ nodes)
+    conflict = _pattern(nodes.T @ _pattern(node_graph @ nodes))  # patches that overlap or touch
+    patch = _pattern(twins @ nodes if layers else B[first].T)  # DOFs × patches: a support grown is whole nodes
     rows_of = np.full((first.size, slot.max(initial=0) + 1), -1)  # each patch's rows by slot
     rows_of[support, slot] = np.arange(B.shape[0])
     B_first = _per_row(np.minimum, B.indices, B.indptr)
-    K_rows, B_rows = _row_hashes(K, np.arange(K.shape[0])), _row_hashes(B, B_first)
+    inside = np.unique(patch.indices)  # the DOFs of some patch: only their rows are hashed
+    K_rows, B_rows = _row_hashes(K, np.arange(K.shape[0]), rows=inside), _row_hashes(B, B_first)
     diagonal, solved = np.zeros(B.shape[0]), {}  # solved: a patch's key -> the patch solved for it
     colours = colouring(conflict)
     for colour in range(colours.max(initial=-1) + 1):
@@ -80,6 +85,27 @@ def local_diagonal(K: sp.spmatrix, B: sp.spmatrix, layers: int = LAYERS) -> np.n
         copies, originals = rows_of[members[~fresh]].ravel(), rows_of[twin[~fresh]].ravel()
         diagonal[copies[copies >= 0]] = diagonal[originals[copies >= 0]]  # twins: the same slots
     return diagonal
+
+
+def _twins(graph: sp.csr_matrix) -> sp.csr_matrix:
+    """The DOFs × nodes map of ``graph`` (a symmetric pattern): runs of consecutive rows with one pattern, a node's DOFs
+    in a vector field's numbering. A DOF's neighbours are then its node's, and so are the neighbours' nodes: a patch
+    grown, and whether two patches touch, are the same on nodes, with d² fewer entries to multiply: grown and coloured
+    on DOFs, the patches of a plate 20 : 20 : 1 at 2.6·10⁵ DOFs took 1.3 of the 1.6–2.1 s of its diagonal, which now
+    takes 0.85–0.89 s (the same d_j, bit for bit)."""
+    n, indptr, indices = graph.shape[0], graph.indptr, graph.indices
+    length = np.diff(indptr)
+    same = np.zeros(n, dtype=bool)  # row i's pattern is row i − 1's
+    candidates = np.flatnonzero(length[1:] == length[:-1]) + 1
+    step = max(1, candidates.size * (1 << 16) // max(graph.nnz, 1))
+    for start in range(0, candidates.size, step):  # by rows of about 2¹⁶ entries: an index per entry is K-sized
+        rows = candidates[start:start + step]
+        count = length[rows]
+        at = np.repeat(indptr[rows] - np.cumsum(count) + count, count) + np.arange(count.sum())
+        differ = indices[at] != indices[at - np.repeat(count, count)]
+        same[rows] = np.add.reduceat(differ, np.cumsum(count) - count) == 0 if differ.size else True
+    node = np.cumsum(~same) - 1
+    return sp.csr_matrix((np.ones(n, dtype=np.int32), (np.arange(n), node)), shape=(n, node[-1] + 1 if n else 0))
 
 
 def _solved(K_region: sp.csr_matrix, load: sp.csr_matrix, slot: np.ndarray) -> np.ndarray:
@@ -167,19 +193,23 @@ def group_ranks(groups: np.ndarray) -> np.ndarray:
     return ranks
 
 
-def _row_hashes(A: sp.csr_matrix, reference: np.ndarray, chunk: int = 1 << 14) -> np.ndarray:
-    """A 64-bit hash of each row of ``A``: its stored columns less the row's ``reference`` column, and its entries
-    rounded to QUANTUM of the row's largest. Rows alike up to a shift of the numbering hash alike. By rows of about
-    ``chunk`` entries: a few arrays of A's entries at once held ~5 × K's bytes (the diagonal's peak)."""
+def _row_hashes(A: sp.csr_matrix, reference: np.ndarray, chunk: int = 1 << 14, rows: np.ndarray | None = None
+                ) -> np.ndarray:
+    """A 64-bit hash of each row of ``A`` (of ``rows``, if given; 0 for the others): its stored columns less the row's
+    ``reference`` column, and its entries rounded to QUANTUM of the row's largest. Rows alike up to a shift of the
+    numbering hash alike. By rows of about ``chunk`` entries: a few arrays of A's entries at once held ~5 × K's bytes
+    (the diagonal's peak)."""
     hashes = np.zeros(A.shape[0], dtype=np.uint64)
-    step = max(1, A.shape[0] * chunk // max(A.nnz, 1))
-    for start in range(0, A.shape[0], step):
-        rows = A[start:start + step]
-        row = np.repeat(np.arange(rows.shape[0]), np.diff(rows.indptr))
-        largest = _per_row(np.maximum, np.abs(rows.data), rows.indptr)
-        level = np.rint(rows.data / np.where(largest > 0, largest, 1.0)[row] / QUANTUM).astype(np.int64)
-        hashed = _mix(_mix(rows.indices - reference[start + row]) ^ level.view(np.uint64))
-        hashes[start:start + step] = _sums(hashed, row, rows.shape[0])
+    rows = np.arange(A.shape[0]) if rows is None else rows
+    step = max(1, rows.size * chunk // max(A.nnz, 1))
+    for start in range(0, rows.size, step):
+        taken = rows[start:start + step]
+        block = A[taken]
+        row = np.repeat(np.arange(taken.size), np.diff(block.indptr))
+        largest = _per_row(np.maximum, np.abs(block.data), block.indptr)
+        level = np.rint(block.data / np.where(largest > 0, largest, 1.0)[row] / QUANTUM).astype(np.int64)
+        hashed = _mix(_mix(block.indices - reference[taken[row]]) ^ level.view(np.uint64))
+        hashes[taken] = _sums(hashed, row, taken.size)
     return hashes
 
 
@@ -205,6 +235,11 @@ def _mix(x: np.ndarray) -> np.ndarray:
     x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
     return x ^ (x >> np.uint64(31))
+
+
+def _ones(A: sp.csr_matrix) -> sp.csr_matrix:
+    """The stored entries of a CSR matrix as ones, on its own index arrays (no conversion)."""
+    return sp.csr_matrix((np.ones(A.nnz, dtype=np.int32), A.indices, A.indptr), shape=A.shape)
 
 
 def _pattern(A: sp.spmatrix) -> sp.csc_matrix:
