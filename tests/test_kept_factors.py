@@ -171,3 +171,26 @@ def test_coarser_grids_reach_the_dense_limit_in_a_few_tries(exponent, dim):
         spacing = coarse.coarser(tried, dim)
         tried.append((spacing, functions(spacing)))
     assert len(tried) <= 4 and coarse.FILL * coarse.DENSE_COLUMNS * (1 - 1e-9) <= tried[-1][1] <= coarse.DENSE_COLUMNS
+
+
+def test_the_first_step_keeps_the_empty_face_s_factors_on_released_faces_too(monkeypatch):
+    """From no start, the first Newton step's face is the empty one (every set free): its factors' terms, each
+    variable's 1/δ, bound every face's, released sets included (REUSE). On the free plate 20 : 20 : 1 (5,043 Tresca
+    unknowns) the first step's faces grow, then release a set: every system after the first keeps its factors, where a
+    released face refactorized before (4 factorizations in all, now 3), and the answer is certified."""
+    model = cc.prepare(shape_scene("plate-free-20", law_of("tresca"), 6e3, dim=3), "dual-matrix-free")
+    systems, steps = [], []
+    system = newton_cg._Preconditioner.system
+
+    def recorded(self, R, curvature, grown=False):
+        apply = system(self, R, curvature, grown)
+        systems.append((len(steps), grown, self.kept, self.factorizations))
+        return apply
+
+    monkeypatch.setattr(newton_cg._Preconditioner, "system", recorded)
+    solution = newton_cg.Session(model.program, progress=lambda step, residual: steps.append(step)).solve()
+    first = [entry for entry in systems if entry[0] == 1]  # the systems of the step from the empty face
+    assert len(first) >= 3 and first[0][3] == 1
+    assert all(grown and kept and factorizations == 1 for _, grown, kept, factorizations in first[1:])
+    assert solution.status == "solved" and solution.info["factorizations"] == 3
+    assert model.result(solution, {}, model.slip_bound).certificate.worst < 1e-10
