@@ -99,9 +99,9 @@ def _superlu(K: sp.spmatrix, dim: int):
     return solve
 
 
-def _pardiso_factors(K: sp.spmatrix, schur: np.ndarray | None = None, mtype: int = 2):
+def _pardiso_factors(K: sp.spmatrix, schur: np.ndarray | None = None, mtype: int = 2, upper: bool = False):
     try:
-        return _pardiso().Pardiso(K, schur, mtype)
+        return _pardiso().Pardiso(K, schur, mtype, upper)
     except RuntimeError as error:
         if getattr(error, "singular", False):
             raise singular_stiffness("PARDISO found a zero pivot") from None
@@ -676,8 +676,9 @@ def _appended(K: sp.csr_matrix, B: sp.csr_matrix) -> tuple:
     (:class:`Saddle`'s W, :meth:`Approximation.reduced`)."""
     n, m = K.shape[0], B.shape[0]
     zeros = sp.csr_matrix((np.zeros(m), np.arange(m), np.arange(m + 1)), shape=(m, m))  # stored: PARDISO's rule
-    A = sp.bmat([[sp.triu(K), B.T], [None, zeros]], format="csr")
-    factors = _pardiso_factors(A, schur=np.arange(n, n + m), mtype=_pardiso().SADDLE)
+    A = sp.bmat([[sp.triu(K), B.T], [None, zeros]], format="csr")  # its own upper triangle: factored as it is
+    A.sum_duplicates()  # canonical (sorted columns), in place
+    factors = _pardiso_factors(A, schur=np.arange(n, n + m), mtype=_pardiso().SADDLE, upper=True)
     W, factors.S = _symmetrized(factors.S, -1.0), None
     return factors, W
 
