@@ -233,8 +233,8 @@ def test_the_saddle_is_factored_as_its_own_upper_triangle(monkeypatch):
     """A = [K Bᵀ; B 0] is built as its upper triangle and PARDISO factors it as it is: while it factors, Python holds
     W's array and A's upper triangle once, with PARDISO's int32 copy of its indices (before, a second copy of A's
     upper triangle beside it: 22 MB of the pair's peak at 2.6·10⁵ DOFs); W the same to the bit."""
-    from convexcontact.studies.benchmarks.bench import two_body_scene
     from convexcontact.formulations.dual import contact_rows
+    from convexcontact.studies.benchmarks.bench import two_body_scene
 
     model = cc.prepare(two_body_scene("tresca", 2e4), "primal")
     K, B = model.fem.K, contact_rows(model.fem.contact, model.C, model.friction)
