@@ -145,8 +145,8 @@ def test_a_large_3d_pair_keeps_its_dense_w_from_the_saddle(monkeypatch):
     """DENSE_DOFS_3D sends a large 3-D body matrix-free because condensing it onto the contact DOFs costs more than a
     factorization; where the saddle forms W (fewer rows than the DOFs they touch: a pair's slave rows on both bodies'
     DOFs) there is no such condensation, and the pair keeps its dense W, certified. One body (its rows on its own
-    nodes' DOFs) keeps the rule, and so does the pair without the saddle, saying why (docs/performance.md, "The 3-D
-    pair of spheres through the saddle's W")."""
+    nodes' DOFs) keeps the rule where its contact DOFs are over MATRIX_FREE_COLUMNS, and the pair without the saddle
+    goes matrix-free by them, saying why (docs/performance.md, "The 3-D pair of spheres through the saddle's W")."""
     scene = two_body_scene("tresca", 2e3, dim=3)
     monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 0)
     monkeypatch.setattr(rules, "DENSE_DOFS_3D", 10)
@@ -155,11 +155,15 @@ def test_a_large_3d_pair_keeps_its_dense_w_from_the_saddle(monkeypatch):
     assert model.formulation == "dual" and isinstance(model.condensation.factorization, Saddle)
     result = model.solve()
     assert result.status == "solved" and result.certificate.worst < 1e-10
-    one_body = cc.prepare(punch_scene(3, "signorini", 3000))  # its rows on its own nodes' DOFs: the rule holds
-    assert one_body.program.P.shape[0] < contact_columns(one_body.fem).size and solvers.matrix_free(one_body.program)
+    one_body = punch_scene(3, "signorini", 3000)  # its rows on its own nodes' DOFs: the rule holds
+    columns = contact_columns(cc.prepare(one_body).fem).size
+    monkeypatch.setattr(rules, "MATRIX_FREE_COLUMNS", columns - 1)  # over it: the contact DOFs, not the rows
+    one_body = cc.prepare(one_body)
+    assert one_body.program.P.shape[0] < columns and solvers.matrix_free(one_body.program)
     monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 10**9)
+    monkeypatch.setattr(rules, "MATRIX_FREE_COLUMNS", contact_columns(model.fem).size - 1)
     model = cc.prepare(scene)
-    assert solvers.matrix_free(model.program) and "costs more to condense than to factorize" in model.reason
+    assert solvers.matrix_free(model.program) and "DOFs to condense onto exceed" in model.reason
 
 
 

@@ -199,24 +199,32 @@ def test_auto_goes_matrix_free_for_large_closed_zones(monkeypatch):
     assert forced.formulation == "primal" and "force-controlled" in forced.reason
 
 
-def test_auto_goes_matrix_free_for_large_3d_bodies(monkeypatch):
-    """The rule, not the timing: a 3-D body over DENSE_DOFS_3D DOFs is not condensed (in 3-D the Schur complement
-    costs more than a factorization) but solved matrix-free, with the reason said, to the dense dual's answer; a 2-D
-    body of as many DOFs keeps the dense W, and so does a force-controlled 3-D obstacle (no bound form)."""
-    scene = punch_3d(cells=6, law=Tresca(slip_bound=0.002))
+def test_auto_goes_matrix_free_for_large_3d_bodies_with_many_contact_dofs(monkeypatch):
+    """The rule, not the timing: a 3-D body over DENSE_DOFS_3D DOFs whose contact DOFs are over MATRIX_FREE_COLUMNS is
+    not condensed (in 3-D the Schur complement costs more than a factorization), even where the saddle would form W by
+    its fewer rows, but solved matrix-free, with the reason said, to the dense dual's answer. With as few contact DOFs
+    as its dense dual costs less for (the tall block at 10⁵ DOFs, Coulomb: 5.16 → 1.42 end to end) it keeps its dense
+    W; a 2-D body of as many DOFs keeps it too, and so does a force-controlled 3-D obstacle (no bound form)."""
+    scene = punch_3d(cells=6, law=Signorini())
     dense = cc.prepare(scene)
-    assert dense.formulation == "dual" and not solvers.matrix_free(dense.program)
+    columns, rows = rules.contact_columns(dense.fem).size, dense.program.P.shape[0]
+    assert dense.formulation == "dual" and not solvers.matrix_free(dense.program) and rows < columns
     monkeypatch.setattr(rules, "DENSE_DOFS_3D", dense.fem.n_free - 1)
+    assert not solvers.matrix_free(cc.prepare(scene).program)  # contact DOFs under MATRIX_FREE_COLUMNS
+    monkeypatch.setattr(factorization, "SADDLE_COLUMNS", 0)  # W would come from the saddle: its cost its rows'
+    limit = rules.MATRIX_FREE_COLUMNS
+    monkeypatch.setattr(rules, "MATRIX_FREE_COLUMNS", columns - 1)
     model = cc.prepare(scene)
-    assert solvers.matrix_free(model.program) and "costs more to condense than to factorize" in model.reason
+    assert solvers.matrix_free(model.program) and "costs more to condense onto its" in model.reason
     result, expected = model.solve(), dense.solve("clarabel")
     assert result.solver == "newton-cg" and result.status == "solved" and result.certificate.worst < 1e-10
     assert np.abs(result.contact.pressure - expected.contact.pressure).max() < 1e-8 * expected.max_pressure
-    monkeypatch.setattr(rules, "DENSE_DOFS_3D", 10)
-    assert not solvers.matrix_free(cc.prepare(tresca_punch(nx=30)).program)
     pushed = cc.Obstacle("parabolic", radius=1.0, center=(0.0, 0.0, 0.0), force=0.01)
     forced = cc.prepare(dataclasses.replace(scene, contact=dataclasses.replace(scene.contact, obstacle=pushed)))
     assert not solvers.matrix_free(forced.program)
+    monkeypatch.setattr(rules, "DENSE_DOFS_3D", 10)
+    monkeypatch.setattr(rules, "MATRIX_FREE_COLUMNS", limit)
+    assert not solvers.matrix_free(cc.prepare(tresca_punch(nx=30)).program)
 
 
 def test_whole_face_bench_row_says_what_auto_chose(tmp_path, monkeypatch):

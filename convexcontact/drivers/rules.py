@@ -58,7 +58,14 @@ Tresca 14.2 → 1.69 / 1.50 (201 products, 18 factorizations → 6 dense Newton 
 one run each): Tresca 6.02 → 1.81, Coulomb 5.72 → 1.24, Signorini 1.53 / 1.58 → 1.90 / 1.42 (two pairs of runs:
 a wash, its matrix-free dual factorizes one slab per session; memory 1.26 → 1.10×); docs/performance.md, "The 3-D
 pair of spheres through the saddle's W". One body keeps the rule: the tall block's Signorini at 3.2·10⁵ DOFs (900
-rows on 2700 DOFs) is 1.25 end to end matrix-free (2 Newton steps, 16 products), below the saddle's ~1.6×."""
+rows on 2700 DOFs) is 1.25 end to end matrix-free (2 Newton steps, 16 products), below the saddle's ~1.6×.
+Only where the contact DOFs are over MATRIX_FREE_COLUMNS too: a body whose contact zone is small beside its DOFs keeps
+its dense W, whose condensation is then a fraction of the matrix-free dual's products and factorizations (quiet, end
+to end, matrix-free → dense; Coulomb / Tresca / Signorini; docs/performance.md, "The free plate's Tresca at 3·10⁵
+DOFs under its target; the tall block's Coulomb row at 10⁵ over its own"): the tall block 1 : 1 : 4 at 10⁵ DOFs (1,323
+contact DOFs) 5.16 → 1.42, 1.68 → 1.49, 1.23 → 1.17; at 3·10⁵ (2,700) 2.71 → 1.82, 1.60 → 1.48, 1.17 → 1.09 (friction there
+stays matrix-free: its 2,700 unknowns are closed, CLOSED_LIMIT); the punch at 10⁵ (3,072) 2.64 → 1.95, 2.92 → 2.12, 1.88 → 1.38. Beyond: the punch at 3·10⁵ (6,348) Coulomb 1.87 against
+2.11 dense, the flat block 4 : 4 : 1 at 10⁵ (8,427) 2.04 against 19.9."""
 
 COLUMN_LIMIT = 15000
 """Most columns K is condensed onto for a dense W (the contact DOFs; a pair's slave and master DOFs): the
@@ -109,8 +116,10 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
                  f"the {columns} DOFs to condense onto exceed {COLUMN_LIMIT}" if columns > COLUMN_LIMIT and not saddle
                  else f"{what} exceed {MATRIX_FREE_COLUMNS}" if size > MATRIX_FREE_COLUMNS and matrix_free_applies(fem, law)
                  else
-                 f"a 3-D body of {fem.n_free} DOFs (over {DENSE_DOFS_3D}) costs more to condense than to factorize"
-                 if fem.dim == 3 and fem.n_free > DENSE_DOFS_3D and not (saddle and pair) else None)
+                 f"a 3-D body of {fem.n_free} DOFs (over {DENSE_DOFS_3D}) costs more to condense onto its {columns} "
+                 f"contact DOFs (over {MATRIX_FREE_COLUMNS}) than to factorize"
+                 if fem.dim == 3 and fem.n_free > DENSE_DOFS_3D and columns > MATRIX_FREE_COLUMNS and not (saddle and pair)
+                 else None)
     if too_large and matrix_free_applies(fem, law):
         return MATRIX_FREE, (f"{too_large}: W = B K⁻¹ Bᵀ is applied through one factorization of K{reuse}, never "
                              "formed (a dense W would cost more), and newton-cg solves the dual")
