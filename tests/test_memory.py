@@ -255,7 +255,8 @@ def test_the_saddle_is_factored_as_its_own_upper_triangle(monkeypatch):
     A_bytes = 12 * upper + 4 * K.shape[0]  # float64 values, int32 indices and row pointers
     assert held[0] - 8 * m * m < 1.5 * A_bytes, (held[0] - 8 * m * m) / A_bytes  # before: 2.3 ×
     monkeypatch.setattr(pardiso, "_call", call)
-    monkeypatch.setattr(factorization, "_pardiso_factors", lambda A, schur, mtype, upper: pardiso.Pardiso(A, schur, mtype))
+    monkeypatch.setattr(factorization, "_pardiso_factors",
+                        lambda A, schur, mtype, upper: pardiso.Pardiso(A, schur, mtype))
     assert np.array_equal(factorization.saddle(K, B).schur(B), W)  # A's upper triangle copied, as before
 
 

@@ -62,10 +62,11 @@ rows on 2700 DOFs) is 1.25 end to end matrix-free (2 Newton steps, 16 products),
 Only where the contact DOFs are over MATRIX_FREE_COLUMNS too: a body whose contact zone is small beside its DOFs keeps
 its dense W, whose condensation is then a fraction of the matrix-free dual's products and factorizations (quiet, end
 to end, matrix-free → dense; Coulomb / Tresca / Signorini; docs/performance.md, "The free plate's Tresca at 3·10⁵
-DOFs under its target; the tall block's Coulomb row at 10⁵ over its own"): the tall block 1 : 1 : 4 at 10⁵ DOFs (1,323
-contact DOFs) 5.16 → 1.42, 1.68 → 1.49, 1.23 → 1.17; at 3·10⁵ (2,700) 2.71 → 1.82, 1.60 → 1.48, 1.17 → 1.09 (friction there
-stays matrix-free: its 2,700 unknowns are closed, CLOSED_LIMIT); the punch at 10⁵ (3,072) 2.64 → 1.95, 2.92 → 2.12, 1.88 → 1.38. Beyond: the punch at 3·10⁵ (6,348) Coulomb 1.87 against
-2.11 dense, the flat block 4 : 4 : 1 at 10⁵ (8,427) 2.04 against 19.9."""
+DOFs under its target; the tall block's Coulomb row at 10⁵ over its own, and `auto`'s 3-D rule"): the tall block
+1 : 1 : 4 at 10⁵ DOFs (1,323 contact DOFs) 5.16 → 1.42, 1.68 → 1.49, 1.23 → 1.17; at 3·10⁵ (2,700) 2.71 → 1.82,
+1.60 → 1.48, 1.17 → 1.09 (friction there stays matrix-free: its 2,700 unknowns are closed, CLOSED_LIMIT); the punch at
+10⁵ (3,072) 2.64 → 1.95, 2.92 → 2.12, 1.88 → 1.38. Beyond: the punch at 3·10⁵ (6,348) Coulomb 1.87 against 2.11
+dense, the flat block 4 : 4 : 1 at 10⁵ (8,427) 2.04 against 19.9."""
 
 COLUMN_LIMIT = 15000
 """Most columns K is condensed onto for a dense W (the contact DOFs; a pair's slave and master DOFs): the
@@ -118,8 +119,8 @@ def choose_formulation(fem: FEModel, law, unknowns: int) -> tuple[str, str]:
                  else
                  f"a 3-D body of {fem.n_free} DOFs (over {DENSE_DOFS_3D}) costs more to condense onto its {columns} "
                  f"contact DOFs (over {MATRIX_FREE_COLUMNS}) than to factorize"
-                 if fem.dim == 3 and fem.n_free > DENSE_DOFS_3D and columns > MATRIX_FREE_COLUMNS and not (saddle and pair)
-                 else None)
+                 if fem.dim == 3 and fem.n_free > DENSE_DOFS_3D and columns > MATRIX_FREE_COLUMNS
+                 and not (saddle and pair) else None)
     if too_large and matrix_free_applies(fem, law):
         return MATRIX_FREE, (f"{too_large}: W = B K⁻¹ Bᵀ is applied through one factorization of K{reuse}, never "
                              "formed (a dense W would cost more), and newton-cg solves the dual")

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..arrays import group_ranks
 from .assembly import FEModel
 from .estimate import ContactState, scaled_body_force
 from .flux import (
@@ -48,7 +49,6 @@ from .flux import (
     opposite_facets,
     vertex_values,
 )
-from .local_delassus import group_ranks
 
 CHUNK = 1024
 """Patches per stacked solve: its dense systems (rows × patches × n² doubles, n ≈ 60 on a uniform mesh) stay near

@@ -14,6 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..arrays import group_ranks
 from .coarse import bodies
 
 LAYERS = 2
@@ -182,15 +183,6 @@ def colouring(conflict: sp.csr_matrix) -> np.ndarray:
         colours[row] = np.argmin(taken)
         taken[around] = False
     return colours
-
-
-def group_ranks(groups: np.ndarray) -> np.ndarray:
-    """Each item's rank among the items of its group, in their order."""
-    order = np.argsort(groups, kind="stable")
-    starts = np.searchsorted(groups[order], groups[order])  # each item's group's first place in the order
-    ranks = np.empty_like(groups)
-    ranks[order] = np.arange(groups.size) - starts
-    return ranks
 
 
 def _row_hashes(A: sp.csr_matrix, reference: np.ndarray, chunk: int = 1 << 14, rows: np.ndarray | None = None

@@ -67,6 +67,7 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import reverse_cuthill_mckee, shortest_path
 
 from .. import blas
+from ..arrays import group_ranks
 from ..conic import ConicProgram, ConicSolution, nonnegative, soc
 from .cone_polish import BoundForm, bound_form, tangent_bases, unit_rows
 
@@ -1031,7 +1032,7 @@ def _matched(R: sp.csc_matrix, other: sp.csc_matrix) -> tuple[np.ndarray, np.nda
     """The columns of R and of ``other`` (two faces) that are one variable's or one sphere's tangent coordinate in both:
     those with the same first and last row, paired in their order among such columns."""
     keys = [_rows(face) for face in (R, other)]
-    ranks = [_ranks(key) for key in keys]
+    ranks = [group_ranks(key) for key in keys]
     count = 1 + max(rank.max(initial=0) for rank in ranks)
     return np.intersect1d(*(key * count + rank for key, rank in zip(keys, ranks)), assume_unique=True,
                           return_indices=True)[1:]
@@ -1041,15 +1042,6 @@ def _rows(R: sp.csc_matrix) -> np.ndarray:
     """Each column's first row × rows + its last."""
     R.sort_indices()
     return R.indices[R.indptr[:-1]].astype(np.int64) * R.shape[0] + R.indices[R.indptr[1:] - 1]
-
-
-def _ranks(keys: np.ndarray) -> np.ndarray:
-    """Each entry's rank among the entries equal to it, in their order."""
-    order = np.argsort(keys, kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(keys[order]) != 0])
-    ranks = np.empty(keys.size, np.int64)
-    ranks[order] = np.arange(keys.size) - np.repeat(starts, np.diff(np.r_[starts, keys.size]))
-    return ranks
 
 
 def _cost(factors, fill: int | None) -> float | None:
