@@ -9,9 +9,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import convexcontact as cc
-from convexcontact.conic import Cone, ConicProgram, nonnegative, soc
+from convexcontact.conic import Cone, ConicProgram, dense_matrix, nonnegative, soc
 
-SURFACES = ("cc.ConicProgram",)
+SURFACES = ("cc.ConicProgram", "conic.dense_matrix")
 
 
 def program(**fields) -> ConicProgram:
@@ -43,6 +43,8 @@ def test_the_sound_program_is_solved_to_its_closed_form():
     ({"P": sp.csc_matrix(np.array([[1.0, np.nan], [np.nan, 1.0]]))}, "ConicProgram.P: holds NaN or inf"),
     ({"A": sp.csc_matrix(np.array([[-np.inf, 0.0], [0.0, -1.0]]))}, "ConicProgram.A: holds NaN or inf"),
     ({"P": sp.csc_matrix(np.array([[1.0, 0.5], [0.0, 1.0]]))}, "ConicProgram.P: not symmetric"),
+    ({"P": dense_matrix(np.array([[1.0, 0.5], [0.0, 1.0]]))}, "ConicProgram.P: not symmetric"),
+    ({"P": dense_matrix(np.array([[1.0, np.inf], [np.inf, 1.0]]))}, "ConicProgram.P: holds NaN or inf"),
     ({"gradient": np.zeros(2)}, "ConicProgram.gradient: expected a function"),
 ])
 def test_a_program_that_is_not_one_is_refused_by_name(fields, message):
@@ -75,6 +77,20 @@ def test_any_asymmetry_above_round_off_is_found(skew, size, seed):
     assert ConicProgram(P, np.zeros(size), sp.csc_matrix((0, size)), np.zeros(0), ()).n_variables == size
     with pytest.raises(ValueError, match="not symmetric"):
         ConicProgram(P + E, np.zeros(size), sp.csc_matrix((0, size)), np.zeros(0), ())
+
+
+@pytest.mark.parametrize("W", [[[1.0, 0.0], [0.0, 1.0]], np.ones(4), np.ones((2, 3)), np.array([["1", "0"], ["0", "1"]]),
+                               sp.eye(2)])
+def test_a_dense_p_that_is_not_a_square_array_is_refused_by_name(W):
+    with pytest.raises(ValueError, match="dense_matrix: expected a square 2-D numpy array of numbers"):
+        dense_matrix(W)
+
+
+@pytest.mark.parametrize("solver", ["clarabel", "osqp", "cvxpy", "newton-cg"])
+def test_a_dense_p_is_solved_to_the_closed_form_by_every_solver(solver):
+    """P held as one dense block (the dual's W) is read by each adapter as the matrix it is."""
+    solution = cc.solvers.solve(program(P=dense_matrix(np.eye(2))), solver)
+    assert solution.status == "solved" and solution.x == pytest.approx([1.0, 0.0], abs=1e-8)
 
 
 def test_an_operator_for_p_is_a_program():

@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 import scipy.sparse as sp
 
-from ..conic import ConicProgram, ConicSolution, nonnegative, soc, zero
+from ..conic import ConicProgram, ConicSolution, dense_matrix, nonnegative, soc, zero
 from ..fem.contact import ContactTrace
 from ..fem.factorization import Factorization, factorize
 from ..fem.friction import FrictionPoints
@@ -67,7 +67,7 @@ def dual(
     elif extra:
         P = sp.block_diag([sp.csc_matrix(factorization.schur(B)), sp.csc_matrix((extra, extra))], format="csc")
     else:  # W alone where there is no μ block: block_diag would copy it (a pair's W at 10⁵ DOFs: 25 MB)
-        P = dense_csc(factorization.schur(B))
+        P = dense_matrix(factorization.schur(B))
     q = np.concatenate([-(B @ Kf + c), -epsilon * friction.weights if extra else np.zeros(0)])
 
     rows, b, cones = [], [], []
@@ -126,16 +126,6 @@ def dual(
 def contact_rows(contact: ContactTrace, C: sp.spmatrix, friction: FrictionPoints | None) -> sp.csr_matrix:
     """B: the dual's rows over the free DOFs, the weighted normal rows C N, then the friction rows −R."""
     return sp.vstack([C @ contact.N] + ([-friction.R] if friction is not None else [])).tocsr()
-
-
-def dense_csc(W: np.ndarray) -> sp.csc_matrix:
-    """The symmetric dense W as a CSC matrix whose values are W's own memory (its columns are its rows): csc_matrix(W)
-    copied it through a COO list of every entry, 25 MB held and ~60 MB at once for the pair's W at 10⁵ DOFs (1434²)
-    beside the 16 MB of W, which :class:`~convexcontact.drivers.prepared.Reused` keeps for the next program."""
-    n = W.shape[0]
-    indices = np.tile(np.arange(n, dtype=np.int32), n)
-    return sp.csc_matrix((np.ascontiguousarray(W).reshape(-1), indices, np.arange(0, n * n + 1, n, dtype=np.int64)),
-                         shape=W.shape)
 
 
 def normal_multipliers(program: ConicProgram, C: sp.spmatrix, contact: ContactTrace) -> sp.csr_matrix:
