@@ -12,8 +12,8 @@ import scipy.sparse as sp
 
 import convexcontact as cc
 from convexcontact import blas
-from convexcontact.fem.factorization import condense
 from convexcontact.conic import dense_matrix, dense_values
+from convexcontact.fem.factorization import condense
 from convexcontact.solvers import newton_cg
 from convexcontact.solvers.cone_polish import tangent_bases
 from convexcontact.studies.benchmarks.bench import two_body_scene
