@@ -40,7 +40,11 @@ closed; ratios to one linear solve, dense / matrix-free; docs/performance.md): 2
 1000 unknowns 3.3 / 3.3, 2000: 24 / 2.1; Tresca 1000: 4.7 / 5.7, 2000: 10.4 / 4.2, 4000: 169 / 3.7;
 3-D 3·10⁴ DOFs, Signorini 625: 3.4 / 1.6–2.5, 1089: 12.1 / 2.7; Tresca 867: 2.8 / failed, 1875: 11.9 / 9.2,
 3267: 51 / 7.3. On the punch (few nodes closed) the dense W stays ahead: 2-D Tresca 634 unknowns
-1.9 / 4.0, 1098: 2.2 / 7.0."""
+1.9 / 4.0, 1098: 2.2 / 7.0. Measured again with newton-cg on the dense W (end to end, dense / matrix-free, Tresca and
+Coulomb; docs/performance.md, "The rule for closed nodes measured again"): 2-D strips 20 : 1 at 10⁵ DOFs (2,002
+unknowns) 2.89 / 2.16 and 6.16 / 2.67 free, 4.57 / 1.68 and 6.98 / 1.76 clamped; at 3·10⁵ (3,482) 4.55 / 2.18 and
+12.1 / 2.23; 400 : 1 at 10⁴ (3,202) 42 / 2.6 and 247 / 2.7, the dense memory 2.5–43× the linear solve's. Only the 3-D
+tall block at 3·10⁵ DOFs (2,700) is the other way, 1.48 / 1.60 and 1.82 / 2.71, both under their targets."""
 
 DENSE_DOFS_3D = 50_000
 """Most free DOFs of a 3-D body for a dense W: there its condensation (PARDISO's Schur complement onto the contact
