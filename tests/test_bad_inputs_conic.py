@@ -79,8 +79,8 @@ def test_any_asymmetry_above_round_off_is_found(skew, size, seed):
         ConicProgram(P + E, np.zeros(size), sp.csc_matrix((0, size)), np.zeros(0), ())
 
 
-@pytest.mark.parametrize("W", [[[1.0, 0.0], [0.0, 1.0]], np.ones(4), np.ones((2, 3)), np.array([["1", "0"], ["0", "1"]]),
-                               sp.eye(2)])
+@pytest.mark.parametrize("W", [[[1.0, 0.0], [0.0, 1.0]], np.ones(4), np.ones((2, 3)),
+                               np.array([["1", "0"], ["0", "1"]]), sp.eye(2)])
 def test_a_dense_p_that_is_not_a_square_array_is_refused_by_name(W):
     with pytest.raises(ValueError, match="dense_matrix: expected a square 2-D numpy array of numbers"):
         dense_matrix(W)
