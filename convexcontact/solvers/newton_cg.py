@@ -266,9 +266,10 @@ and they took 3 Newton steps instead of 2 (0.01: 2 steps, 32–33 products; 0.00
 43 on the plate, with 6 and 9 factorizations against 2). The step's later grown faces stop there too, at KEPT_FORCING ×
 the first kept face's residual, not their own (``grown_point``'s ``level``): each face is a few columns off the last,
 whose point it starts from, so its own first residual is already that much smaller, and KEPT_FORCING of it asked 100
-times more of each face in turn. The free plate 20 : 20 : 1, Tresca, from the empty face: at 2.6·10⁵ DOFs its six
+times more of each face in turn. The free plate 20 : 20 : 1, Tresca, from the empty face: at 2.6·10⁵ DOFs its
 grown faces took 6 / 11 / 9 / 9 / 15 / 12 CG iterations, now 6 / 7 / 4 / 3 / 0 (products 99 → 57, the same 5 Newton
-steps and 2 factorizations); at 7.9·10⁴ 57 → 44 (docs/performance.md, "The free plate's second Newton step")."""
+steps and 2 factorizations); at 7.9·10⁴ 57 → 44; the free strip 400 : 1 at 10⁴ DOFs 2 Newton steps / 27 products →
+3 / 23 (docs/performance.md, "The free plate's second Newton step")."""
 ROTATION = 0.3
 """Largest change of a tangent basis's entries (~ its angle) for which a Newton system is the same face as the one
 factored (REUSE)."""
