@@ -263,7 +263,13 @@ residual, not GROWN_FORCING: the exact inverse went well past GROWN_FORCING in i
 GROWN_FORCING the first step's point on the free strips 100 / 400 : 1 (10⁴ DOFs) was 10 times farther from the answer
 and they took 3 Newton steps instead of 2 (0.01: 2 steps, 32–33 products; 0.001: 2, 35–37; the step's own target:
 2, 41–44; the plate 20 : 20 : 1 at 2·10⁴ DOFs 5 steps and 59 / 65 / 92 products; the exact inverse 25 on the strips,
-43 on the plate, with 6 and 9 factorizations against 2)."""
+43 on the plate, with 6 and 9 factorizations against 2). The step's later grown faces stop there too, at KEPT_FORCING ×
+the first kept face's residual, not their own (``grown_point``'s ``level``): each face is a few columns off the last,
+whose point it starts from, so its own first residual is already that much smaller, and KEPT_FORCING of it asked 100
+times more of each face in turn. The free plate 20 : 20 : 1, Tresca, from the empty face: at 2.6·10⁵ DOFs its
+grown faces took 6 / 11 / 9 / 9 / 15 / 12 CG iterations, now 6 / 7 / 4 / 3 / 0 (products 99 → 57, the same 5 Newton
+steps and 2 factorizations); at 7.9·10⁴ 57 → 44; the free strip 400 : 1 at 10⁴ DOFs 2 Newton steps / 27 products →
+3 / 23 (docs/performance.md, "The free plate's second Newton step")."""
 ROTATION = 0.3
 """Largest change of a tangent basis's entries (~ its angle) for which a Newton system is the same face as the one
 factored (REUSE)."""
@@ -627,6 +633,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         from the last point, projected, until the face stays (at most ``limit`` times, GROW by default; see GROW); the
         point, the CG iterations it took and ∇f there where known; ``empty``: y is the empty face."""
         iterations, at, released, moved = 0, v, np.zeros(v.size, bool), False
+        level = [0.0]  # where the step's first kept solve stopped: the later ones' target too (KEPT_FORCING)
         for _ in range(GROW if limit is None else limit):
             if natural_faces:
                 known = gradient(newton) if known is None else known
@@ -640,8 +647,9 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             # not the step's kept factors where radii move: REUSE's bound is for CG's symmetric systems, and GMRES
             # on the clamped plate's Coulomb problem (2·10⁴ DOFs) took over 4 min CPU with them, 13 s without; nor
             # once a set was released, but after the empty face, whose factors bound every face's (see REUSE)
-            newton, more, known = _step(P, affine, sets, at, y, c, target, products, cache["precondition"], matrix,
-                                        GROWN_FORCING, face, grown=sets.coupling is None and (empty or not moved),
+            newton, more, known = _step(P, affine, sets, at, y, c, max(target, level[0]), products,
+                                        cache["precondition"], matrix, GROWN_FORCING, face,
+                                        grown=sets.coupling is None and (empty or not moved), level=level,
                                         gradient_at=(newton, known) if loose and known is not None else None)
             iterations += more
             faces[0] += 1
@@ -1287,14 +1295,15 @@ def _start_gradient(point, known, affine, sets: _Bounds, products) -> np.ndarray
 
 
 def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, matrix=None, relative=0.0, face=None,
-          grown=False, gradient_at=None):
+          grown=False, gradient_at=None, level=None):
     """The Newton step from v (y = v − c∇f; ``affine``: x ↦ P x + q, see :func:`_affine`): the new v, the CG
     (GMRES, where radii move) iterations it took and ∇f at the new v where CG's products give it (else None), CG
     stopping at ``target`` or ``relative`` × its first residual (GROWN_FORCING); where P is a matrix (``matrix()`` = P̃)
     and the system has at most DIRECT_LIMIT unknowns, a dense Cholesky (LU where that fails or radii move) instead, or
     the factor kept in ``face`` (:func:`_direct`). ``grown``: the face is a grown one of the step's (:func:`_grown`),
     whose preconditioner may be the step's factors (REUSE, KEPT_FORCING). ``gradient_at``: (a point, ∇f there), ∇f at
-    the step's start where that is the point (:func:`_start_gradient`)."""
+    the step's start where that is the point (:func:`_start_gradient`). ``level``: [0] is set, where it is 0, to the
+    residual CG stops at on a kept system (KEPT_FORCING)."""
     n = v.size
     held = np.zeros(n, bool)
     new = np.zeros(n)
@@ -1374,7 +1383,10 @@ def _step(P, affine, sets: _Bounds, v, y, c, target, products, precondition, mat
                 gradient[:] += ((x - before) @ p / (p @ p)) * Pp
                 last[2] = x.copy()
 
-            relative = min(relative, KEPT_FORCING) if getattr(precondition, "kept", False) else relative
+            if getattr(precondition, "kept", False):
+                relative = min(relative, KEPT_FORCING)
+                if level is not None and not level[0]:
+                    level[0] = relative * np.linalg.norm(rhs)
             xi, _ = spla.cg(H, rhs, rtol=relative, atol=target, maxiter=CG_LIMIT, M=M, callback=follow)
             at_point = gradient
             if precondition is not None:
