@@ -322,6 +322,12 @@ products, and the fine path needs it: the pair at 1.4·10⁶ DOFs, Tresca, from 
 78 products with 13 and 9, as from no start to 1e-3 after 35 coarse products (docs/performance.md, "The coarse program
 from its approximation's answer"). From no start, 1e-2 on the pair at 10⁵ DOFs forced matrix-free, Tresca: 82 → 108
 products."""
+COARSE_BOUNDS_TOL = 1e-3
+"""COARSE_TOL where the sets are bounds alone (Signorini): there the fine path needs the coarse answer only to 1e-3.
+The pair (Newton steps, the fine program's products, the coarse program's), 1e-5 → 1e-3: at 1.4·10⁶ DOFs 2, 26, 12 →
+2, 26, 11; at 3.5·10⁵ forced matrix-free 3, 28, 10 → 3, 28, 6 (the coarse program's second Newton step, 4 products,
+took its residual from ~1e-3 to ~4e-8). Looser, 1e-2, it stopped at 1.3e-3 after one step at 1.4·10⁶ and the fine
+first step grew two faces more: 8 coarse products, 30 fine (docs/performance.md, "The pair's Signorini products")."""
 LINE = 8
 """The coarse start (COARSE_SETS) only where the sets' rows form a line: the breadth-first levels of their graph from
 the reverse Cuthill–McKee order's start number at least 1 / LINE of the rows (the 2-D pair at 2·10⁴ / 5·10⁴ DOFs: 44
@@ -807,23 +813,35 @@ def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter:
                                      for k in range(radius.size)]  # each ball: its radius row, −I on its variables
     b = np.concatenate([np.zeros(bounds)] + [np.concatenate([[r], np.zeros(p)]) for r in radius])
     coarse = ConicProgram(P, Q.T @ q, sp.vstack(A).tocsc(), b, tuple(cones))
-    solution = newton_cg(coarse, bound_form_of(coarse), _approximated(coarse, max_iter, verbose), COARSE_TOL,
-                         max_iter, verbose)
+    bounds_only = not sets.balls.size
+    lengths = {}  # the approximated program's step lengths (see _approximated)
+    start = _approximated(coarse, max_iter, verbose, lengths)
+    solution = newton_cg(coarse, bound_form_of(coarse), start, COARSE_BOUNDS_TOL if bounds_only else COARSE_TOL,
+                         max_iter, verbose, cache=lengths if bounds_only else None)
     info = {key: solution.info[key] for key in ("products", "grown", "factorizations", "updates")}
     info.update(products=info["products"] + int(sets.shift.any()), steps=solution.iterations)
     lifted = P.lifted(solution.x)
     return sets.shift + Q @ solution.x, info, None if lifted is None else sets.scale * (q + lifted)
 
 
-def _approximated(program: ConicProgram, max_iter: int, verbose: bool) -> np.ndarray | None:
+def _approximated(program: ConicProgram, max_iter: int, verbose: bool, lengths: dict) -> np.ndarray | None:
     """x of the answer of the coarse ``program`` (:func:`_coarse_start`) with P its approximation G Gᵀ, dense: no
     product with P, where it is solved (else None), the coarse solve's start. From no start the coarse program found its
     faces as the fine one did, each a product with W at least (a K solve): the pair at 1.4·10⁶ DOFs, Signorini 21 → 12
     coarse products, Tresca 35 → 8 (COARSE_TOL 1e-5), the fine program's Newton steps, products, refactorizations and
-    updates the same; Coulomb's stick start at 2·10⁴ DOFs forced matrix-free 46 → 6."""
+    updates the same; Coulomb's stick start at 2·10⁴ DOFs forced matrix-free 46 → 6.
+
+    ``lengths`` gets that solve's step lengths, 0.1 / (G Gᵀ)_jj (a newton-cg ``cache``): the coarse program's where
+    its sets are bounds alone, in place of Hutchinson's estimate (:func:`_step_lengths`, a product with W). A bound's
+    step length only decides whether a variable within c∇f of 0 is held, and the ratio Hutchinson's product measures
+    was ~0.75 there: the pair at 1.4·10⁶ DOFs, Signorini, 11 → 10 coarse products, the same fine path; 3.5·10⁵ forced
+    matrix-free 6 → 5. Not with balls: the stick–slip test ‖v − c∇f‖ ≤ ρ takes c at every sticking node, and the
+    pair's Tresca coarse program at 2·10⁴ DOFs forced matrix-free took 2 Newton steps and 23 products against 1 and 20
+    (the fine program's ratio in place of the coarse one's: 25)."""
     G = program.P.approximation.G
     approximated = replace(program, P=sp.csc_matrix((G @ G.T).toarray()))
-    solution = newton_cg(approximated, bound_form_of(approximated), None, COARSE_TOL, max_iter, verbose)
+    solution = newton_cg(approximated, bound_form_of(approximated), None, COARSE_TOL, max_iter, verbose, cache=lengths)
+    lengths.pop("precondition", None)
     return solution.x if solution.solved else None
 
 
