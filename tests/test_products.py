@@ -109,16 +109,19 @@ def pair_solve(monkeypatch, law: str):
     return solution
 
 
-@pytest.mark.parametrize("law, steps, reused", [("signorini", 4, 3), ("tresca", 5, 5)])
+@pytest.mark.parametrize("law, steps, reused", [("signorini", 4, 3), ("tresca", 5, 6)])
 def test_a_newton_step_on_the_face_it_ended_on_starts_from_the_gradient_it_ended_with(monkeypatch, law, steps, reused):
     """Each Newton step after a taken Newton point starts on that point's face, whose ∇f CG's products left
     (newton_cg._start_gradient): ``reused`` products fewer than with a fresh ∇f at each step's start, the same Newton
-    steps, and that ∇f is a fresh one's to round-off."""
+    steps, and that ∇f is a fresh one's to round-off (Tresca's 5 before a step whose target is below the sum's rounding
+    started from updates of a fresh ∇f too, newton_cg._fresh_enough)."""
     start_gradient, drift = newton_cg._start_gradient, []
+    owns, affine_of = [], newton_cg._affine  # W's own formula, outside newton-cg's count of its evaluations
+    monkeypatch.setattr(newton_cg, "_affine", lambda program: owns.append(affine_of(program)[1]) or affine_of(program))
 
     def checked(point, known, affine, sets, products):
         if known is not None and np.array_equal(point, known[0]):
-            fresh = sets.scale * affine(sets.shift + sets.scale * point)
+            fresh = sets.scale * owns[-1](sets.shift + sets.scale * point)
             drift.append(np.abs(known[1] - fresh).max() / np.abs(fresh).max())
         return start_gradient(point, known, affine, sets, products)
 
@@ -155,7 +158,9 @@ def test_where_radii_move_the_gradient_at_newton_s_point_comes_from_gmres_s_prod
     one's to round-off; the solve where radii move took 133 products with a fresh ∇f there (131 with the session's
     step lengths and the refused point's ∇f handed on where its face stays), 117–118 with the lift (GMRES's iterations
     follow PARDISO's rounding), the same 6 Newton steps; since Newton's points take the natural map's faces at every
-    step (RELEASE_MOVING) 3 steps, 80 → 69 products: each lifted ∇f (11) is one product fewer, to GMRES's rounding."""
+    step (RELEASE_MOVING) 3 steps, 80 → 69 products: each lifted ∇f (11) is one product fewer, to GMRES's rounding;
+    78 → 69 since a step may start from a fresh ∇f's updates (newton_cg._fresh_enough), which spares the solve
+    without the lift two of the products the lift spares."""
     step, drift = newton_cg._step, []
 
     def checked(P, affine, sets, *args, **kwargs):
@@ -170,7 +175,7 @@ def test_where_radii_move_the_gradient_at_newton_s_point_comes_from_gmres_s_prod
     monkeypatch.setattr(newton_cg, "GMRES_LIFT", False)
     before = coupled_solve(monkeypatch)
     assert now.iterations == before.iterations == 3 and len(drift) >= 8
-    assert before.info["products"] - now.info["products"] >= len(drift) - 1
+    assert before.info["products"] - now.info["products"] >= len(drift) - 2
     assert max(drift) <= 1e-12
 
 

@@ -484,11 +484,16 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         lambda: _scaled(program.P, sets.scale))
     products = [0]
     fresh = [None]  # the last ∇f gradient() computed, where it is the stopping test's fresh one (see that test)
+    evaluated = [0, None]  # P's own formula's evaluations: how many, and the last ∇f it gave (see _fresh_enough)
     as_sum, own = _affine(program)
     exact = own is not None and matrix is None  # see SUM_FLOOR
 
     def affine(x):
-        return own(x) if exact else as_sum(x)
+        if not exact:
+            return as_sum(x)
+        value = own(x)
+        evaluated[:] = evaluated[0] + 1, sets.scale * value
+        return value
 
     def gradient(v):
         """∇f in v: scale ⊙ (P x + q); q itself at x = 0, without a product: a solve from no start began with one
@@ -671,8 +676,8 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         """The scale the stopping test holds the residual to: see LOAD_SCALE."""
         return max(np.abs(v).max(initial=0.0), LOAD_SCALE * size) if exact else size
 
-    residual = first = entry = None  # entry: ∇f where the last step began, if every system of it began from a
-    # fresh ∇f (_fresh_enough)
+    residual = first = None
+    drift = 0.0 if g is fresh[0] else np.inf  # c ⊙ what updates added to ∇f since P's own formula gave it, ∞-norm
     best, history = np.inf, []
     risen, kinds, descent = 0.0, dict.fromkeys(("residual", "segment", "arc", "gradient", "face"), 0), []
     steps = cg_total = 0
@@ -685,14 +690,14 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         residual, y, size = natural(v, g)
         if residual * size <= max(tol * answer(v, size), 0.0 if exact or own is None else floor):
             exact = own is not None  # the sum's rounding is near: P's own formula from here on, where it has one
-            if (exact or tol < LOAD_SCALE) and g is not fresh[0] and not _fresh_enough(g, entry, c,
+            if (exact or tol < LOAD_SCALE) and g is not fresh[0] and not _fresh_enough(drift,
                                                                                      0.1 * tol * answer(v, size)):
                 # ∇f was updated along the segments: check with a fresh one; not a sum again against a tolerance above
                 # √ε (the coarse program's, COARSE_TOL), beyond the rounding of the updates, ε‖P̃‖‖w − v‖ each: a
                 # product of each coarse solve (the pair at 1.4·10⁶ DOFs, Signorini: 63 → 62 products); nor where ∇f
                 # is fresh already (a segment's end by P's own formula, ``move``: the 3-D rows' Tresca steps, whose
                 # Newton points leave their spheres, flat block at 3·10⁴ DOFs 44 → 43) or the last step's updates
-                # of one (_fresh_enough)
+                # of one (drift, _fresh_enough)
                 g = gradient(v)
                 residual, y, size = natural(v, g)
         first = first or residual
@@ -712,7 +717,9 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         empty = steps == 0 and start is None and coarse is None and sets.coupling is None and matrix is None
         target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
         target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
-        loose = not exact or target * np.max(c) >= floor  # ∇f's sums may serve (_start_gradient)
+        # ∇f's sums may serve (_start_gradient): above the sum's rounding, or the updates' (_fresh_enough)
+        loose = not exact or target * np.max(c) >= min(floor, SUM_FLOOR * EPS * drift)
+        count = evaluated[0]
         newton, iterations, known = newton_point(v, g, np.zeros_like(y) if empty else y, target, empty)
         cg_total += iterations
         best = min(best, residual)
@@ -742,14 +749,21 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             if not moved:
                 word = "stalled"
                 break
+            drift = 0.0 if g is fresh[0] else np.inf
             continue
         # Newton's point, projected, where it halves the least natural residual so far (so those steps cannot cycle;
         # near the answer f's changes are round-off, and the segment alone stalled a 3-D Tresca dual at 2e-10), else a
         # point that lowers f at least as a fraction of the projected gradient's step does (see "Convergence")
         cauchy = g @ (_project(y, sets) - v)
-        entry = None if loose else g
+        before = g
         v, g, change, kind = descend(v, g, newton, ACCEPT * best, cauchy, risen, known, residual * size, target)
-        entry = entry if kind == "residual" and g is known else None
+        if g is fresh[0]:
+            drift = 0.0
+        elif kind == "residual" and g is known and exact:  # CG's updates since the step's last fresh ∇f, or its start
+            restarted = evaluated[0] > count
+            drift = (0.0 if restarted else drift) + np.abs(c * (g - (evaluated[1] if restarted else before))).max()
+        else:
+            drift = np.inf
         if kind in ("segment", "gradient") and natural(v, g)[0] > STALL * residual:
             v, g, more = gradient_step(v, g)
             change += more
@@ -1307,20 +1321,19 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
     return v
 
 
-def _fresh_enough(g: np.ndarray, entry: np.ndarray | None, c, limit: float) -> bool:
-    """Whether ∇f ``g`` at the stopping test needs no fresh product: it is CG's updates (:func:`_step`) of the fresh
-    ∇f its last system began from (every system of the last step began from one: its target below the sum's floor,
-    ``loose`` in :func:`newton_cg`), and Newton's point was taken; ``entry``, ∇f where that step began (None: no such
-    step), bounds what the updates added, whose rounding is at most SUM_FLOOR × ε of it (as the sum's, SUM_FLOOR):
-    where that is below ``limit``, a fresh ∇f checks nothing the updates' rounding could hide. Measured
-    (docs/performance.md, "The pair's Signorini products"): on the pair at 1.4·10⁶ DOFs, Signorini, the last step moved
-    c∇f by 3e-7 of the answer's scale and the natural residual by the updates was 1.8e-15 where a fresh ∇f gave
-    1.6e-15 (tol 1e-12): 26 → 25 fine products; one less, the same Newton steps and certificates, on the 2-D pair at
-    2·10⁴ DOFs forced matrix-free (Signorini 46 → 45, Tresca 40 → 39) and on the strips and the 3-D free plate at
-    3·10⁴–10⁵ DOFs, the clamped strip 20 : 1 at 10⁵ 15 → 14 (its second step starts from a fresh ∇f,
-    tests/test_products.py). Not where radii move, nor after a step that took no Newton point or whose target was
-    above the sum's floor: its ∇f may be a sum of many steps' updates."""
-    return entry is not None and SUM_FLOOR * EPS * np.abs(c * (g - entry)).max(initial=0.0) <= limit
+def _fresh_enough(drift: float, limit: float) -> bool:
+    """Whether a ∇f that is updates of one by P's own formula (``drift``: c ⊙ what they added, ∞-norm; ∞ where it is no
+    such sum) serves as a fresh one to ``limit``: their rounding is at most SUM_FLOOR × ε of what they added (as the
+    sum's, SUM_FLOOR). At the stopping test (limit: a tenth of the tolerance) a fresh ∇f then checks nothing the
+    updates' rounding could hide; at a Newton step's start (limit: its target) it starts from them (``loose`` in
+    :func:`newton_cg`, :func:`_start_gradient`). Measured (docs/performance.md, "The pair's Signorini products"): on
+    the pair at 1.4·10⁶ DOFs, Signorini, the last step moved c∇f by 3e-7 of the answer's scale and the natural residual
+    by the updates was 1.8e-15 where a fresh ∇f gave 1.6e-15 (tol 1e-12): 26 → 25 fine products; one less, the same
+    Newton steps and certificates, on the 2-D pair at 2·10⁴ DOFs forced matrix-free (Signorini 46 → 45, Tresca 40 →
+    39) and on the strips and the 3-D free plate at 3·10⁴–10⁵ DOFs, the clamped strip 20 : 1 at 10⁵ 15 → 14. Where
+    the first step's updates from far away stand for ∇f (the clamped strip 20 : 1: c∇f moved by ~‖c q‖ = 10³ ‖v‖) the
+    bound is above any target near the answer, and the next step starts from a fresh ∇f (tests/test_products.py)."""
+    return SUM_FLOOR * EPS * drift <= limit
 
 
 def _start_gradient(point, known, affine, sets: _Bounds, products) -> np.ndarray:
