@@ -139,7 +139,7 @@ def test_the_coarse_approximation_is_g_h_inverse_g_t_from_one_factorization(monk
 def test_the_signorini_coarse_program_to_its_own_tolerance_with_its_approximation_s_step_lengths(monkeypatch):
     """Bounds alone (Signorini): the coarse program stops at COARSE_BOUNDS_TOL (1e-3, not COARSE_TOL's 1e-5) and takes
     its approximated start's step lengths (newton_cg._approximated), not Hutchinson's product. The pair at 5·10⁴ DOFs
-    forced matrix-free: 3 Newton steps, 29 products (12 the coarse program's) before, 23 (7) now, the fine path the
+    forced matrix-free: 3 Newton steps, 29 products (12 the coarse program's) before, 22 (7) now, the fine path the
     same; the coarse answer from every bound at 0 within 3.3e-3 of its largest entry of the exact one's, 12 → 7
     products."""
     result, [solution] = solved(monkeypatch, scene_of("two-body", 2, "signorini", 5e4), "dual-matrix-free")
