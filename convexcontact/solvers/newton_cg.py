@@ -1328,11 +1328,12 @@ def _fresh_enough(drift: float, limit: float) -> bool:
     updates' rounding could hide; at a Newton step's start (limit: its target) it starts from them (``loose`` in
     :func:`newton_cg`, :func:`_start_gradient`). Measured (docs/performance.md, "The pair's Signorini products"): on
     the pair at 1.4·10⁶ DOFs, Signorini, the last step moved c∇f by 3e-7 of the answer's scale and the natural residual
-    by the updates was 1.8e-15 where a fresh ∇f gave 1.6e-15 (tol 1e-12): 26 → 25 fine products; one less, the same
-    Newton steps and certificates, on the 2-D pair at 2·10⁴ DOFs forced matrix-free (Signorini 46 → 45, Tresca 40 →
-    39) and on the strips and the 3-D free plate at 3·10⁴–10⁵ DOFs, the clamped strip 20 : 1 at 10⁵ 15 → 14. Where
-    the first step's updates from far away stand for ∇f (the clamped strip 20 : 1: c∇f moved by ~‖c q‖ = 10³ ‖v‖) the
-    bound is above any target near the answer, and the next step starts from a fresh ∇f (tests/test_products.py)."""
+    by the updates was 1.8e-15 where a fresh ∇f gave 1.6e-15 (tol 1e-12), and its second step began one CG update
+    away from a fresh ∇f: 26 → 24 fine products; one or two less, the same Newton steps and certificates, on the 2-D
+    pair at 2·10⁴ DOFs forced matrix-free (Signorini 46 → 45, Tresca 40 → 38), on the strips and the 3-D free plate
+    at 3·10⁴–10⁵ DOFs, the clamped strip 20 : 1 at 10⁵ 15 → 14. Where the first step's updates from far away stand
+    for ∇f (that strip's: c∇f moved by ~‖c q‖ = 10³ ‖v‖) the bound is above any target near the answer, and the next
+    step starts from a fresh ∇f (tests/test_products.py)."""
     return SUM_FLOOR * EPS * drift <= limit
 
 
