@@ -328,6 +328,12 @@ products, and the fine path needs it: the pair at 1.4·10⁶ DOFs, Tresca, from 
 78 products with 13 and 9, as from no start to 1e-3 after 35 coarse products (docs/performance.md, "The coarse program
 from its approximation's answer"). From no start, 1e-2 on the pair at 10⁵ DOFs forced matrix-free, Tresca: 82 → 108
 products."""
+COARSE_BOUNDS_TOL = 1e-3
+"""COARSE_TOL where the sets are bounds alone (Signorini): there the fine path needs the coarse answer only to 1e-3.
+The pair (Newton steps, the fine program's products, the coarse program's), 1e-5 → 1e-3: at 1.4·10⁶ DOFs 2, 26, 12 →
+2, 26, 11; at 3.5·10⁵ forced matrix-free 3, 28, 10 → 3, 28, 6 (the coarse program's second Newton step, 4 products,
+took its residual from ~1e-3 to ~4e-8). Looser, 1e-2, it stopped at 1.3e-3 after one step at 1.4·10⁶ and the fine
+first step grew two faces more: 8 coarse products, 30 fine (docs/performance.md, "The pair's Signorini products")."""
 LINE = 8
 """The coarse start (COARSE_SETS) only where the sets' rows form a line: the breadth-first levels of their graph from
 the reverse Cuthill–McKee order's start number at least 1 / LINE of the rows (the 2-D pair at 2·10⁴ / 5·10⁴ DOFs: 44
@@ -483,11 +489,17 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
     matrix = None if isinstance(program.P, spla.LinearOperator) else functools.cache(  # P̃, made at a dense step
         lambda: _scaled(program.P, sets.scale))
     products = [0]
+    fresh = [None]  # the last ∇f gradient() computed, where it is the stopping test's fresh one (see that test)
+    evaluated = [0, None]  # P's own formula's evaluations: how many, and the last ∇f it gave (see _fresh_enough)
     as_sum, own = _affine(program)
     exact = own is not None and matrix is None  # see SUM_FLOOR
 
     def affine(x):
-        return own(x) if exact else as_sum(x)
+        if not exact:
+            return as_sum(x)
+        value = own(x)
+        evaluated[:] = evaluated[0] + 1, sets.scale * value
+        return value
 
     def gradient(v):
         """∇f in v: scale ⊙ (P x + q); q itself at x = 0, without a product: a solve from no start began with one
@@ -496,7 +508,9 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         if not x.any():
             return sets.scale * program.q
         products[0] += 1
-        return sets.scale * affine(x)
+        g = sets.scale * affine(x)
+        fresh[0] = g if exact == (own is not None) else None  # by the formula the stopping test takes
+        return g
 
     @functools.cache
     def curvature():
@@ -671,6 +685,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         return max(np.abs(v).max(initial=0.0), LOAD_SCALE * size) if exact else size
 
     residual = first = None
+    drift = 0.0 if g is fresh[0] else np.inf  # c ⊙ what updates added to ∇f since P's own formula gave it, ∞-norm
     best, history = np.inf, []
     risen, kinds, descent = 0.0, dict.fromkeys(("residual", "segment", "arc", "gradient", "face"), 0), []
     steps = cg_total = 0
@@ -683,10 +698,14 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         residual, y, size = natural(v, g)
         if residual * size <= max(tol * answer(v, size), 0.0 if exact or own is None else floor):
             exact = own is not None  # the sum's rounding is near: P's own formula from here on, where it has one
-            if exact or tol < LOAD_SCALE:  # ∇f was updated along the segments: check with a fresh one; not a sum
-                # again against a tolerance above √ε (the coarse program's, COARSE_TOL), beyond the rounding of the
-                # updates, ε‖P̃‖‖w − v‖ each: a product of each coarse solve (the pair at 1.4·10⁶ DOFs, Signorini:
-                # 63 → 62 products)
+            if (exact or tol < LOAD_SCALE) and g is not fresh[0] and not _fresh_enough(drift,
+                                                                                     0.1 * tol * answer(v, size)):
+                # ∇f was updated along the segments: check with a fresh one; not a sum again against a tolerance above
+                # √ε (the coarse program's, COARSE_TOL), beyond the rounding of the updates, ε‖P̃‖‖w − v‖ each: a
+                # product of each coarse solve (the pair at 1.4·10⁶ DOFs, Signorini: 63 → 62 products); nor where ∇f
+                # is fresh already (a segment's end by P's own formula, ``move``: the 3-D rows' Tresca steps, whose
+                # Newton points leave their spheres, flat block at 3·10⁴ DOFs 44 → 43) or the last step's updates
+                # of one (drift, _fresh_enough)
                 g = gradient(v)
                 residual, y, size = natural(v, g)
         first = first or residual
@@ -706,7 +725,9 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         empty = steps == 0 and start is None and coarse is None and sets.coupling is None and matrix is None
         target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
         target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
-        loose = not exact or target * np.max(c) >= floor  # ∇f's sums may serve (_start_gradient)
+        # ∇f's sums may serve (_start_gradient): above the sum's rounding, or the updates' (_fresh_enough)
+        loose = not exact or target * np.max(c) >= min(floor, SUM_FLOOR * EPS * drift)
+        count = evaluated[0]
         newton, iterations, known = newton_point(v, g, np.zeros_like(y) if empty else y, target, empty)
         cg_total += iterations
         best = min(best, residual)
@@ -736,12 +757,21 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             if not moved:
                 word = "stalled"
                 break
+            drift = 0.0 if g is fresh[0] else np.inf
             continue
         # Newton's point, projected, where it halves the least natural residual so far (so those steps cannot cycle;
         # near the answer f's changes are round-off, and the segment alone stalled a 3-D Tresca dual at 2e-10), else a
         # point that lowers f at least as a fraction of the projected gradient's step does (see "Convergence")
         cauchy = g @ (_project(y, sets) - v)
+        before = g
         v, g, change, kind = descend(v, g, newton, ACCEPT * best, cauchy, risen, known, residual * size, target)
+        if g is fresh[0]:
+            drift = 0.0
+        elif kind == "residual" and g is known and exact:  # CG's updates since the step's last fresh ∇f, or its start
+            restarted = evaluated[0] > count
+            drift = (0.0 if restarted else drift) + np.abs(c * (g - (evaluated[1] if restarted else before))).max()
+        else:
+            drift = np.inf
         if kind in ("segment", "gradient") and natural(v, g)[0] > STALL * residual:
             v, g, more = gradient_step(v, g)
             change += more
@@ -815,23 +845,35 @@ def _coarse_start(program: ConicProgram, sets: _Bounds, v: np.ndarray, max_iter:
                                      for k in range(radius.size)]  # each ball: its radius row, −I on its variables
     b = np.concatenate([np.zeros(bounds)] + [np.concatenate([[r], np.zeros(p)]) for r in radius])
     coarse = ConicProgram(P, Q.T @ q, sp.vstack(A).tocsc(), b, tuple(cones))
-    solution = newton_cg(coarse, bound_form_of(coarse), _approximated(coarse, max_iter, verbose), COARSE_TOL,
-                         max_iter, verbose)
+    bounds_only = not sets.balls.size
+    lengths = {}  # the approximated program's step lengths (see _approximated)
+    start = _approximated(coarse, max_iter, verbose, lengths)
+    solution = newton_cg(coarse, bound_form_of(coarse), start, COARSE_BOUNDS_TOL if bounds_only else COARSE_TOL,
+                         max_iter, verbose, cache=lengths if bounds_only else None)
     info = {key: solution.info[key] for key in ("products", "grown", "factorizations", "updates")}
     info.update(products=info["products"] + int(sets.shift.any()), steps=solution.iterations)
     lifted = P.lifted(solution.x)
     return sets.shift + Q @ solution.x, info, None if lifted is None else sets.scale * (q + lifted)
 
 
-def _approximated(program: ConicProgram, max_iter: int, verbose: bool) -> np.ndarray | None:
+def _approximated(program: ConicProgram, max_iter: int, verbose: bool, lengths: dict) -> np.ndarray | None:
     """x of the answer of the coarse ``program`` (:func:`_coarse_start`) with P its approximation G Gᵀ, dense: no
     product with P, where it is solved (else None), the coarse solve's start. From no start the coarse program found its
     faces as the fine one did, each a product with W at least (a K solve): the pair at 1.4·10⁶ DOFs, Signorini 21 → 12
     coarse products, Tresca 35 → 8 (COARSE_TOL 1e-5), the fine program's Newton steps, products, refactorizations and
-    updates the same; Coulomb's stick start at 2·10⁴ DOFs forced matrix-free 46 → 6."""
+    updates the same; Coulomb's stick start at 2·10⁴ DOFs forced matrix-free 46 → 6.
+
+    ``lengths`` gets that solve's step lengths, 0.1 / (G Gᵀ)_jj (a newton-cg ``cache``): the coarse program's where
+    its sets are bounds alone, in place of Hutchinson's estimate (:func:`_step_lengths`, a product with W). A bound's
+    step length only decides whether a variable within c∇f of 0 is held, and the ratio Hutchinson's product measures
+    was ~0.75 there: the pair at 1.4·10⁶ DOFs, Signorini, 11 → 10 coarse products, the same fine path; 3.5·10⁵ forced
+    matrix-free 6 → 5. Not with balls: the stick–slip test ‖v − c∇f‖ ≤ ρ takes c at every sticking node, and the
+    pair's Tresca coarse program at 2·10⁴ DOFs forced matrix-free took 2 Newton steps and 23 products against 1 and 20
+    (the fine program's ratio in place of the coarse one's: 25)."""
     G = program.P.approximation.G
     approximated = replace(program, P=sp.csc_matrix((G @ G.T).toarray()))
-    solution = newton_cg(approximated, bound_form_of(approximated), None, COARSE_TOL, max_iter, verbose)
+    solution = newton_cg(approximated, bound_form_of(approximated), None, COARSE_TOL, max_iter, verbose, cache=lengths)
+    lengths.pop("precondition", None)
     return solution.x if solution.solved else None
 
 
@@ -1276,6 +1318,22 @@ def _project(y: np.ndarray, sets: _Bounds, radius: np.ndarray | None = None) -> 
     if outside.any():
         v[sets.balls[outside]] = radius[outside, None] * unit_rows(ball[outside])
     return v
+
+
+def _fresh_enough(drift: float, limit: float) -> bool:
+    """Whether a ∇f that is updates of one by P's own formula (``drift``: c ⊙ what they added, ∞-norm; ∞ where it is no
+    such sum) serves as a fresh one to ``limit``: their rounding is at most SUM_FLOOR × ε of what they added (as the
+    sum's, SUM_FLOOR). At the stopping test (limit: a tenth of the tolerance) a fresh ∇f then checks nothing the
+    updates' rounding could hide; at a Newton step's start (limit: its target) it starts from them (``loose`` in
+    :func:`newton_cg`, :func:`_start_gradient`). Measured (docs/performance.md, "The pair's Signorini products"): on
+    the pair at 1.4·10⁶ DOFs, Signorini, the last step moved c∇f by 3e-7 of the answer's scale and the natural residual
+    by the updates was 1.8e-15 where a fresh ∇f gave 1.6e-15 (tol 1e-12), and its second step began one CG update
+    away from a fresh ∇f: 26 → 24 fine products; one or two less, the same Newton steps and certificates, on the 2-D
+    pair at 2·10⁴ DOFs forced matrix-free (Signorini 46 → 45, Tresca 40 → 38), on the strips and the 3-D free plate
+    at 3·10⁴–10⁵ DOFs, the clamped strip 20 : 1 at 10⁵ 15 → 14. Where the first step's updates from far away stand
+    for ∇f (that strip's: c∇f moved by ~‖c q‖ = 10³ ‖v‖) the bound is above any target near the answer, and the next
+    step starts from a fresh ∇f (tests/test_products.py)."""
+    return SUM_FLOOR * EPS * drift <= limit
 
 
 def _start_gradient(point, known, affine, sets: _Bounds, products) -> np.ndarray:
