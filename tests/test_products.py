@@ -4,6 +4,8 @@ products that are not CG iterations"): no curvature probe where P's diagonal is 
 program's), and a Newton step that starts where the last one ended starts from the gradient it ended with, while
 the step's target is above the sum's rounding."""
 
+import itertools
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -196,7 +198,7 @@ def test_the_last_step_s_updates_stand_for_a_fresh_gradient_at_the_answer(monkey
     (newton_cg._fresh_enough), the stopping test takes CG's updates of it, not W's own formula at the answer: the
     pair's Signorini dual at 2·10⁴ DOFs forced matrix-free, 4 Newton steps both, 46 products before, 45 now; the natural
     residual by a fresh ∇f there below the tolerance."""
-    products, formulas = recorded(monkeypatch)
+    _, formulas = recorded(monkeypatch)
     now = pair_solve(monkeypatch, "signorini")
     assert not any(np.array_equal(x, now.x) for x in formulas)
     program = cc.prepare(scene_of("two-body", 2, "signorini", 2e4), "dual-matrix-free").program
@@ -217,4 +219,4 @@ def test_w_s_own_formula_is_not_taken_twice_at_one_point(monkeypatch):
     _, formulas = recorded(monkeypatch)
     result = cc.prepare(scene_of("flat", 3, "tresca", 5e3), "dual-matrix-free").solve()
     assert result.solved and result.certificate.worst <= 1e-10
-    assert len(formulas) == 14 and not any(np.array_equal(a, b) for a, b in zip(formulas, formulas[1:]))
+    assert len(formulas) == 14 and not any(np.array_equal(a, b) for a, b in itertools.pairwise(formulas))
