@@ -85,8 +85,8 @@ class ConicProgram:
                                  f"{type(vector).__name__} {getattr(vector, 'shape', '')}; pass np.ravel(…)")
         if not (sp.issparse(self.P) or isinstance(self.P, spla.LinearOperator)):
             raise ValueError(f"ConicProgram.P: expected a scipy.sparse matrix or a scipy LinearOperator, got "
-                             f"{type(self.P).__name__}; pass scipy.sparse.csc_matrix(P), or conic.dense_matrix(P) to "
-                             "keep a dense P's memory")
+                             f"{type(self.P).__name__}; pass scipy.sparse.csc_matrix(P), or "
+                             "convexcontact.conic.dense_matrix(P) to keep a dense P's memory")
         if not sp.issparse(self.A):
             raise ValueError(f"ConicProgram.A: expected a scipy.sparse matrix, got {type(self.A).__name__}; pass "
                              "scipy.sparse.csc_matrix(A)")
