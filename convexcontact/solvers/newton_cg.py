@@ -726,7 +726,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         target = (FIRST_FORCING if empty else FORCING) * min(1.0, residual / first) * residual * size / np.max(c)
         target = max(target, 0.1 * tol * answer(v, size) / np.max(c))
         # ∇f's sums may serve (_start_gradient): above the sum's rounding, or the updates' (_fresh_enough)
-        loose = not exact or target * np.max(c) >= min(floor, SUM_FLOOR * EPS * drift)
+        loose = not exact or target * np.max(c) >= floor or _fresh_enough(drift, target * np.max(c))
         count = evaluated[0]
         newton, iterations, known = newton_point(v, g, np.zeros_like(y) if empty else y, target, empty)
         cg_total += iterations
