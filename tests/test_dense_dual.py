@@ -183,3 +183,27 @@ def test_the_dense_newton_systems_run_on_one_blas_thread(pair, monkeypatch):
     solution = newton_cg.solve(pair.program)
     assert solution.status == "solved" and inside and all(count == {newton_cg.DENSE_THREADS} for count in inside)
     assert threads() == outside
+
+
+def test_the_recovery_takes_the_stopping_test_s_solve_where_its_load_is_the_same(monkeypatch):
+    """newton-cg stops on a fresh gradient, whose solve K⁻¹(f − Bᵀr) is the recovery's displacement: the pair's
+    Signorini dual recovers it with no solve, the same to the last bit; another point, or the same one once its
+    displacement has left with the fields, is solved again."""
+    from dataclasses import replace
+
+    from convexcontact import solvers
+    from convexcontact.formulations.dual import contact_rows
+
+    model = cc.prepare(two_body_scene("signorini", 1e4), "dual")
+    solution = solvers.solve(model.program, "newton-cg")
+    assert solution.solved
+    reused, solves = model.condensation, []
+    solve = reused.solve
+    monkeypatch.setattr(reused, "solve", lambda b: solves.append(1) or solve(b))
+    fields = model.recover(solution)
+    assert not solves
+    B = contact_rows(model.fem.contact, model.C, None)
+    assert np.array_equal(fields.u, solve(model.fem.f - B.T @ fields.pressure))
+    assert np.array_equal(model.recover(solution).u, fields.u) and len(solves) == 1
+    half = model.recover(replace(solution, x=0.5 * solution.x))
+    assert len(solves) == 2 and not np.allclose(half.u, fields.u)
