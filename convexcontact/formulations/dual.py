@@ -91,13 +91,6 @@ def dual(
         rows.append(sp.vstack(pick).tocsr()[order])
         b.append(np.concatenate([slip_bound, np.zeros((dim - 1) * count)])[order])
         cones += [soc(dim)] * count
-    def gradient(x: np.ndarray) -> np.ndarray:
-        """W x + q as −(B u + c), u = K⁻¹(f − Bᵀx) the displacement the answer's fields recover. W x and q cancel
-        where the loads bend a body its contact holds up: on a strip 400 : 1 clamped at its ends (2·10³ DOFs) the
-        load alone would move it ‖K⁻¹f‖ = 9·10⁵ where it moves 2·10⁻³, and the sum's rounding (~1e-11) stood for
-        the gradient where the certificate's gaps need 1e-13; f − Bᵀx (loads and contact forces on nodes of their
-        own) loses nothing (docs/performance.md, "The clamped strip's certificates")."""
-        return np.concatenate([-(B @ displacement(x[:m + tangential]) + c), q[m + tangential:]])  # W's μ block is 0
 
     last: list = [None, None]  # the load and displacement of the last gradient
 
@@ -109,6 +102,14 @@ def dual(
         u = last[1] if last[0] is not None and np.array_equal(load, last[0]) else factorization.solve(load)
         last[:] = (None, None) if handed else (load, u)
         return u
+
+    def gradient(x: np.ndarray) -> np.ndarray:
+        """W x + q as −(B u + c), u = K⁻¹(f − Bᵀx) the displacement the answer's fields recover. W x and q cancel
+        where the loads bend a body its contact holds up: on a strip 400 : 1 clamped at its ends (2·10³ DOFs) the
+        load alone would move it ‖K⁻¹f‖ = 9·10⁵ where it moves 2·10⁻³, and the sum's rounding (~1e-11) stood for
+        the gradient where the certificate's gaps need 1e-13; f − Bᵀx (loads and contact forces on nodes of their
+        own) loses nothing (docs/performance.md, "The clamped strip's certificates")."""
+        return np.concatenate([-(B @ displacement(x[:m + tangential]) + c), q[m + tangential:]])  # W's μ block is 0
 
     program = ConicProgram(P, q, sp.vstack(rows).tocsc(), np.concatenate(b), tuple(cones), gradient=gradient)
     bound_rows = equalities + m + np.arange(count) * dim
