@@ -4,6 +4,7 @@ globalization for a dense W and an operator, W from one triangular solve, S fact
 program's P on W's own values."""
 
 import tracemalloc
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,9 +12,10 @@ import scipy.linalg as la
 import scipy.sparse as sp
 
 import convexcontact as cc
-from convexcontact import blas
+from convexcontact import blas, solvers
 from convexcontact.conic import dense_matrix, dense_values
 from convexcontact.fem.factorization import condense
+from convexcontact.formulations.dual import contact_rows
 from convexcontact.solvers import newton_cg
 from convexcontact.solvers.cone_polish import tangent_bases
 from convexcontact.studies.benchmarks.bench import two_body_scene
@@ -189,11 +191,6 @@ def test_the_recovery_takes_the_stopping_test_s_solve_where_its_load_is_the_same
     """newton-cg stops on a fresh gradient, whose solve K⁻¹(f − Bᵀr) is the recovery's displacement: the pair's
     Signorini dual recovers it with no solve, the same to the last bit; another point, or the same one once its
     displacement has left with the fields, is solved again."""
-    from dataclasses import replace
-
-    from convexcontact import solvers
-    from convexcontact.formulations.dual import contact_rows
-
     model = cc.prepare(two_body_scene("signorini", 1e4), "dual")
     solution = solvers.solve(model.program, "newton-cg")
     assert solution.solved
