@@ -684,8 +684,12 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         """The scale the stopping test holds the residual to: see LOAD_SCALE."""
         return max(np.abs(v).max(initial=0.0), LOAD_SCALE * size) if exact else size
 
+    def drift_at(g) -> float:
+        """``drift`` where ∇f is g and no updates are counted: 0 where P's own formula gave g, else ∞."""
+        return 0.0 if g is fresh[0] else np.inf
+
     residual = first = None
-    drift = 0.0 if g is fresh[0] else np.inf  # c ⊙ what updates added to ∇f since P's own formula gave it, ∞-norm
+    drift = drift_at(g)  # c ⊙ what updates added to ∇f since P's own formula gave it, ∞-norm
     best, history = np.inf, []
     risen, kinds, descent = 0.0, dict.fromkeys(("residual", "segment", "arc", "gradient", "face"), 0), []
     steps = cg_total = 0
@@ -757,7 +761,7 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
             if not moved:
                 word = "stalled"
                 break
-            drift = 0.0 if g is fresh[0] else np.inf
+            drift = drift_at(g)
             continue
         # Newton's point, projected, where it halves the least natural residual so far (so those steps cannot cycle;
         # near the answer f's changes are round-off, and the segment alone stalled a 3-D Tresca dual at 2e-10), else a
@@ -765,13 +769,12 @@ def newton_cg(program: ConicProgram, form: BoundForm, start, tol: float, max_ite
         cauchy = g @ (_project(y, sets) - v)
         before = g
         v, g, change, kind = descend(v, g, newton, ACCEPT * best, cauchy, risen, known, residual * size, target)
-        if g is fresh[0]:
-            drift = 0.0
-        elif kind == "residual" and g is known and exact:  # CG's updates since the step's last fresh ∇f, or its start
+        # drift: CG's updates of ∇f since the step's last fresh one, or since its start
+        if kind == "residual" and g is known and exact and g is not fresh[0]:
             restarted = evaluated[0] > count
             drift = (0.0 if restarted else drift) + np.abs(c * (g - (evaluated[1] if restarted else before))).max()
         else:
-            drift = np.inf
+            drift = drift_at(g)
         if kind in ("segment", "gradient") and natural(v, g)[0] > STALL * residual:
             v, g, more = gradient_step(v, g)
             change += more
